@@ -1,0 +1,177 @@
+"""Command line: ``bayesrod <command> ...`` (CONTRACT.md section 2).
+
+I/O lives here and in the readers; the physics never sees a file. Bad input
+ends with one line ``bayesrod <command>: error: <message>`` on stderr and a
+non-zero exit, never a traceback (set BAYESROD_DEBUG=1 to see one).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from . import __version__  # noqa: F401  (re-exported for --version)
+from ._parse import parse_values
+from .physics import Effects, force_from_displacement, k_theta, k_x
+from .physics.effects import parse_effect_assignments
+from .presets import PRESETS, get_preset
+
+EXIT_BAD_INPUT = 2
+
+_COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
+
+
+def _command(name: str):
+    def deco(fn):
+        _COMMANDS[name] = fn
+        return fn
+
+    return deco
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports usage errors in the same one-line form."""
+
+    def error(self, message: str) -> None:  # noqa: D401
+        self.print_usage(sys.stderr)
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="bayesrod", description="Bayesian stiffness of plant stems (tapered Kirchhoff rod).")
+    parser.add_argument("--version", action="version", version=f"bayesrod {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+
+    p = sub.add_parser("predict", help="forward elastica: force at given contact displacements")
+    p.add_argument("--preset", choices=sorted(PRESETS), help="take EI0, p and length from a published specimen")
+    p.add_argument("--EI0", type=float, help="base flexural rigidity [N m^2]")
+    p.add_argument("--p", type=float, help="taper exponent of EI(s) = EI0 (1 - s/L)^(4p)")
+    p.add_argument("--length", type=float, help="stem length L [m]")
+    p.add_argument("--posterior", metavar="RUN", help="a fit's run directory (credible bands instead of values)")
+    p.add_argument("--height", type=float, required=True, help="sensor height h [m], 0 < h < L")
+    p.add_argument(
+        "--displacement",
+        required=True,
+        help="contact displacement(s) since first contact [m]: X, X,Y,Z or start:stop:num",
+    )
+    p.add_argument("--effect", action="append", metavar="NAME=VALUE", help="add a model effect (repeatable)")
+    p.add_argument("--json", action="store_true", help="print JSON (CONTRACT.md section 3) instead of a table")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return _COMMANDS[args.command](args)
+    except (ValueError, TypeError, OSError, KeyError) as exc:
+        if os.environ.get("BAYESROD_DEBUG"):
+            raise
+        message = str(exc) if not isinstance(exc, KeyError) else f"missing key {exc}"
+        print(f"bayesrod {args.command}: error: {message}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print(f"bayesrod {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+# --------------------------------------------------------------------------- #
+# predict
+# --------------------------------------------------------------------------- #
+def _rod_from_args(args: argparse.Namespace) -> tuple[float, float, float]:
+    values = {"EI0": args.EI0, "p": args.p, "length": args.length}
+    if args.preset:
+        preset = get_preset(args.preset)
+        defaults = {"EI0": preset["EI0"], "p": preset["p"], "length": preset["length_m"]}
+        values = {k: (v if v is not None else defaults[k]) for k, v in values.items()}
+    missing = [f"--{k}" for k, v in values.items() if v is None]
+    if missing:
+        raise ValueError(f"{', '.join(missing)}: expected a value (or --preset, or --posterior RUN), got none")
+    for key, val in values.items():
+        if not math.isfinite(val):
+            raise ValueError(f"--{key}: expected a finite number, got {val}")
+    if values["EI0"] <= 0:
+        raise ValueError(f"--EI0: expected a flexural rigidity > 0 N m^2, got {values['EI0']}")
+    if values["p"] < 0:
+        raise ValueError(f"--p: expected a taper exponent >= 0, got {values['p']}")
+    if values["length"] <= 0:
+        raise ValueError(f"--length: expected a stem length > 0 m, got {values['length']}")
+    return values["EI0"], values["p"], values["length"]
+
+
+def _check_height(h: float, length: float) -> None:
+    if not (math.isfinite(h) and 0 < h < length):
+        raise ValueError(f"--height: expected 0 < height < length ({length:g} m), got {h:g}")
+
+
+def _check_displacements(D: np.ndarray) -> None:
+    if np.any(D < 0):
+        raise ValueError(f"--displacement: expected values >= 0 m, got {D[D < 0][0]:g}")
+
+
+@_command("predict")
+def cmd_predict(args: argparse.Namespace) -> int:
+    effects = parse_effect_assignments(args.effect)
+    D = parse_values(args.displacement, "--displacement")
+    _check_displacements(D)
+    if args.posterior:
+        raise ValueError("--posterior: expected a fit run directory; fitting is not available in this version yet")
+    EI0, p, L = _rod_from_args(args)
+    _check_height(args.height, L)
+    result = predict_point(EI0, p, L, args.height, D, effects)
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        _print_prediction(result, EI0, p, L, effects)
+    return 0
+
+
+def predict_point(EI0: float, p: float, L: float, h: float, D: np.ndarray, effects: Effects) -> dict:
+    """The ``predict --json`` document for one parameter set (CONTRACT.md section 3)."""
+    sol = force_from_displacement(D, h, EI0, p, L, effects)
+    points = []
+    for i, d in enumerate(D):
+        slipped = bool(sol.slipped[i])
+        points.append(
+            {
+                "displacement_m": float(d),
+                "force_N": None if slipped else float(sol.force_N[i]),
+                "contact_s_m": None if slipped else float(sol.contact_s_m[i]),
+                "slipped": slipped,
+                "yielded": bool(sol.yielded[i]),
+            }
+        )
+    return {
+        "height_m": float(h),
+        "k_theta_Nm_per_rad": float(k_theta(h, EI0, p, L, effects.base_compliance)),
+        "k_x_N_per_m": float(k_x(h, EI0, p, L, effects.base_compliance)),
+        "model": {"EI0": EI0, "p": p, "length_m": L, "effects": effects.to_mapping()},
+        "points": points,
+    }
+
+
+def _print_prediction(result: dict, EI0: float, p: float, L: float, effects: Effects) -> None:
+    eff = ", ".join(f"{k}={v:g}" for k, v in effects.to_mapping().items()) or "none"
+    print(f"Tapered rod: EI0 = {EI0:g} N m^2, p = {p:g}, L = {L:g} m, effects: {eff}")
+    print(
+        f"Contact height h = {result['height_m']:g} m:  k_theta = {result['k_theta_Nm_per_rad']:.4g} N m/rad,  "
+        f"k_x = {result['k_x_N_per_m']:.4g} N/m  (small-deflection, eqs. kdist/kx)"
+    )
+    print(f"{'displacement [m]':>17} {'force [N]':>11} {'contact s [m]':>14}  note")
+    for pt in result["points"]:
+        if pt["slipped"]:
+            print(f"{pt['displacement_m']:17.4f} {'-':>11} {'-':>14}  slipped past the sensor")
+        else:
+            note = "base yielded" if pt["yielded"] else ""
+            print(f"{pt['displacement_m']:17.4f} {pt['force_N']:11.4f} {pt['contact_s_m']:14.4f}  {note}")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,839 @@
+"""Fast batched planar elastica of a tapered stem pushed at a fixed height.
+
+The seed paper's rod (eq. ivp) in nondimensional form. With sigma = s/L,
+xi = x/L, zeta = z/L, phi the tangent angle from vertical (positive toward the
+push), e(sigma) = EI(s)/EI0 = (1 - sigma)^(4p), f = F L^2/EI0 and
+m = M L/EI0 the bending moment (positive bending toward +x), the state
+(xi, zeta, phi, m) obeys::
+
+    xi'   = sin(phi)
+    zeta' = cos(phi)
+    phi'  = m / e(sigma) + kappa0                     (eq. constitutive, A4)
+    m'    = -a(sigma) (f cos(phi) - mu f sin(phi)) - W(sigma) sin(phi)
+
+from the base (xi = zeta = 0, phi = tilt + c_base m(0) + phi_plastic), where
+a = 1 below the contact (zeta < eta = h/L) and 0 above it, and W is the
+nondimensional weight carried above sigma (effect ``self_weight``). Without
+friction or weight, m(0) = f eta exactly and m = f (eta - zeta) below the
+contact: eq. M_determinate. The problem therefore depends on f, p and eta only
+(plus the nondimensional effect groups), so EI0 is a pure scale.
+
+The fast path is a fixed-step 8th-order Runge-Kutta (DOP853 tableau) batched over a leading axis of any number
+of problems, with the contact located exactly by Newton on a partial step
+(the moment has a kink there, which a step across it would smear). The slow,
+obvious reference is :mod:`bayesrod.physics.reference` (``solve_ivp``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .effects import Effects
+
+__all__ = [
+    "ContactSolution",
+    "ForceSolution",
+    "contact_from_force",
+    "contact_from_force_nd",
+    "force_from_displacement",
+    "force_from_displacement_nd",
+    "DEFAULT_STEPS",
+    "secant_k_theta",
+]
+
+DEFAULT_STEPS = 48
+TIP_TOLERANCE = 1e-4
+"""Contact up to this fraction of L past the tip is taken as contact at the tip."""
+_TINY = 1e-300
+_HALF_PI = 0.5 * np.pi
+_EFFECT_KEYS = ("c_base", "kappa0", "tilt", "mu", "f_offset", "w0", "m_yield")
+
+
+# --------------------------------------------------------------------------- #
+# Problem arrays
+# --------------------------------------------------------------------------- #
+def _problem(eta: ArrayLike, p: ArrayLike, eff: dict | None, *extra: ArrayLike) -> tuple[dict, list]:
+    """Broadcast eta, p, effect groups and extra arrays to one flat batch."""
+    eff = dict(eff or {})
+    neutral = {"c_base": 0.0, "kappa0": 0.0, "tilt": 0.0, "mu": 0.0, "f_offset": 0.0, "w0": 0.0, "m_yield": np.inf}
+    arrays = [np.asarray(eta, float), np.asarray(p, float)]
+    arrays += [np.asarray(eff.get(k, neutral[k]), float) for k in _EFFECT_KEYS]
+    arrays += [np.asarray(a, float) for a in extra]
+    shape = np.broadcast_shapes(*(a.shape for a in arrays))
+    flat = [np.ascontiguousarray(np.broadcast_to(a, shape)).ravel() for a in arrays]
+    P = {"eta": flat[0], "p": flat[1]}
+    P.update(dict(zip(_EFFECT_KEYS, flat[2:9], strict=True)))
+    P["shape"] = shape
+    return P, flat[9:]
+
+
+def _subset(P: dict, idx: NDArray) -> dict:
+    return {k: (v[idx] if isinstance(v, np.ndarray) else v) for k, v in P.items()}
+
+
+def _weighted(P: dict) -> bool:
+    return bool(np.any(P["w0"] != 0.0))
+
+
+# --------------------------------------------------------------------------- #
+# Fixed-step 8th-order Runge-Kutta march
+# --------------------------------------------------------------------------- #
+# Dormand-Prince 8(5,3) tableau (Hairer, Norsett & Wanner, Solving ODEs I), 8th-order weights.
+# Same coefficients as scipy.integrate.DOP853, used here with fixed steps.
+_C = np.array(
+    [
+        0.0,
+        0.05260015195876773,
+        0.0789002279381516,
+        0.1183503419072274,
+        0.2816496580927726,
+        0.3333333333333333,
+        0.25,
+        0.3076923076923077,
+        0.6512820512820513,
+        0.6,
+        0.8571428571428571,
+        1.0,
+    ]
+)
+_B = np.array(
+    [
+        0.054293734116568765,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        4.450312892752409,
+        1.8915178993145003,
+        -5.801203960010585,
+        0.3111643669578199,
+        -0.1521609496625161,
+        0.20136540080403034,
+        0.04471061572777259,
+    ]
+)
+_A = np.array(
+    [
+        [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        [0.05260015195876773, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        [0.0197250569845379, 0.0591751709536137, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        [0.02958758547680685, 0.0, 0.08876275643042054, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        [0.2413651341592667, 0.0, -0.8845494793282861, 0.924834003261792, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        [0.037037037037037035, 0.0, 0.0, 0.17082860872947386, 0.12546768756682242, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        [0.037109375, 0.0, 0.0, 0.17025221101954405, 0.06021653898045596, -0.017578125, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        [
+            0.03709200011850479,
+            0.0,
+            0.0,
+            0.17038392571223998,
+            0.10726203044637328,
+            -0.015319437748624402,
+            0.008273789163814023,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+        ],
+        [
+            0.6241109587160757,
+            0.0,
+            0.0,
+            -3.3608926294469414,
+            -0.868219346841726,
+            27.59209969944671,
+            20.154067550477894,
+            -43.48988418106996,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+        ],
+        [
+            0.47766253643826434,
+            0.0,
+            0.0,
+            -2.4881146199716677,
+            -0.590290826836843,
+            21.230051448181193,
+            15.279233632882423,
+            -33.28821096898486,
+            -0.020331201708508627,
+            0.0,
+            0.0,
+            0.0,
+        ],
+        [
+            -0.9371424300859873,
+            0.0,
+            0.0,
+            5.186372428844064,
+            1.0914373489967295,
+            -8.149787010746927,
+            -18.52006565999696,
+            22.739487099350505,
+            2.4936055526796523,
+            -3.0467644718982196,
+            0.0,
+            0.0,
+        ],
+        [
+            2.273310147516538,
+            0.0,
+            0.0,
+            -10.53449546673725,
+            -2.0008720582248625,
+            -17.9589318631188,
+            27.94888452941996,
+            -2.8589982771350235,
+            -8.87285693353063,
+            12.360567175794303,
+            0.6433927460157636,
+            0.0,
+        ],
+    ]
+)
+
+
+def _prepare(P: dict) -> dict:
+    """Flags and derived arrays the right-hand side needs (computed once per march)."""
+    P = dict(P)
+    P["_p4"] = 4.0 * P["p"]
+    P["_q"] = 2.0 * P["p"] + 1.0
+    P["_weighted"] = bool(np.any(P["w0"] != 0.0))
+    P["_friction"] = bool(np.any(P["mu"] != 0.0))
+    P["_curved"] = bool(np.any(P["kappa0"] != 0.0))
+    # One taper exponent for the whole batch (a force-displacement curve, a
+    # height sweep): e(sigma) is then a scalar per stage.
+    P["_p4_scalar"] = float(P["_p4"][0]) if P["_p4"].size and np.all(P["_p4"] == P["_p4"][0]) else None
+    return P
+
+
+def _rhs(sig, Y, af, P, out=None):
+    """d/dsigma of the stacked state Y = (xi, zeta, phi, m), shape (4, B).
+
+    ``af`` is the contact load factor a(sigma) * f (zero above the contact).
+    """
+    if out is None:
+        out = np.empty_like(Y)
+    if P["_p4_scalar"] is not None and np.ndim(sig) == 0:
+        e = max((1.0 - sig) ** P["_p4_scalar"] if sig < 1.0 else 0.0, _TINY) if P["_p4_scalar"] else 1.0
+        log1m = None
+    else:
+        log1m = np.log(np.maximum(1.0 - sig, _TINY))
+        e = np.maximum(np.exp(P["_p4"] * log1m), _TINY)
+    np.sin(Y[2], out=out[0])
+    np.cos(Y[2], out=out[1])
+    np.divide(Y[3], e, out=out[2])
+    if P["_curved"]:
+        out[2] += P["kappa0"]
+    if P["_friction"]:
+        np.multiply(out[1] - P["mu"] * out[0], af, out=out[3])
+        np.negative(out[3], out=out[3])
+    else:
+        np.multiply(out[1], -af, out=out[3])
+    if P["_weighted"]:
+        if log1m is None:
+            log1m = np.log(max(1.0 - sig, _TINY))
+        out[3] -= P["w0"] * np.exp(P["_q"] * log1m) / P["_q"] * out[0]
+    return out
+
+
+def _step(Y, sig, h, f, P, active):
+    """One explicit RK step (DOP853 tableau, 8th order) of size h (scalar or (B,))."""
+    B = Y.shape[1]
+    af = active * f
+    K = np.empty((12, 4, B))
+    K2 = K.reshape(12, 4 * B)
+    _rhs(sig, Y, af, P, K[0])
+    for i in range(1, 12):
+        Yi = Y + h * (_A[i, :i] @ K2[:i]).reshape(4, B)
+        _rhs(sig + _C[i] * h, Yi, af, P, K[i])
+    return Y + h * (_B @ K2).reshape(4, B)
+
+
+def _march(f, m0, phi0, P, n_steps, keep=False):
+    """Integrate from the base; locate the contact; return contact and residual.
+
+    Returns a dict of flat arrays: ``found`` (contact reached on the rod, below
+    a horizontal tangent), ``sig_c``, ``xi_c``, ``phi_c``, ``resid`` (moment
+    at the contact without weight, at the tip with weight: zero at
+    equilibrium) and, with ``keep``, the grid states ``grid`` of shape
+    (n_steps + 1, 3, B) holding xi, zeta, phi at sigma_k = k / n_steps.
+    """
+    P = _prepare(P)
+    B = f.shape[0]
+    eta = P["eta"]
+    h = 1.0 / n_steps
+    Y = np.zeros((4, B))
+    Y[2], Y[3] = phi0, m0
+    active = np.ones(B)
+    open_ = np.ones(B, bool)  # still below the contact and not lost
+    out = {k: np.full(B, np.nan) for k in ("sig_c", "xi_c", "phi_c", "m_c")}
+    grid = np.empty((n_steps + 1, 3, B)) if keep else None
+    if keep:
+        grid[0] = Y[:3]
+    run_to_tip = keep or P["_weighted"]
+
+    # Steps that close an element (contact crossed, or tangent past horizontal)
+    # are recorded and resolved afterwards in one vectorised call, unless the
+    # march must continue past the contact (shapes, self-weight).
+    pend_Y = np.zeros((4, B))
+    pend_sig = np.zeros(B)
+    pend_h = np.zeros(B)
+    pend = np.zeros(B, bool)
+
+    def resolve(idx, Y0, sig0, h0):
+        """Exact contact (or none) for elements whose step [sig0, sig0 + h0] closed them."""
+        Pi = _subset(P, idx)
+        fi = f[idx]
+        y1 = _step(Y0, sig0, h0, fi, Pi, 1.0)
+        dmax = np.array(h0, dtype=float, copy=True) * np.ones(idx.size)
+        crossed = y1[1] >= Pi["eta"]
+        over = ~crossed
+        if over.any():
+            # zeta may peak above eta inside the step (phi passes pi/2): check the peak.
+            io = np.flatnonzero(over)
+            Po = _subset(Pi, io)
+            hs = dmax[io]
+            ypk, dpk = _locate(Y0[:, io], _at(sig0, io), hs, fi[io], Po, 2, _HALF_PI, hs)
+            peak = ypk[1] >= Po["eta"]
+            crossed[io[peak]] = True
+            dmax[io[peak]] = dpk[peak]
+        ic = np.flatnonzero(crossed)
+        if ic.size == 0:
+            return ic, None, None
+        Pc = _subset(Pi, ic)
+        yc, dc = _locate(Y0[:, ic], _at(sig0, ic), dmax[ic], fi[ic], Pc, 1, Pc["eta"], dmax[ic])
+        j = idx[ic]
+        out["sig_c"][j] = _at(sig0, ic) + dc
+        out["xi_c"][j] = yc[0]
+        out["phi_c"][j] = yc[2]
+        out["m_c"][j] = yc[3]
+        return ic, yc, dc
+
+    def advance(Y, sig, step):
+        new = _step(Y, sig, step, f, P, active)
+        closing = open_ & ((new[1] >= eta) | (new[2] >= _HALF_PI))
+        if closing.any():
+            idx = np.flatnonzero(closing)
+            if run_to_tip:
+                ic, yc, dc = resolve(idx, Y[:, idx], sig, step)
+                if ic.size:
+                    j = idx[ic]
+                    new[:, j] = _step(yc, sig + dc, step - dc, f[j], _subset(P, j), 0.0)
+            else:
+                pend[idx] = True
+                pend_Y[:, idx] = Y[:, idx]
+                pend_sig[idx] = sig
+                pend_h[idx] = step
+            open_[idx] = False
+            active[idx] = 0.0
+        return new
+
+    with np.errstate(all="ignore"):
+        for k in range(n_steps):
+            Y = advance(Y, k * h, h)
+            if keep:
+                grid[k + 1] = Y[:3]
+            if not run_to_tip and not open_.any():
+                break
+        if open_.any():
+            # Contact within TIP_TOLERANCE * L of the tip still counts (the probe
+            # and the tip have a finite size): one short step past sigma = 1.
+            Y = advance(Y, 1.0, TIP_TOLERANCE)
+        if pend.any():
+            idx = np.flatnonzero(pend)
+            resolve(idx, pend_Y[:, idx], pend_sig[idx], pend_h[idx])
+    found = np.isfinite(out["sig_c"])
+    resid = Y[3] if P["_weighted"] else out["m_c"]
+    out.update(found=found, resid=np.where(found, resid, np.nan), grid=grid)
+    return out
+
+
+def _at(a, idx):
+    """``a[idx]`` for arrays, ``a`` for scalars."""
+    return a[idx] if np.ndim(a) else a
+
+
+def _locate(Y, sig, h, f, P, comp, target, dmax, iters=8):
+    """Newton on the partial step length d in [0, dmax] so that Y[comp](sig + d) = target.
+
+    The state component must be increasing over the step (zeta toward the
+    sensor height, or phi toward horizontal).
+    """
+    y0 = Y[comp]
+    y1 = _step(Y, sig, dmax, f, P, 1.0)[comp]
+    d = np.clip(dmax * (target - y0) / np.where(y1 > y0, y1 - y0, 1.0), 0.0, dmax)
+    for _ in range(iters):
+        yd = _step(Y, sig, d, f, P, 1.0)
+        slope = _rhs(sig + d, yd, f, P)[comp]
+        d = np.clip(d - (yd[comp] - target) / np.maximum(slope, 1e-6), 0.0, dmax)
+    return _step(Y, sig, d, f, P, 1.0), d
+
+
+# --------------------------------------------------------------------------- #
+# Vectorised scalar root finding (Illinois regula falsi) and bracketing
+# --------------------------------------------------------------------------- #
+def _illinois(fun, lo, hi, glo, ghi, xtol=1e-13, maxiter=80):
+    """Roots of increasing ``fun`` on brackets with glo < 0 <= ghi (elementwise)."""
+    lo, hi, glo, ghi = (np.array(a, float) for a in (lo, hi, glo, ghi))
+    x = hi.copy()
+    todo = np.ones(lo.shape, bool)
+    side = np.zeros(lo.shape, int)
+    for _ in range(maxiter):
+        if not todo.any():
+            break
+        i = np.flatnonzero(todo)
+        denom = ghi[i] - glo[i]
+        xs = np.where(
+            denom > 0, hi[i] - ghi[i] * (hi[i] - lo[i]) / np.where(denom > 0, denom, 1), 0.5 * (lo[i] + hi[i])
+        )
+        bad = ~((xs > lo[i]) & (xs < hi[i]))
+        xs[bad] = 0.5 * (lo[i] + hi[i])[bad]
+        g = fun(xs, i)
+        g = np.where(np.isnan(g), np.inf, g)  # beyond the branch counts as "too far"
+        x[i] = xs
+        up = g >= 0
+        # Illinois: halve the retained end's value when the same side repeats.
+        ju, jd = i[up], i[~up]
+        glo[ju] = np.where(side[ju] == 1, 0.5 * glo[ju], glo[ju])
+        hi[ju], ghi[ju] = xs[up], np.minimum(g[up], 1e300)
+        side[ju] = 1
+        ghi[jd] = np.where(side[jd] == -1, 0.5 * ghi[jd], ghi[jd])
+        lo[jd], glo[jd] = xs[~up], g[~up]
+        side[jd] = -1
+        done = (np.abs(g) <= 1e-14) | (hi[i] - lo[i] <= xtol * np.maximum(1.0, np.abs(hi[i])))
+        todo[i[done]] = False
+    return x
+
+
+def _bracket_and_solve(fun, x_guess, x_max=np.inf, grow=1.6, max_expand=80, boundary_rtol=4e-16):
+    """Solve fun(x) = 0 for x >= 0 where fun(0) < 0, fun increasing, NaN past a branch end.
+
+    Returns ``(x, ok)``; ``ok`` is False where the branch ends (fun becomes NaN)
+    before fun reaches 0, i.e. the stem slips first.
+    """
+    B = x_guess.shape[0]
+    lo = np.zeros(B)
+    glo = fun(lo, np.arange(B))
+    hi = np.maximum(x_guess, 1e-12)
+    ghi = np.full(B, np.nan)
+    state = np.zeros(B, int)  # 0 expanding, 1 bracketed, 2 boundary bisection, 3 no root
+    for _ in range(max_expand):
+        i = np.flatnonzero(state == 0)
+        if i.size == 0:
+            break
+        g = fun(hi[i], i)
+        ok = g >= 0
+        state[i[ok]] = 1
+        ghi[i[ok]] = g[ok]
+        nan = np.isnan(g)
+        state[i[nan]] = 2
+        grow_ = ~ok & ~nan
+        lo[i[grow_]], glo[i[grow_]] = hi[i[grow_]], g[grow_]
+        hi[i[grow_]] = np.minimum(hi[i[grow_]] * grow, x_max)
+        capped = grow_ & (hi[i] >= x_max) & (lo[i] >= x_max)
+        state[i[capped]] = 3
+    state[state == 0] = 3
+    for _ in range(80):
+        i = np.flatnonzero(state == 2)
+        if i.size == 0:
+            break
+        mid = 0.5 * (lo[i] + hi[i])
+        g = fun(mid, i)
+        nan = np.isnan(g)
+        hit = ~nan & (g >= 0)
+        state[i[hit]] = 1
+        hi[i[hit]], ghi[i[hit]] = mid[hit], g[hit]
+        hi[i[nan]] = mid[nan]
+        low = ~nan & ~hit
+        lo[i[low]], glo[i[low]] = mid[low], g[low]
+        narrow = (hi[i] - lo[i]) <= boundary_rtol * hi[i]
+        state[i[narrow & (state[i] == 2)]] = 3
+    x = np.full(B, np.nan)
+    b = np.flatnonzero(state == 1)
+    if b.size:
+        x[b] = _illinois(lambda xs, j: fun(xs, b[j]), lo[b], hi[b], glo[b], ghi[b])
+    return x, state == 1
+
+
+# --------------------------------------------------------------------------- #
+# Force -> contact (direction a)
+# --------------------------------------------------------------------------- #
+def _equilibrium(f, phi_p, P, n_steps, keep=False):
+    """Solve the base moment for given force and plastic base rotation."""
+    m0 = f * P["eta"]
+    phi0 = P["tilt"] + phi_p + P["c_base"] * m0
+    sol = _march(f, m0, phi0, P, n_steps, keep)
+    need = np.any(P["mu"] != 0.0) or _weighted(P)
+    if not need:
+        sol["m0"] = m0
+        return sol
+    # Secant on the base moment; the residual has unit slope to leading order.
+    r0 = sol["resid"]
+    m_a, r_a = m0, r0
+    m_b = m0 - np.nan_to_num(r0)
+    for _ in range(30):
+        sol = _march(f, m_b, P["tilt"] + phi_p + P["c_base"] * m_b, P, n_steps, keep)
+        r_b = sol["resid"]
+        conv = ~(np.abs(r_b) > 1e-12 * (1.0 + np.abs(m_b)))
+        if conv.all():
+            break
+        slope = np.where(np.abs(m_b - m_a) > 0, (r_b - r_a) / np.where(m_b != m_a, m_b - m_a, 1.0), 1.0)
+        slope = np.where(np.isfinite(slope) & (slope > 0.05), slope, 1.0)
+        m_a, r_a = m_b, r_b
+        m_b = np.where(conv, m_b, m_b - np.nan_to_num(r_b) / slope)
+    sol["m0"] = m_b
+    return sol
+
+
+def contact_from_force_nd(
+    f: ArrayLike,
+    eta: ArrayLike,
+    p: ArrayLike,
+    effects_nd: dict | None = None,
+    *,
+    n_steps: int = DEFAULT_STEPS,
+    keep_shape: bool = False,
+) -> dict:
+    """Nondimensional direction (a): force to contact point (and shape).
+
+    Parameters
+    ----------
+    f : array_like
+        F L^2 / EI0, broadcast with ``eta``, ``p`` and the effect groups.
+    eta : array_like
+        h / L, in (0, 1).
+    p : array_like
+        Taper exponent, EI(s) = EI0 (1 - s/L)^(4p) (eq. EI_taper).
+    effects_nd : dict, optional
+        Nondimensional effect groups from :meth:`Effects.nondim`.
+
+    Returns
+    -------
+    dict
+        ``found``, ``sig_c`` (s_c/L), ``xi_c`` (x_c/L), ``phi_c`` (tangent angle
+        from vertical at the contact, rad), ``m0`` (base moment, M L/EI0) and
+        with ``keep_shape`` the grid (n_steps + 1, 3, ...) of xi, zeta, phi.
+        Each array has the broadcast shape. ``yielded`` marks forces the base
+        cannot carry (effect ``yield``).
+    """
+    P, (f_,) = _problem(eta, p, effects_nd, f)
+    sol = _equilibrium(f_, np.zeros_like(f_), P, n_steps, keep_shape)
+    yielded = sol["m0"] > P["m_yield"]
+    res = _reshape(sol, P["shape"])
+    res["yielded"] = yielded.reshape(P["shape"])
+    return res
+
+
+def _reshape(sol: dict, shape) -> dict:
+    out = {}
+    for k in ("found", "sig_c", "xi_c", "phi_c", "m0"):
+        out[k] = sol[k].reshape(shape)
+    if sol.get("grid") is not None:
+        g = sol["grid"]
+        out["grid"] = g.reshape(g.shape[:2] + tuple(shape))
+    return out
+
+
+# --------------------------------------------------------------------------- #
+# Displacement -> force (direction b, the shooting problem the data poses)
+# --------------------------------------------------------------------------- #
+def force_from_displacement_nd(
+    d: ArrayLike,
+    eta: ArrayLike,
+    p: ArrayLike,
+    effects_nd: dict | None = None,
+    *,
+    n_steps: int = DEFAULT_STEPS,
+    keep_shape: bool = False,
+) -> dict:
+    """Nondimensional direction (b): contact displacement since first contact to force.
+
+    Follows the loading branch continuously from first contact (d = 0). Where
+    the requested displacement lies beyond the branch's end (the stem slips
+    past the sensor: contact passes the tip, the stem bends over below the
+    sensor, or the force-displacement curve turns), ``slipped`` is True and
+    the force is NaN. With a base yield moment, loading beyond yield follows
+    the plastic branch (base moment held at the yield moment).
+
+    Returns
+    -------
+    dict
+        ``f`` (true force, F L^2/EI0), ``f_measured`` (plus sensor offset),
+        ``sig_c``, ``xi_c``, ``phi_c``, ``m0``, ``phi_plastic``, ``slipped``,
+        ``yielded``; with ``keep_shape`` also ``grid``. Arrays have the
+        broadcast shape of the inputs.
+    """
+    P, (d_,) = _problem(eta, p, effects_nd, d)
+    B = d_.shape[0]
+    zeros = np.zeros(B)
+    ref = _equilibrium(zeros, zeros, P, n_steps)
+    if not np.all(ref["found"]):
+        bad = np.flatnonzero(~ref["found"])[0]
+        raise ValueError(
+            "height_m: expected a height the unloaded stem reaches, got h/L = "
+            f"{P['eta'][bad]:.4g} which its rest shape never crosses"
+        )
+    target = ref["xi_c"] + d_
+
+    def g_elastic(f, i):
+        s = _equilibrium(f, zeros[i], _subset(P, i), n_steps)
+        return np.where(s["found"], s["xi_c"] - target[i], np.nan)
+
+    k_guess = _linear_kx_nd(P)
+    f_guess = np.maximum(d_, 1e-9) * k_guess
+    f_sol, ok = _bracket_and_solve(g_elastic, f_guess)
+    f_sol = np.where(d_ <= 0, 0.0, f_sol)
+    ok = ok | (d_ <= 0)
+    phi_p = np.zeros(B)
+    sol = _equilibrium(np.nan_to_num(f_sol), phi_p, P, n_steps, keep_shape)
+    yielded = ok & (sol["m0"] > P["m_yield"])
+    if yielded.any():
+        iy = np.flatnonzero(yielded)
+        f_y, phi_y, ok_y = _plastic_branch(P, iy, target, n_steps)
+        f_sol[iy], phi_p[iy], ok[iy] = f_y, phi_y, ok_y
+        sol = _equilibrium(np.nan_to_num(f_sol), phi_p, P, n_steps, keep_shape)
+    slipped = ~ok | ~sol["found"]
+    f_sol = np.where(slipped, np.nan, f_sol)
+    out = {
+        "f": f_sol,
+        "f_measured": f_sol + P["f_offset"],
+        "sig_c": np.where(slipped, np.nan, sol["sig_c"]),
+        "xi_c": np.where(slipped, np.nan, sol["xi_c"]),
+        "phi_c": np.where(slipped, np.nan, sol["phi_c"]),
+        "m0": np.where(slipped, np.nan, sol["m0"]),
+        "phi_plastic": phi_p,
+        "slipped": slipped,
+        "yielded": yielded & ~slipped,
+        "xi_c0": ref["xi_c"],
+    }
+    if keep_shape:
+        out["grid"] = sol["grid"]
+        shape = P["shape"]
+        res = {k: v.reshape(shape) for k, v in out.items() if k != "grid"}
+        res["grid"] = sol["grid"].reshape(sol["grid"].shape[:2] + tuple(shape))
+        return res
+    return {k: v.reshape(P["shape"]) for k, v in out.items()}
+
+
+def _plastic_branch(P, iy, target, n_steps):
+    """Beyond yield: base moment held at m_yield; solve plastic rotation for the target."""
+    Py = _subset(P, iy)
+    tgt = target[iy]
+    my = Py["m_yield"]
+
+    simple = not (np.any(Py["mu"] != 0.0) or np.any(Py["w0"] != 0.0))
+
+    def f_for_phi(phi_p, j):
+        # Force at which the base moment equals the yield moment (m0 increasing in f).
+        Pj = _subset(Py, j)
+        if simple:  # m0 = f eta exactly (eq. M_determinate at s = 0)
+            return my[j] / Pj["eta"]
+
+        def g(fv, k):
+            s = _equilibrium(fv, phi_p[k], _subset(Pj, k), n_steps)
+            return np.where(s["found"], s["m0"] - my[j][k], np.nan)
+
+        fv, okv = _bracket_and_solve(g, my[j] / Pj["eta"])
+        return np.where(okv, fv, np.nan)
+
+    def g_phi(phi_p, j):
+        fv = f_for_phi(phi_p, j)
+        s = _equilibrium(np.nan_to_num(fv), phi_p, _subset(Py, j), n_steps)
+        return np.where(np.isfinite(fv) & s["found"], s["xi_c"] - tgt[j], np.nan)
+
+    phi, ok = _bracket_and_solve(g_phi, np.full(iy.size, 0.05), x_max=_HALF_PI)
+    return f_for_phi(np.nan_to_num(phi), np.arange(iy.size)), phi, ok
+
+
+def _linear_kx_nd(P):
+    """Small-deflection k_x L^3/EI0 (with base compliance), for initial guesses."""
+    from .lumped import kx_nd
+
+    c = P["c_base"]
+    kx = kx_nd(P["eta"], P["p"])
+    return 1.0 / (1.0 / kx + c * P["eta"] ** 2)
+
+
+# --------------------------------------------------------------------------- #
+# Dimensional wrappers
+# --------------------------------------------------------------------------- #
+@dataclass(frozen=True)
+class ContactSolution:
+    """Elastica at given forces (arrays share the broadcast shape).
+
+    Attributes
+    ----------
+    force_N : true contact force [N]
+    contact_s_m : arc length of the contact s_c [m]
+    contact_x_m : horizontal position of the contact x_c [m]
+    contact_angle_rad : tangent angle from vertical at the contact [rad]
+    base_moment_Nm : moment at the base [N m]
+    found : contact exists (stem reaches the sensor height)
+    shape_xz_m : optional centerline grid, shape (n_steps + 1, 2, ...), in m
+    """
+
+    force_N: NDArray
+    contact_s_m: NDArray
+    contact_x_m: NDArray
+    contact_angle_rad: NDArray
+    base_moment_Nm: NDArray
+    found: NDArray
+    shape_xz_m: NDArray | None = None
+
+
+@dataclass(frozen=True)
+class ForceSolution:
+    """Force at given contact displacements (arrays share the broadcast shape).
+
+    Attributes
+    ----------
+    displacement_m : horizontal contact displacement since first contact [m]
+    force_N : force the sensor reads (true force plus ``force_offset``) [N];
+        NaN where slipped
+    true_force_N : force on the stem [N]
+    contact_s_m : arc length of the contact [m]
+    contact_angle_rad : tangent angle from vertical at the contact [rad]
+    slipped : True where the stem can no longer hold contact
+    yielded : True where the base is on its plastic branch
+    shape_xz_m : optional centerline grid (n_steps + 1, 2, ...) [m]
+    """
+
+    displacement_m: NDArray
+    force_N: NDArray
+    true_force_N: NDArray
+    contact_s_m: NDArray
+    contact_angle_rad: NDArray
+    slipped: NDArray
+    yielded: NDArray
+    shape_xz_m: NDArray | None = None
+
+
+def check_rod(
+    EI0: ArrayLike, p: ArrayLike, length: float, height: ArrayLike
+) -> tuple[NDArray, NDArray, float, NDArray]:
+    """Validate rod parameters; raise ValueError naming the field and value."""
+    EI0 = np.asarray(EI0, float)
+    p = np.asarray(p, float)
+    h = np.asarray(height, float)
+    L = float(length)
+    if not np.isfinite(L) or L <= 0:
+        raise ValueError(f"length_m: expected a length > 0 m, got {length}")
+    if not np.all(np.isfinite(EI0) & (EI0 > 0)):
+        raise ValueError(f"EI0: expected a flexural rigidity > 0 N m^2, got {EI0.ravel()[~(EI0.ravel() > 0)][:1]}")
+    if not np.all(np.isfinite(p) & (p >= 0)):
+        raise ValueError(f"p: expected a taper exponent >= 0, got {p.ravel()[~(p.ravel() >= 0)][:1]}")
+    bad = ~(np.isfinite(h) & (h > 0) & (h < L))
+    if np.any(bad):
+        raise ValueError(f"height_m: expected 0 < height < length ({L:g} m), got {h.ravel()[bad.ravel()][0]:g}")
+    return EI0, p, L, h
+
+
+def contact_from_force(
+    force_N: ArrayLike,
+    height_m: ArrayLike,
+    EI0: ArrayLike,
+    p: ArrayLike,
+    length_m: float,
+    effects: Effects | None = None,
+    *,
+    n_steps: int = DEFAULT_STEPS,
+    keep_shape: bool = False,
+) -> ContactSolution:
+    """Direction (a) in SI units: true contact force to contact point and shape.
+
+    All array arguments broadcast together (batched over a leading axis).
+    """
+    EI0, p, L, h = check_rod(EI0, p, length_m, height_m)
+    F = np.asarray(force_N, float)
+    eff = (effects or Effects()).nondim(L, EI0)
+    res = contact_from_force_nd(F * L**2 / EI0, h / L, p, eff, n_steps=n_steps, keep_shape=keep_shape)
+    scale = np.broadcast_to(EI0 / L, res["m0"].shape)
+    return ContactSolution(
+        force_N=np.broadcast_to(F, res["m0"].shape).astype(float),
+        contact_s_m=res["sig_c"] * L,
+        contact_x_m=res["xi_c"] * L,
+        contact_angle_rad=res["phi_c"],
+        base_moment_Nm=res["m0"] * scale,
+        found=res["found"] & ~res["yielded"],
+        shape_xz_m=res["grid"][:, :2] * L if keep_shape else None,
+    )
+
+
+def force_from_displacement(
+    displacement_m: ArrayLike,
+    height_m: ArrayLike,
+    EI0: ArrayLike,
+    p: ArrayLike,
+    length_m: float,
+    effects: Effects | None = None,
+    *,
+    n_steps: int = DEFAULT_STEPS,
+    keep_shape: bool = False,
+) -> ForceSolution:
+    """Direction (b) in SI units: contact displacement since first contact to force.
+
+    Parameters
+    ----------
+    displacement_m : array_like
+        Horizontal displacement of the contact point since first contact [m].
+    height_m : array_like
+        Sensor height h [m], 0 < h < L.
+    EI0 : array_like
+        Base flexural rigidity [N m^2].
+    p : array_like
+        Taper exponent (eq. EI_taper).
+    length_m : float
+        Stem length L [m].
+    effects : Effects, optional
+        Model effects (SI).
+
+    Returns
+    -------
+    ForceSolution
+        Arrays of the broadcast shape; ``force_N`` is NaN where ``slipped``.
+    """
+    EI0, p, L, h = check_rod(EI0, p, length_m, height_m)
+    D = np.asarray(displacement_m, float)
+    if np.any(~np.isfinite(D)) or np.any(D < 0):
+        raise ValueError(f"displacement_m: expected finite values >= 0 m, got {D.ravel()[~(D.ravel() >= 0)][:1]}")
+    eff = (effects or Effects()).nondim(L, EI0)
+    res = force_from_displacement_nd(D / L, h / L, p, eff, n_steps=n_steps, keep_shape=keep_shape)
+    scale = np.broadcast_to(EI0 / L**2, res["f"].shape)
+    return ForceSolution(
+        displacement_m=np.broadcast_to(D, res["f"].shape).astype(float),
+        force_N=res["f_measured"] * scale,
+        true_force_N=res["f"] * scale,
+        contact_s_m=res["sig_c"] * L,
+        contact_angle_rad=res["phi_c"],
+        slipped=res["slipped"],
+        yielded=res["yielded"],
+        shape_xz_m=res["grid"][:, :2] * L if keep_shape else None,
+    )
+
+
+def secant_k_theta(
+    force_N: ArrayLike,
+    height_m: ArrayLike,
+    EI0: ArrayLike,
+    p: ArrayLike,
+    length_m: float,
+    effects: Effects | None = None,
+    *,
+    n_steps: int = DEFAULT_STEPS,
+) -> NDArray:
+    """Secant rotational stiffness F h / theta(h) from the elastica [N m/rad] (seed III-D).
+
+    theta(h) is the tangent rotation at the contact relative to the unloaded
+    stem; it tends to k_theta(h) of eq. kdist as F -> 0 and falls below it
+    for large deflections. NaN where no contact exists.
+    """
+    sol = contact_from_force(force_N, height_m, EI0, p, length_m, effects, n_steps=n_steps)
+    rest = contact_from_force(np.zeros_like(sol.force_N), height_m, EI0, p, length_m, effects, n_steps=n_steps)
+    theta = sol.contact_angle_rad - rest.contact_angle_rad
+    return np.where(sol.found, sol.force_N * np.asarray(height_m, float) / theta, np.nan)

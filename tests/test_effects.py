@@ -1,0 +1,162 @@
+"""Each model effect against a limit derived by hand, and against the reference."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+from bayesrod.physics import Effects, contact_from_force, force_from_displacement, k_x
+from bayesrod.physics import reference as R
+from bayesrod.physics.effects import parse_effect_assignments
+
+EI0, P, L, H = 2.63, 0.43, 0.8, 0.45
+
+
+def _ei(s, p=P):
+    return EI0 * (1 - s / L) ** (4 * p)
+
+
+def _linear_compliance(phi0, dphi0, z0, s_c0, p=P):
+    """dD/dF at F -> 0 for a rest shape phi0(s): first-order beam theory.
+
+    A unit force rotates the section at s by g(s) = int_0^s (h - z0)/EI; the
+    contact, kept at height h, moves by dx - tan(phi0(s_c0)) dz.
+    """
+
+    def g(s):
+        return quad(lambda t: (H - z0(t)) / _ei(t, p), 0, s, epsabs=0, epsrel=1e-12)[0]
+
+    dx = quad(lambda s: g(s) * math.cos(phi0(s)), 0, s_c0, epsabs=0, epsrel=1e-10)[0]
+    dz = -quad(lambda s: g(s) * math.sin(phi0(s)), 0, s_c0, epsabs=0, epsrel=1e-10)[0]
+    return dx - math.tan(phi0(s_c0)) * dz
+
+
+def _small_force(effects, F=1e-4):
+    """dD/dF from the solver at a tiny force, and the displacement reference x_c(0)."""
+    zero = contact_from_force(0.0, H, EI0, P, L, effects)
+    one = contact_from_force(F, H, EI0, P, L, effects)
+    return float((one.contact_x_m - zero.contact_x_m) / F), float(zero.contact_x_m)
+
+
+def test_base_compliance_adds_Fh2_over_k():
+    kb = 4.0
+    D = np.array([1e-6, 2e-6])
+    sol = force_from_displacement(D, H, EI0, P, L, Effects(base_compliance=kb))
+    expected = D / (1 / k_x(H, EI0, P, L) + H**2 / kb)
+    np.testing.assert_allclose(sol.force_N, expected, rtol=1e-5)
+    # and the compliance really softens large deflections too
+    stiff = force_from_displacement(0.1, H, EI0, P, L)
+    soft = force_from_displacement(0.1, H, EI0, P, L, Effects(base_compliance=kb))
+    assert soft.force_N < 0.5 * stiff.force_N
+
+
+def test_base_tilt_rigid_rotation_and_linear_response():
+    t = 0.1
+    eff = Effects(base_tilt=t)
+    comp, x0 = _small_force(eff)
+    assert x0 == pytest.approx(H * math.tan(t), rel=1e-10)
+    expected = _linear_compliance(lambda s: t, None, lambda s: s * math.cos(t), H / math.cos(t))
+    assert comp == pytest.approx(expected, rel=1e-3)
+
+
+def test_rest_curvature_is_an_arc_and_linear_response():
+    k0 = 0.5
+    eff = Effects(rest_curvature=k0)
+    sol = contact_from_force(0.0, H, EI0, P, L, eff, keep_shape=True, n_steps=64)
+    s = np.linspace(0, L, 65)
+    np.testing.assert_allclose(sol.shape_xz_m[:, 0], (1 - np.cos(k0 * s)) / k0, atol=1e-10)
+    np.testing.assert_allclose(sol.shape_xz_m[:, 1], np.sin(k0 * s) / k0, atol=1e-10)
+    s_c0 = math.asin(k0 * H) / k0
+    comp, x0 = _small_force(eff)
+    assert x0 == pytest.approx((1 - math.cos(k0 * s_c0)) / k0, rel=1e-10)
+    expected = _linear_compliance(lambda s: k0 * s, None, lambda s: math.sin(k0 * s) / k0, s_c0)
+    assert comp == pytest.approx(expected, rel=1e-3)
+
+
+def test_contact_friction_second_order_term():
+    """Uniform rod: D = F h^3/(3EI) - (2/15) mu F^2 h^5/EI^2 + O(F^3) (derived in docs/model.md)."""
+    mu, EI, h, Lr = 0.3, 1.0, 0.5, 1.0
+    F = np.array([1e-3, 2e-3, 4e-3])
+    with_mu = contact_from_force(F, h, EI, 0.0, Lr, Effects(contact_friction=mu)).contact_x_m
+    without = contact_from_force(F, h, EI, 0.0, Lr).contact_x_m
+    coef = (with_mu - without) / F**2
+    np.testing.assert_allclose(coef, -2 / 15 * mu * h**5 / EI**2, rtol=2e-2)
+
+
+def test_force_offset_is_additive_on_measured_force():
+    D = np.array([0.0, 0.02, 0.1])
+    plain = force_from_displacement(D, H, EI0, P, L)
+    off = force_from_displacement(D, H, EI0, P, L, Effects(force_offset=0.25))
+    np.testing.assert_allclose(off.force_N, plain.force_N + 0.25, rtol=1e-12)
+    np.testing.assert_allclose(off.true_force_N, plain.force_N, rtol=1e-12)
+
+
+def test_self_weight_first_order_p_delta():
+    """Uniform rod, uniform weight w: x_c = F/k_x + w F C, C from linear beam theory."""
+    EI, h, Lr = 1.0, 0.5, 1.0
+
+    def x1(s):  # linear shape per unit force; straight above the contact
+        return s**2 * (3 * h - s) / (6 * EI) if s <= h else h**3 / (3 * EI) + h**2 / (2 * EI) * (s - h)
+
+    def dM(s):  # moment per unit (w F) from the weight above s on the deflected shape
+        return quad(lambda t: x1(t) - x1(s), s, Lr, epsabs=0, epsrel=1e-12, points=[h])[0]
+
+    C = quad(lambda s: dM(s) * (h - s) / EI, 0, h, epsabs=0, epsrel=1e-10)[0]
+    F, w = 1e-3, np.array([1e-3, 2e-3])
+    xw = contact_from_force(F, h, EI, 0.0, Lr, Effects(self_weight=1.0)).contact_x_m  # warm-up, finite
+    assert np.isfinite(xw)
+    x = np.array([float(contact_from_force(F, h, EI, 0.0, Lr, Effects(self_weight=wi)).contact_x_m) for wi in w])
+    x0 = float(contact_from_force(F, h, EI, 0.0, Lr).contact_x_m)
+    np.testing.assert_allclose((x - x0) / (w * F), C, rtol=2e-2)
+
+
+def test_yield_plateau_at_My_over_h():
+    My = 0.5
+    D = np.array([0.005, 0.02, 0.1, 0.2])
+    sol = force_from_displacement(D, H, EI0, P, L, Effects(yield_moment=My))
+    elastic = force_from_displacement(D, H, EI0, P, L)
+    below = elastic.force_N * H < My
+    np.testing.assert_allclose(sol.force_N[below], elastic.force_N[below], rtol=1e-12)
+    np.testing.assert_allclose(sol.force_N[~below], My / H, rtol=1e-9)
+    assert list(sol.yielded) == list(~below)
+
+
+@pytest.mark.parametrize(
+    "name,value",
+    [
+        ("base_compliance", 6.0),
+        ("rest_curvature", 0.4),
+        ("base_tilt", -0.08),
+        ("contact_friction", 0.25),
+        ("self_weight", 1.5),
+    ],
+)
+def test_effects_agree_with_reference(name, value):
+    eff = Effects.from_mapping({name: value})
+    nd = {k: float(v) for k, v in eff.nondim(L, EI0).items()}
+    d = np.array([0.02, 0.1, 0.25])
+    fast = force_from_displacement(d, H, EI0, P, L, eff)
+    ref = np.array([R.solve_displacement(x / L, H / L, P, nd)["f"] for x in d]) * EI0 / L**2
+    np.testing.assert_allclose(fast.true_force_N, ref, rtol=1e-6)
+
+
+@pytest.mark.parametrize(
+    "items,msg",
+    [
+        (["foo=1"], "effect name"),
+        (["base_tilt"], "NAME=VALUE"),
+        (["base_tilt=abc"], "base_tilt"),
+        (["base_compliance=-1"], "base_compliance"),
+        (["base_tilt=0.1", "base_tilt=0.2"], "twice"),
+    ],
+)
+def test_effect_parsing_errors(items, msg):
+    with pytest.raises(ValueError, match=msg):
+        parse_effect_assignments(items)
+
+
+def test_effect_mapping_roundtrip():
+    eff = parse_effect_assignments(["yield=0.3", "base_tilt=0.02"])
+    assert eff.to_mapping() == {"base_tilt": 0.02, "yield": 0.3}
+    assert Effects.from_mapping(eff.to_mapping()) == eff

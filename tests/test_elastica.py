@@ -1,0 +1,161 @@
+"""Forward elastica against analytic solutions and an independent solve_ivp reference."""
+
+import numpy as np
+import pytest
+
+from bayesrod.physics import (
+    contact_from_force,
+    contact_from_force_nd,
+    force_from_displacement,
+    force_from_displacement_nd,
+    k_x,
+)
+from bayesrod.physics import reference as R
+from bayesrod.presets import PRESETS
+
+
+# --------------------------------------------------------------------------- #
+# Bisshopp & Drucker (1945): uniform cantilever, tip load P L^2/EI = 1 and 2
+# --------------------------------------------------------------------------- #
+@pytest.mark.parametrize("length", [1.0, 1.5, 3.0])
+def test_bisshopp_drucker(length):
+    sol = force_from_displacement([0.30172, 0.49346], [0.94357, 0.83936], 1.0, 0.0, length)
+    assert not sol.slipped.any()
+    np.testing.assert_allclose(sol.force_N, [1.0, 2.0], atol=1e-4)
+    # The contact sits at s = 1 m: the published tip of the unit-length rod.
+    np.testing.assert_allclose(sol.contact_s_m, [1.0, 1.0], atol=1e-4)
+
+
+def test_bisshopp_drucker_force_to_shape():
+    sol = contact_from_force([1.0, 2.0], [0.94357, 0.83936], 1.0, 0.0, 2.0)
+    np.testing.assert_allclose(sol.contact_x_m, [0.30172, 0.49346], atol=2e-5)
+    np.testing.assert_allclose(sol.contact_s_m, [1.0, 1.0], atol=2e-5)
+
+
+# --------------------------------------------------------------------------- #
+# Small deflection: k_x = 3 EI / h^3 for constant EI, eq. kx for the taper
+# --------------------------------------------------------------------------- #
+@pytest.mark.parametrize("EI,h,L", [(1.0, 0.5, 1.0), (0.2, 0.1, 0.47), (3.0, 0.7, 0.8)])
+def test_small_deflection_uniform(EI, h, L):
+    D = 1e-5 * h
+    sol = force_from_displacement(D, h, EI, 0.0, L)
+    np.testing.assert_allclose(sol.force_N / D, 3 * EI / h**3, rtol=1e-4)
+
+
+@pytest.mark.parametrize("preset", ["twig", "grass"])
+def test_small_deflection_taper(preset):
+    pr = PRESETS[preset]
+    h = np.array(pr["heights_m"])
+    D = 1e-5 * h
+    sol = force_from_displacement(D, h, pr["EI0"], pr["p"], pr["length_m"])
+    np.testing.assert_allclose(sol.force_N / D, k_x(h, pr["EI0"], pr["p"], pr["length_m"]), rtol=1e-4)
+
+
+# --------------------------------------------------------------------------- #
+# Published twig and grass: agreement with the reference up to slip
+# --------------------------------------------------------------------------- #
+def _branch_end(eta, p, eff=None):
+    d = np.linspace(0, 1.2, 241)
+    r = force_from_displacement_nd(d, eta, p, eff)
+    return d[~r["slipped"]].max()
+
+
+@pytest.mark.parametrize("preset", ["twig", "grass"])
+def test_forces_agree_with_reference_up_to_slip(preset):
+    pr = PRESETS[preset]
+    L, EI0, p = pr["length_m"], pr["EI0"], pr["p"]
+    for h in pr["heights_m"]:
+        eta = h / L
+        d_end = _branch_end(eta, p)
+        d = d_end * np.array([0.002, 0.05, 0.2, 0.4, 0.6, 0.8, 0.9, 0.95, 0.97])
+        fast = force_from_displacement(d * L, h, EI0, p, L)
+        assert not fast.slipped.any()
+        ref = np.array([R.solve_displacement(x, eta, p)["f"] for x in d]) * EI0 / L**2
+        np.testing.assert_allclose(fast.force_N, ref, rtol=1e-6)
+
+
+def test_force_to_contact_agrees_with_reference():
+    rng = np.random.default_rng(3)
+    eta = rng.uniform(0.1, 0.9, 25)
+    p = rng.uniform(0.0, 2.0, 25)
+    # forces up to ~60% of the small-deflection scale at that height
+    f = rng.uniform(0.0, 0.6, 25) * 2.0 / eta**2 / (1 + 2 * p * eta)
+    fast = contact_from_force_nd(f, eta, p)
+    for i in range(25):
+        ref = R.solve_force(f[i], eta[i], p[i])
+        assert fast["found"][i] == ref["found"]
+        if ref["found"]:
+            np.testing.assert_allclose(fast["xi_c"][i], ref["xi_c"], rtol=1e-8, atol=1e-12)
+            np.testing.assert_allclose(fast["sig_c"][i], ref["sig_c"], rtol=1e-8)
+
+
+def test_slip_reported_not_invented():
+    pr = PRESETS["twig"]
+    L, EI0, p, h = pr["length_m"], pr["EI0"], pr["p"], 0.65
+    d_end = _branch_end(h / L, p) * L
+    sol = force_from_displacement([0.5 * d_end, 1.05 * d_end, 3.0], h, EI0, p, L)
+    assert list(sol.slipped) == [False, True, True]
+    assert np.isnan(sol.force_N[1:]).all() and np.isfinite(sol.force_N[0])
+    # the reference agrees that 5% past the branch end there is no contact
+    assert R.solve_displacement(1.05 * d_end / L, h / L, p)["slipped"]
+
+
+def test_force_increases_monotonically_along_branch():
+    for eta, p in [(0.56, 0.43), (0.81, 0.43), (0.19, 1.6), (0.3, 0.0)]:
+        d = np.linspace(0, 0.99 * _branch_end(eta, p), 100)
+        f = force_from_displacement_nd(d, eta, p)["f"]
+        # strictly rising, except a plateau flat to round-off where the stem lies
+        # horizontal at the sensor just before it slips
+        assert np.all(np.diff(f) > -1e-9 * f.max())
+        assert np.all(np.diff(f[: len(f) // 2]) > 0)
+
+
+# --------------------------------------------------------------------------- #
+# Nondimensional structure and batching
+# --------------------------------------------------------------------------- #
+def test_EI0_is_a_pure_scale_and_length_scales():
+    base = force_from_displacement(0.05, 0.45, 2.63, 0.43, 0.8)
+    stiffer = force_from_displacement(0.05, 0.45, 5.26, 0.43, 0.8)
+    np.testing.assert_allclose(stiffer.force_N, 2 * base.force_N, rtol=1e-12)
+    # L -> 2L, h -> 2h, D -> 2D: f = F L^2/EI0 unchanged, so F scales by 1/4
+    big = force_from_displacement(0.10, 0.90, 2.63, 0.43, 1.6)
+    np.testing.assert_allclose(big.force_N, base.force_N / 4, rtol=1e-10)
+    np.testing.assert_allclose(big.contact_s_m, 2 * base.contact_s_m, rtol=1e-10)
+
+
+def test_batching_matches_single_solves():
+    D = np.linspace(0.0, 0.2, 4)[None, :]
+    h = np.array([0.45, 0.55, 0.65])[:, None]
+    batch = force_from_displacement(D, h, 2.63, 0.43, 0.8)
+    assert batch.force_N.shape == (3, 4)
+    for i in range(3):
+        for j in range(4):
+            one = force_from_displacement(D[0, j], h[i, 0], 2.63, 0.43, 0.8)
+            np.testing.assert_allclose(batch.force_N[i, j], one.force_N, rtol=1e-12, atol=1e-15)
+
+
+def test_shape_grid_matches_reference():
+    f, eta, p = 1.5, 0.5625, 0.43
+    res = contact_from_force_nd(f, eta, p, n_steps=64, keep_shape=True)
+    sig = np.linspace(0, 1, 65)
+    ref = R.shape_at_force(f, eta, p, sig)
+    np.testing.assert_allclose(res["grid"][:, 0], ref[0], atol=1e-8)
+    np.testing.assert_allclose(res["grid"][:, 1], ref[1], atol=1e-8)
+
+
+@pytest.mark.parametrize(
+    "kwargs,field",
+    [
+        ({"EI0": -1.0}, "EI0"),
+        ({"p": -0.1}, "p"),
+        ({"height_m": 0.9}, "height_m"),
+        ({"height_m": 0.0}, "height_m"),
+        ({"length_m": 0.0}, "length_m"),
+        ({"displacement_m": -0.1}, "displacement_m"),
+    ],
+)
+def test_impossible_inputs_raise_value_error(kwargs, field):
+    args = {"displacement_m": 0.1, "height_m": 0.45, "EI0": 2.63, "p": 0.43, "length_m": 0.8}
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=field):
+        force_from_displacement(**args)
