@@ -13,6 +13,7 @@ import math
 import os
 import sys
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
 import numpy as np
 
@@ -63,6 +64,30 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--effect", action="append", metavar="NAME=VALUE", help="add a model effect (repeatable)")
     p.add_argument("--json", action="store_true", help="print JSON (CONTRACT.md section 3) instead of a table")
+    v = sub.add_parser("validate", help="check a dataset and list every problem found")
+    v.add_argument("dataset", help="dataset directory (holding specimen.json)")
+    v.add_argument("--json", action="store_true", help="print the problems as JSON")
+
+    sm = sub.add_parser("simulate", help="write a synthetic dataset from the forward model")
+    sm.add_argument("--preset", required=True, choices=sorted(PRESETS), help="published specimen to simulate")
+    sm.add_argument("--out", required=True, help="output dataset directory")
+    sm.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    sm.add_argument("--noise", default="default", choices=["default", "none"], help="measurement noise")
+    sm.add_argument("--frames", action="store_true", help="also render RGB-D video frames")
+    sm.add_argument("--effect", action="append", metavar="NAME=VALUE", help="add a model effect (repeatable)")
+    sm.add_argument("--heights", help="override the preset's heights [m]: X,Y,Z or start:stop:num")
+    sm.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
+    im = sub.add_parser("import", help="turn raw force-displacement tables into datasets")
+    im.add_argument("kind", choices=["blueberry"], help="table layout (see docs/data.md)")
+    im.add_argument("src", help="folder of raw tables")
+    im.add_argument("--out", required=True, help="output folder (one dataset per specimen)")
+    im.add_argument(
+        "--length-m",
+        type=float,
+        required=True,
+        help="assumed stem length [m]: the blueberry tables hold none (an explicit assumption)",
+    )
+    im.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
     return parser
 
 
@@ -171,6 +196,90 @@ def _print_prediction(result: dict, EI0: float, p: float, L: float, effects: Eff
         else:
             note = "base yielded" if pt["yielded"] else ""
             print(f"{pt['displacement_m']:17.4f} {pt['force_N']:11.4f} {pt['contact_s_m']:14.4f}  {note}")
+
+
+# --------------------------------------------------------------------------- #
+# validate, simulate
+# --------------------------------------------------------------------------- #
+@_command("validate")
+def cmd_validate(args: argparse.Namespace) -> int:
+    from .dataset import validate_dataset
+
+    problems = validate_dataset(args.dataset)
+    errors = [p for p in problems if p.severity == "error"]
+    if args.json:
+        print(
+            json.dumps(
+                {"dataset": args.dataset, "valid": not errors, "problems": [dict(vars(p)) for p in problems]}, indent=2
+            )
+        )
+    else:
+        for prob in problems:
+            print(prob, file=sys.stderr if prob.severity == "error" else sys.stdout)
+        if errors:
+            print(f"{args.dataset}: {len(errors)} problem{'s' * (len(errors) > 1)} found", file=sys.stderr)
+        else:
+            print(f"{args.dataset}: valid bayesrod.dataset/1" + (f" ({len(problems)} warnings)" if problems else ""))
+    return 1 if errors else 0
+
+
+@_command("simulate")
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from .io import atomic_dir, check_out_dir
+    from .simulate import SimConfig, simulate, write_simulated
+    from .vision.render import default_camera
+
+    effects = parse_effect_assignments(args.effect)
+    check_out_dir(args.out, args.force)
+    overrides = {}
+    if args.heights:
+        overrides["heights_m"] = tuple(parse_values(args.heights, "--heights"))
+    cfg = SimConfig.from_preset(args.preset, seed=args.seed, noise=args.noise, effects=effects, **overrides)
+    for h in cfg.heights_m:
+        _check_height(h, cfg.length_m)
+    pushes = simulate(cfg)
+    with atomic_dir(args.out, args.force) as tmp:
+        write_simulated(
+            cfg, pushes, tmp, frames=args.frames, camera=default_camera(cfg.length_m) if args.frames else None
+        )
+    eff = ", ".join(f"{k}={v:g}" for k, v in effects.to_mapping().items()) or "none"
+    print(
+        f"wrote {args.out}: {cfg.specimen}, {len(pushes)} pushes at "
+        f"{', '.join(f'{h:g}' for h in cfg.heights_m)} m, noise {args.noise}, effects {eff}"
+        + (", with RGB-D frames" if args.frames else "")
+    )
+    return 0
+
+
+@_command("import")
+def cmd_import(args: argparse.Namespace) -> int:
+    from .dataset import validate_dataset
+    from .importers import import_blueberry
+    from .io import atomic_dir, check_out_dir
+
+    check_out_dir(args.out, args.force)
+    with atomic_dir(args.out, args.force) as tmp:
+        report = import_blueberry(args.src, tmp, args.length_m)
+        for cane in report["canes"]:
+            if cane["status"] == "imported":
+                errors = [p for p in validate_dataset(tmp / cane["dataset"]) if p.severity == "error"]
+                if errors:
+                    raise ValueError(f"imported dataset {cane['dataset']} does not validate: {errors[0]}")
+    n_ok = sum(c["status"] == "imported" for c in report["canes"])
+    n_tr = sum(t["status"] == "imported" for c in report["canes"] for t in c["trials"])
+    n_all = sum(len(c["trials"]) for c in report["canes"])
+    print(
+        f"imported {n_ok} of {len(report['canes'])} canes ({n_tr} of {n_all} trials) into {args.out}, "
+        f"assumed cane length {args.length_m:g} m"
+    )
+    for cane in report["canes"]:
+        for t in cane["trials"]:
+            if t["status"] != "imported":
+                print(f"  {cane['cane']}: {t['file']} rejected: {t['reason']}")
+        if cane["status"] != "imported":
+            print(f"  {cane['cane']} rejected: {cane['reason']}")
+    print(f"details: {Path(args.out) / 'import_report.json'}")
+    return 0
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -42,6 +42,7 @@ __all__ = [
     "force_from_displacement_nd",
     "DEFAULT_STEPS",
     "secant_k_theta",
+    "centerline_at",
 ]
 
 DEFAULT_STEPS = 48
@@ -324,6 +325,9 @@ def _march(f, m0, phi0, P, n_steps, keep=False):
                 ic, yc, dc = resolve(idx, Y[:, idx], sig, step)
                 if ic.size:
                     j = idx[ic]
+                    if not P["_weighted"]:
+                        yc = yc.copy()
+                        yc[3] = 0.0  # no load above the contact: M = 0 exactly (round-off / e -> inf at the tip)
                     new[:, j] = _step(yc, sig + dc, step - dc, f[j], _subset(P, j), 0.0)
             else:
                 pend[idx] = True
@@ -837,3 +841,39 @@ def secant_k_theta(
     rest = contact_from_force(np.zeros_like(sol.force_N), height_m, EI0, p, length_m, effects, n_steps=n_steps)
     theta = sol.contact_angle_rad - rest.contact_angle_rad
     return np.where(sol.found, sol.force_N * np.asarray(height_m, float) / theta, np.nan)
+
+
+def centerline_at(grid: ArrayLike, sig: ArrayLike) -> NDArray:
+    """Centerline (xi, zeta) at arc lengths ``sig`` from a march grid.
+
+    Cubic Hermite interpolation between the grid nodes sigma_k = k/n using the
+    exact tangents (sin phi, cos phi), so the error is O(n^-4).
+
+    Parameters
+    ----------
+    grid : array, shape (n + 1, 3, ...)
+        ``grid`` from ``keep_shape=True`` (xi, zeta, phi at the nodes).
+    sig : array, shape (m,)
+        Query arc lengths s/L in [0, 1].
+
+    Returns
+    -------
+    array, shape (2, m, ...)
+    """
+    g = np.asarray(grid, float)
+    s = np.clip(np.asarray(sig, float), 0.0, 1.0)
+    n = g.shape[0] - 1
+    k = np.minimum((s * n).astype(int), n - 1)
+    t = (s * n - k).reshape((-1,) + (1,) * (g.ndim - 2))
+    h = 1.0 / n
+    p0, p1 = g[k, :2], g[k + 1, :2]
+    phi0, phi1 = g[k, 2], g[k + 1, 2]
+    d0 = np.stack([np.sin(phi0), np.cos(phi0)], axis=1) * h
+    d1 = np.stack([np.sin(phi1), np.cos(phi1)], axis=1) * h
+    t = t[:, None]
+    h00 = 2 * t**3 - 3 * t**2 + 1
+    h10 = t**3 - 2 * t**2 + t
+    h01 = -2 * t**3 + 3 * t**2
+    h11 = t**3 - t**2
+    out = h00 * p0 + h10 * d0 + h01 * p1 + h11 * d1  # (m, 2, ...)
+    return np.moveaxis(out, 1, 0)

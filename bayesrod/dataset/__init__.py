@@ -1,0 +1,22 @@
+"""Datasets (CONTRACT.md section 1): typed observations, reader/validator, engagement."""
+
+from .engagement import Engagement, detect_engagement
+from .model import FORMAT, Camera, ForceSeries, FrameRecord, Push, Sensor, ShapeFrame, Specimen
+from .reader import DatasetError, Problem, read_dataset, validate_dataset
+
+__all__ = [
+    "FORMAT",
+    "Camera",
+    "DatasetError",
+    "Engagement",
+    "ForceSeries",
+    "FrameRecord",
+    "Problem",
+    "Push",
+    "Sensor",
+    "ShapeFrame",
+    "Specimen",
+    "detect_engagement",
+    "read_dataset",
+    "validate_dataset",
+]

@@ -1,0 +1,94 @@
+"""Output helpers: atomic directories and files, CSV writing. Inputs are never modified."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+
+import numpy as np
+
+
+def check_out_dir(out: str | os.PathLike, force: bool) -> Path:
+    """Refuse an existing non-empty ``--out`` directory unless ``force``."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out: expected a directory path, got {out} which is a file")
+    if out.is_dir() and any(out.iterdir()) and not force:
+        raise ValueError(
+            f"--out: expected a new or empty directory, got {out} which is not empty (add --force to replace it)"
+        )
+    return out
+
+
+@contextlib.contextmanager
+def atomic_dir(out: str | os.PathLike, force: bool = False) -> Iterator[Path]:
+    """Write a directory's content into a temporary sibling, then swap it in.
+
+    A crash or an error leaves ``out`` as it was (absent, or the old content).
+    """
+    out = check_out_dir(out, force)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+    try:
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    if out.exists():
+        old = out.with_name(f".{out.name}.old-{os.getpid()}")
+        out.rename(old)
+        tmp.rename(out)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        tmp.rename(out)
+
+
+def write_text_atomic(path: str | os.PathLike, text: str) -> None:
+    """Write a file via a temporary sibling and an atomic rename."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def write_json(path: str | os.PathLike, doc) -> None:
+    write_text_atomic(path, json.dumps(doc, indent=2, default=_json_default) + "\n")
+
+
+def _json_default(obj):
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+
+
+def write_csv(path: str | os.PathLike, columns: Mapping[str, np.ndarray | list], fmt: str = "%.10g") -> None:
+    """Write equal-length columns with a header (numbers with ``fmt``, strings as-is)."""
+    names = list(columns)
+    cols = [np.asarray(columns[n]) for n in names]
+    n = {len(c) for c in cols}
+    if len(n) > 1:
+        raise ValueError(f"columns: expected equal lengths, got {dict(zip(names, map(len, cols), strict=True))}")
+    lines = [",".join(names)]
+    for i in range(n.pop() if n else 0):
+        cells = []
+        for c in cols:
+            v = c[i]
+            cells.append(str(v) if isinstance(v, (str, np.str_)) else fmt % v)
+        lines.append(",".join(cells))
+    write_text_atomic(path, "\n".join(lines) + "\n")

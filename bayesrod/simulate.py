@@ -1,0 +1,279 @@
+"""Synthetic datasets from the forward model (``bayesrod simulate``).
+
+A push is simulated as the robot sees it: the sensor advances uniformly in
+time from first contact; the wire sensor deflects under the contact force (a
+linear-elastic wire of axial stiffness ``WIRE_STIFFNESS``), so the robot's
+advance is the contact displacement plus the wire's lateral deflection; the
+stem follows the elastica (with any effects) until it slips past the sensor,
+after which the force falls to the sensor's bias. Forces carry Gaussian noise;
+centerlines are sampled at equal arc length with Gaussian noise and are
+occluded around the sensor and missing at the thin tip.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .dataset.model import FORMAT
+from .io import write_csv, write_json
+from .physics import Effects, force_from_displacement
+from .physics.elastica import centerline_at
+from .physics.lumped import wire_elongation_from_dx
+from .presets import get_preset
+
+WIRE_LENGTH = 0.44  # m, the seed's wire sensor span
+WIRE_STIFFNESS = 2000.0  # N/m axial stiffness of the whole wire
+ROBOT_SPEED = 0.02  # m/s
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """Measurement noise of a simulated dataset (all standard deviations)."""
+
+    force_sd_N: float = 0.03
+    shape_sd_m: float = 0.0015
+    occlusion_half_height_m: float = 0.02  # centerline hidden within this of the sensor height
+    tip_missing_fraction: float = 0.03  # thin tip not seen, as a fraction of L
+
+    @classmethod
+    def none(cls) -> NoiseModel:
+        return cls(0.0, 0.0, 0.0, 0.0)
+
+
+DEFAULT_NOISE = {
+    "twig": NoiseModel(force_sd_N=0.03, shape_sd_m=0.0015, occlusion_half_height_m=0.02),
+    "grass": NoiseModel(force_sd_N=0.015, shape_sd_m=0.001, occlusion_half_height_m=0.008),
+}
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Everything that defines a simulated dataset."""
+
+    specimen: str
+    species: str
+    length_m: float
+    EI0: float
+    p: float
+    heights_m: tuple[float, ...]
+    effects: Effects = field(default_factory=Effects)
+    noise: NoiseModel = field(default_factory=NoiseModel)
+    seed: int = 0
+    n_force_engaged: int = 60
+    n_force_after: int = 8
+    n_frames_engaged: int = 20
+    n_frames_after: int = 2
+    n_points: int = 80
+    force_range_N: tuple[float, float] = (0.05, 8.0)
+
+    @classmethod
+    def from_preset(
+        cls, name: str, *, seed: int = 0, noise: str = "default", effects: Effects | None = None, **overrides
+    ) -> SimConfig:
+        pr = get_preset(name)
+        if noise not in ("default", "none"):
+            raise ValueError(f"--noise: expected default or none, got {noise!r}")
+        nm = DEFAULT_NOISE[name] if noise == "default" else NoiseModel.none()
+        kw = dict(
+            specimen=f"{pr['specimen']}-sim-{seed}",
+            species=pr["species"],
+            length_m=pr["length_m"],
+            EI0=pr["EI0"],
+            p=pr["p"],
+            heights_m=tuple(pr["heights_m"]),
+            effects=effects or Effects(),
+            noise=nm,
+            seed=seed,
+        )
+        kw.update(overrides)
+        return cls(**kw)
+
+
+def wire_deflection(
+    force_N: np.ndarray, wire_length_m: float = WIRE_LENGTH, stiffness: float = WIRE_STIFFNESS
+) -> np.ndarray:
+    """Lateral wire deflection dx [m] carrying horizontal force F (vectorised bisection).
+
+    F = 2 T sin(alpha), T = k_w * elongation, sin(alpha) = dx / sqrt((L_w/2)^2 + dx^2).
+    """
+    F = np.clip(np.asarray(force_N, float), 0.0, None)
+    a = 0.5 * wire_length_m
+    lo, hi = np.zeros_like(F), np.full_like(F, wire_length_m)
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        r = np.hypot(a, mid)
+        g = 2 * stiffness * wire_elongation_from_dx(mid, wire_length_m) * mid / r
+        lo, hi = np.where(g < F, mid, lo), np.where(g < F, hi, mid)
+    return 0.5 * (lo + hi)
+
+
+@dataclass(frozen=True)
+class SimulatedPush:
+    """Arrays of one simulated push (before writing)."""
+
+    id: str
+    height_m: float
+    time_s: np.ndarray
+    force_N: np.ndarray
+    robot_x_m: np.ndarray
+    wire_elongation_m: np.ndarray
+    contact_x_m: np.ndarray
+    engaged: np.ndarray
+    frame_time_s: np.ndarray
+    frame_contact_x_m: np.ndarray  # NaN after the slip
+    shapes_true: np.ndarray  # (n_frames, 2, n_points) noise-free centerlines
+    shapes_obs: np.ndarray  # (n_frames, 2, n_points), NaN where not observed
+    s_m: np.ndarray  # (n_points,) arc length of each point
+
+
+def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> SimulatedPush:
+    L, EI0, p, eff = cfg.length_m, cfg.EI0, cfg.p, cfg.effects
+    # Branch end (slip) on a dense grid of contact displacements, then refine.
+    D_grid = np.linspace(0.0, 1.3 * L, 261)
+    dense = force_from_displacement(D_grid, h, EI0, p, L, eff)
+    ok = ~dense.slipped
+    if ok.sum() < 3:
+        raise ValueError(f"height_m: expected a height the stem can be pushed at, got {h:g} m (slips at once)")
+    D_end = D_grid[ok].max()
+    D_dense = np.linspace(0.0, D_end, 400)
+    sol = force_from_displacement(D_dense, h, EI0, p, L, eff)
+    D_dense, F_true = D_dense[~sol.slipped], sol.true_force_N[~sol.slipped]
+    robot_dense = D_dense + wire_deflection(F_true)
+    # Uniform robot advance in time; exact contact displacement at each sample.
+    x_slip = robot_dense[-1]
+    n_e = cfg.n_force_engaged
+    step = x_slip / (n_e - 0.5)
+    robot = np.arange(n_e + cfg.n_force_after) * step
+    engaged = robot <= x_slip
+    D = np.interp(robot[engaged], robot_dense, D_dense)
+    eng = force_from_displacement(D, h, EI0, p, L, eff)
+    dx = wire_deflection(eng.true_force_N)
+    robot[engaged] = D + dx  # exact robot position for the exact D (negligibly off uniform)
+    force = np.full(robot.size, eff.force_offset)
+    force[engaged] = eng.force_N
+    wire = np.zeros(robot.size)
+    wire[engaged] = wire_elongation_from_dx(dx, WIRE_LENGTH)
+    contact = np.full(robot.size, np.nan)
+    contact[engaged] = D
+    force = force + rng.normal(0.0, cfg.noise.force_sd_N, robot.size)
+    time = robot / ROBOT_SPEED
+    # Frames: a camera clock of its own on the same time base.
+    t_slip = robot[engaged][-1] / ROBOT_SPEED
+    nf = cfg.n_frames_engaged
+    t_frames = (np.arange(nf) + 0.3) * t_slip / nf
+    t_after = t_slip + (np.arange(1, cfg.n_frames_after + 1)) * 2 * step / ROBOT_SPEED
+    t_all = np.concatenate([t_frames, t_after])
+    D_frames = np.interp(t_frames * ROBOT_SPEED, robot_dense, D_dense)
+    D_all = np.concatenate([D_frames, np.zeros(t_after.size)])
+    shp = force_from_displacement(D_all, h, EI0, p, L, eff, keep_shape=True)
+    s = np.linspace(0.0, L, cfg.n_points)
+    grid_nd = np.concatenate([shp.shape_xz_m / L, _phi_grid(D_all, h, EI0, p, L, eff)], axis=1)
+    true = np.moveaxis(centerline_at(grid_nd, s / L), -1, 0) * L  # (frames, 2, points)
+    obs = true + rng.normal(0.0, cfg.noise.shape_sd_m, true.shape)
+    hide = np.abs(true[:, 1, :] - h) < cfg.noise.occlusion_half_height_m
+    hide[:, s > L * (1 - cfg.noise.tip_missing_fraction)] = True
+    hide[:, 0] = False
+    obs[np.repeat(hide[:, None, :], 2, axis=1)] = np.nan
+    frame_contact = np.concatenate([D_frames, np.full(t_after.size, np.nan)])
+    return SimulatedPush(
+        id=f"h{round(h * 1000):d}",
+        height_m=h,
+        time_s=time,
+        force_N=force,
+        robot_x_m=robot,
+        wire_elongation_m=wire,
+        contact_x_m=contact,
+        engaged=engaged,
+        frame_time_s=t_all,
+        frame_contact_x_m=frame_contact,
+        shapes_true=true,
+        shapes_obs=obs,
+        s_m=s,
+    )
+
+
+def _phi_grid(D, h, EI0, p, L, eff):
+    """Tangent angles on the march grid (the SI wrapper keeps only x, z)."""
+    from .physics.elastica import force_from_displacement_nd
+
+    res = force_from_displacement_nd(np.asarray(D) / L, h / L, p, eff.nondim(L, EI0), keep_shape=True)
+    return res["grid"][:, 2:3]
+
+
+def simulate(cfg: SimConfig) -> list[SimulatedPush]:
+    """Simulate every push of ``cfg`` (deterministic for a given seed)."""
+    rng = np.random.default_rng(cfg.seed)
+    return [simulate_push(cfg, h, rng) for h in cfg.heights_m]
+
+
+def write_simulated(
+    cfg: SimConfig, pushes: list[SimulatedPush], out: Path, *, frames: bool = False, camera: dict | None = None
+) -> None:
+    """Write a ``bayesrod.dataset/1`` directory (into ``out``, which must exist)."""
+    doc = {
+        "format": FORMAT,
+        "specimen": cfg.specimen,
+        "species": cfg.species,
+        "length_m": cfg.length_m,
+        "sensor": {"type": "wire", "wire_length_m": WIRE_LENGTH, "force_range_N": list(cfg.force_range_N)},
+        "pushes": [],
+        "truth": {
+            "EI0": cfg.EI0,
+            "p": cfg.p,
+            "effects": cfg.effects.to_mapping(),
+            "noise": {"force_sd_N": cfg.noise.force_sd_N, "shape_sd_m": cfg.noise.shape_sd_m},
+            "seed": cfg.seed,
+            "generator": f"bayesrod simulate {__version__}",
+        },
+    }
+    if frames and camera is not None:
+        doc["camera"] = camera
+    for sp in pushes:
+        d = out / sp.id
+        d.mkdir(parents=True, exist_ok=True)
+        write_csv(
+            d / "force.csv",
+            {
+                "time_s": sp.time_s,
+                "force_N": sp.force_N,
+                "robot_x_m": sp.robot_x_m,
+                "wire_elongation_m": sp.wire_elongation_m,
+            },
+        )
+        entry = {"id": sp.id, "height_m": sp.height_m, "direction": 1, "force": f"{sp.id}/force.csv"}
+        rows = {"time_s": [], "x_m": [], "z_m": []}
+        sd = []
+        for k, t in enumerate(sp.frame_time_s):
+            seen = np.isfinite(sp.shapes_obs[k, 0])
+            rows["time_s"].append(np.full(seen.sum(), t))
+            rows["x_m"].append(sp.shapes_obs[k, 0, seen])
+            rows["z_m"].append(sp.shapes_obs[k, 1, seen])
+            sd.append(np.full(seen.sum(), cfg.noise.shape_sd_m))
+        cols = {k: np.concatenate(v) for k, v in rows.items()}
+        if cfg.noise.shape_sd_m > 0:
+            cols["sd_m"] = np.concatenate(sd)
+        write_csv(d / "shapes.csv", cols)
+        entry["shapes"] = f"{sp.id}/shapes.csv"
+        write_csv(
+            d / "truth_shapes.csv",
+            {
+                "time_s": np.repeat(sp.frame_time_s, sp.s_m.size),
+                "s_m": np.tile(sp.s_m, sp.frame_time_s.size),
+                "x_m": sp.shapes_true[:, 0, :].ravel(),
+                "z_m": sp.shapes_true[:, 1, :].ravel(),
+            },
+        )
+        entry["truth_shapes"] = f"{sp.id}/truth_shapes.csv"
+        if frames:
+            from .vision.render import render_push_frames
+
+            render_push_frames(
+                cfg, sp, d / "frames", camera, np.random.default_rng([cfg.seed, round(sp.height_m * 1e6)])
+            )
+            entry["frames"] = f"{sp.id}/frames"
+        doc["pushes"].append(entry)
+    write_json(out / "specimen.json", doc)

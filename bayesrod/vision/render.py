@@ -1,0 +1,164 @@
+"""Render synthetic RGB-D frames of a simulated push (``bayesrod simulate --frames``).
+
+Deliberately hard: the background is cluttered with branches and leaves of
+the stem's own colour (at other depths), the probe occludes the stem around
+the contact, the tip tapers below a pixel, depth carries noise that grows with
+distance and drops out (0) at random pixels and at depth edges.
+
+Camera: pinhole, image plane parallel to the bending plane, which lies at
+depth ``Z0``. A point (x, z) of the bending plane projects to
+u = u_base + fx * direction * x / Z0, v = v_base - fy * z / Z0.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..io import write_csv
+
+WIDTH, HEIGHT = 640, 480
+FOCAL = 600.0
+STEM_RGB = np.array([112, 118, 62], float)  # olive-brown
+BASE_DIAMETER = {"twig": 0.010, "grass": 0.004}
+
+
+def plane_depth(length_m: float) -> float:
+    """Distance of the bending plane so that the stem spans ~80% of the image height."""
+    return FOCAL * length_m / (0.8 * HEIGHT)
+
+
+def default_camera(length_m: float) -> dict:
+    """Camera block for specimen.json (CONTRACT.md section 1)."""
+    return {
+        "fx": FOCAL,
+        "fy": FOCAL,
+        "cx": WIDTH / 2,
+        "cy": HEIGHT / 2,
+        "base_px": [0.2 * WIDTH, 0.92 * HEIGHT],
+        "image_size": [WIDTH, HEIGHT],
+    }
+
+
+def project(x_m, z_m, camera: dict, depth_m: float, direction: int = 1):
+    u0, v0 = camera["base_px"]
+    return (u0 + camera["fx"] * direction * np.asarray(x_m) / depth_m, v0 - camera["fy"] * np.asarray(z_m) / depth_m)
+
+
+def _background(rng: np.random.Generator, Z0: float):
+    """Static cluttered background: (rgb float HxWx3, depth m HxW)."""
+    yy, xx = np.mgrid[0:HEIGHT, 0:WIDTH]
+    rgb = np.empty((HEIGHT, WIDTH, 3))
+    sky = np.array([150, 160, 140.0]) + 25 * np.sin(xx / 90.0 + rng.uniform(0, 6))[..., None]
+    rgb[:] = sky
+    depth = Z0 + 1.5 + 0.5 * (yy / HEIGHT)
+    ground = yy > 0.92 * HEIGHT + 6 * np.sin(xx / 40.0)
+    rgb[ground] = [95, 80, 55]
+    depth[ground] = Z0 - 0.05 + 0.3 * (HEIGHT - yy[ground]) / HEIGHT + 0.1
+    # Clutter: branches and leaves of similar colour at other depths.
+    for _ in range(int(rng.integers(14, 22))):
+        zc = Z0 + rng.uniform(0.25, 1.4)
+        col = STEM_RGB + rng.normal(0, 14, 3)
+        layer = np.zeros((HEIGHT, WIDTH), np.uint8)
+        if rng.random() < 0.6:
+            pts = np.cumsum(rng.normal(0, 25, (8, 2)), axis=0) + rng.uniform([0, 0], [WIDTH, HEIGHT])
+            cv2.polylines(layer, [pts.astype(np.int32)], False, 255, int(rng.integers(2, 7)), cv2.LINE_AA)
+        else:
+            c = tuple(int(v) for v in rng.uniform([0, 0], [WIDTH, HEIGHT]))
+            ax = (int(rng.integers(8, 30)), int(rng.integers(4, 12)))
+            cv2.ellipse(layer, c, ax, float(rng.uniform(0, 180)), 0, 360, 255, -1, cv2.LINE_AA)
+        m = layer > 127
+        closer = m & (zc < depth)
+        rgb[closer] = col
+        depth[closer] = zc
+    rgb += rng.normal(0, 6, rgb.shape)
+    return rgb, depth
+
+
+def render_frame(bg_rgb, bg_depth, xz_m, s_m, length_m, p, d0, camera, Z0, probe_xz, rng):
+    """One RGB (uint8) and depth (uint16 mm) image of the stem centerline ``xz_m`` (2, n)."""
+    rgb = bg_rgb.copy()
+    depth = bg_depth.copy()
+    u, v = project(xz_m[0], xz_m[1], camera, Z0)
+    diam = d0 * np.clip(1 - s_m / length_m, 0, 1) ** p
+    stem = np.zeros((HEIGHT, WIDTH), np.uint8)
+    for i in range(len(u) - 1):
+        w_px = diam[i] * FOCAL / Z0
+        thick = max(1, int(round(w_px)))
+        shade = 255 if w_px >= 1 else int(255 * max(w_px, 0.35))  # sub-pixel tip: faint
+        cv2.line(
+            stem,
+            (int(round(u[i] * 4)), int(round(v[i] * 4))),
+            (int(round(u[i + 1] * 4)), int(round(v[i + 1] * 4))),
+            shade,
+            thick,
+            cv2.LINE_AA,
+            shift=2,
+        )
+    alpha = stem / 255.0
+    col = STEM_RGB + rng.normal(0, 4, 3)
+    rgb = rgb * (1 - alpha[..., None]) + col * alpha[..., None]
+    depth[alpha > 0.5] = Z0
+    if probe_xz is not None:  # the probe occludes the stem around the contact, in front of it
+        pu, pv = project(probe_xz[0], probe_xz[1], camera, Z0)
+        half_w, half_h = 0.025 * FOCAL / Z0, 0.018 * FOCAL / Z0
+        x0, x1 = int(pu - half_w), int(pu + half_w)
+        y0, y1 = int(pv - half_h), int(pv + half_h)
+        rgb[max(y0, 0) : max(y1, 0), max(x0, 0) : max(x1, 0)] = [60, 62, 66]
+        depth[max(y0, 0) : max(y1, 0), max(x0, 0) : max(x1, 0)] = Z0 - 0.06
+        arm_y0, arm_y1 = int(pv - 0.006 * FOCAL / Z0), int(pv + 0.006 * FOCAL / Z0)
+        rgb[max(arm_y0, 0) : max(arm_y1, 0), max(x1, 0) :] = [70, 72, 78]  # robot arm to the right
+        depth[max(arm_y0, 0) : max(arm_y1, 0), max(x1, 0) :] = Z0 - 0.06
+    # Sensor noise.
+    rgb = np.clip(rgb + rng.normal(0, 3, rgb.shape), 0, 255).astype(np.uint8)
+    rgb = cv2.GaussianBlur(rgb, (3, 3), 0.6)
+    noisy = depth + rng.normal(0, 0.002, depth.shape) * (depth / 1.0) ** 2
+    edges = cv2.Canny(np.clip(depth * 200, 0, 255).astype(np.uint8), 20, 60) > 0
+    edges = cv2.dilate(edges.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    missing = (rng.random(depth.shape) < 0.04) | (edges & (rng.random(depth.shape) < 0.3))
+    d_mm = np.clip(np.round(noisy * 1000), 1, 65535).astype(np.uint16)
+    d_mm[missing] = 0
+    return rgb, d_mm
+
+
+def render_push_frames(cfg, sp, folder: Path, camera: dict, rng: np.random.Generator) -> None:
+    """Write ``folder/index.csv`` and one RGB and one depth PNG per simulated frame."""
+    folder.mkdir(parents=True, exist_ok=True)
+    Z0 = plane_depth(cfg.length_m)
+    bg_rgb, bg_depth = _background(rng, Z0)
+    kind = "grass" if cfg.p > 1.0 else "twig"
+    d0 = BASE_DIAMETER[kind]
+    rows = {"frame": [], "time_s": [], "rgb": [], "depth": []}
+    robot_speed_x = np.interp(sp.frame_time_s, sp.time_s, sp.robot_x_m)
+    for k, t in enumerate(sp.frame_time_s):
+        cx = sp.frame_contact_x_m[k]
+        if np.isfinite(cx):
+            dx_wire = robot_speed_x[k] - cx
+            probe = (cx + 0.5 * dx_wire, sp.height_m)
+        else:
+            probe = (robot_speed_x[k], sp.height_m)
+        rgb, dmm = render_frame(
+            bg_rgb,
+            bg_depth,
+            sp.shapes_true_dense[k] if hasattr(sp, "shapes_true_dense") else sp.shapes_true[k],
+            sp.s_m,
+            cfg.length_m,
+            cfg.p,
+            d0,
+            camera,
+            Z0,
+            probe,
+            rng,
+        )
+        cv2.imwrite(str(folder / f"rgb_{k:03d}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+        cv2.imwrite(str(folder / f"depth_{k:03d}.png"), dmm)
+        rows["frame"].append(k)
+        rows["time_s"].append(t)
+        rows["rgb"].append(f"rgb_{k:03d}.png")
+        rows["depth"].append(f"depth_{k:03d}.png")
+    write_csv(
+        folder / "index.csv",
+        {k: np.array(v) if k in ("frame", "time_s") else np.array(v, dtype=object) for k, v in rows.items()},
+    )

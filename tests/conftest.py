@@ -1,0 +1,39 @@
+import shutil
+from pathlib import Path
+
+import pytest
+
+from bayesrod.simulate import SimConfig, simulate, write_simulated
+
+REPO = Path(__file__).resolve().parents[1]
+BLUEBERRY = REPO.parent / "shared" / "data" / "blueberry-canes"
+
+
+def make_dataset(path: Path, preset="twig", **kw) -> Path:
+    frames = kw.pop("frames", False)
+    cfg = SimConfig.from_preset(preset, **kw)
+    path.mkdir(parents=True, exist_ok=True)
+    camera = None
+    if frames:
+        from bayesrod.vision.render import default_camera
+
+        camera = default_camera(cfg.length_m)
+    write_simulated(cfg, simulate(cfg), path, frames=frames, camera=camera)
+    return path
+
+
+@pytest.fixture(scope="session")
+def twig_clean(tmp_path_factory) -> Path:
+    return make_dataset(tmp_path_factory.mktemp("twig_clean") / "ds", "twig", seed=1, noise="none")
+
+
+@pytest.fixture(scope="session")
+def twig_noisy(tmp_path_factory) -> Path:
+    return make_dataset(tmp_path_factory.mktemp("twig_noisy") / "ds", "twig", seed=2)
+
+
+@pytest.fixture()
+def twig_copy(twig_noisy, tmp_path) -> Path:
+    dst = tmp_path / "copy"
+    shutil.copytree(twig_noisy, dst)
+    return dst

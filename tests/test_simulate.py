@@ -1,0 +1,141 @@
+"""`bayesrod simulate`: agrees with the forward model and an independent integration."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from bayesrod.cli import main
+from bayesrod.dataset import detect_engagement, read_dataset, validate_dataset
+from bayesrod.physics import EFFECT_NAMES, Effects, force_from_displacement
+from bayesrod.physics import reference as R
+
+from .conftest import make_dataset
+
+
+def test_noise_free_forces_match_predict_and_reference(twig_clean):
+    spec = read_dataset(twig_clean)
+    for push in spec.pushes:
+        eng = detect_engagement(push.force.force_N)
+        D = push.force.contact_x_m[eng.mask]
+        F = push.force.force_N[eng.mask]
+        pred = force_from_displacement(D, push.height_m, 2.63, 0.43, 0.8)
+        np.testing.assert_allclose(F, pred.force_N, rtol=1e-4, atol=1e-9)
+        for i in np.linspace(1, D.size - 2, 4).astype(int):  # independent solve_ivp integration
+            ref = R.solve_displacement(D[i] / 0.8, push.height_m / 0.8, 0.43)["f"] * 2.63 / 0.8**2
+            assert F[i] == pytest.approx(ref, rel=1e-4)
+
+
+def test_noise_free_centerlines_within_0p1_mm(twig_clean):
+    spec = read_dataset(twig_clean)
+    push = spec.push("h550")
+    s = np.linspace(0, 0.8, 80)
+    eng = detect_engagement(push.force.force_N)
+    t_eng = push.force.time_s[eng.mask]
+    for frame in push.shapes[:20:6]:
+        # the frame's contact displacement, from the robot's own record on the same clock
+        D = np.interp(frame.time_s, t_eng, push.force.contact_x_m[eng.mask])
+        F = float(force_from_displacement(D, push.height_m, 2.63, 0.43, 0.8).force_N)
+        ref = R.shape_at_force(F * 0.8**2 / 2.63, push.height_m / 0.8, 0.43, s / 0.8) * 0.8
+        # D interpolated between force samples is not exact; bound that by the local sample spacing
+        np.testing.assert_allclose(frame.x_m, ref[0], atol=1e-4 + 0.02 * np.ptp(frame.x_m) / 60)
+        np.testing.assert_allclose(frame.z_m, ref[1], atol=1e-4 + 0.02 * np.ptp(frame.x_m) / 60)
+
+
+def test_truth_shapes_match_independent_integration_to_0p1_mm(twig_clean):
+    import csv
+
+    spec = read_dataset(twig_clean)
+    push = spec.push("h450")
+    rows = list(csv.DictReader(open(twig_clean / "h450" / "truth_shapes.csv")))
+    t0 = float(rows[0]["time_s"])
+    frame = [r for r in rows if float(r["time_s"]) == t0]
+    x = np.array([float(r["x_m"]) for r in frame])
+    z = np.array([float(r["z_m"]) for r in frame])
+    s = np.array([float(r["s_m"]) for r in frame])
+    # contact displacement of that frame from the shape itself (x where z crosses h)
+    D = np.interp(push.height_m, z[z < push.height_m + 0.05], x[z < push.height_m + 0.05])
+    F = float(force_from_displacement(D, push.height_m, 2.63, 0.43, 0.8).force_N)
+    ref = R.shape_at_force(F * 0.8**2 / 2.63, push.height_m / 0.8, 0.43, s / 0.8) * 0.8
+    assert np.max(np.hypot(x - ref[0], z - ref[1])) < 1e-4
+
+
+def test_default_noise_is_realistic_and_engagement_found(twig_noisy):
+    spec = read_dataset(twig_noisy)
+    truth = json.loads((twig_noisy / "specimen.json").read_text())["truth"]
+    for push in spec.pushes:
+        eng = detect_engagement(push.force.force_N)
+        assert eng.slip_index == 60  # n_force_engaged of the simulator
+        assert eng.noise_N == pytest.approx(truth["noise"]["force_sd_N"], rel=0.35)
+        seen = np.concatenate([f.z_m for f in push.shapes[:20]])
+        assert not np.any(np.abs(seen - push.height_m) < 0.015)  # occluded around the sensor
+
+
+def test_engagement_with_unzeroed_sensor(tmp_path):
+    ds = make_dataset(tmp_path / "off", "grass", seed=3, effects=Effects(force_offset=0.8))
+    for push in read_dataset(ds).pushes:
+        eng = detect_engagement(push.force.force_N)
+        assert eng.slip_index == 60
+        assert eng.baseline_N == pytest.approx(0.8, abs=0.05)
+
+
+@pytest.mark.parametrize("name", EFFECT_NAMES)
+def test_every_effect_simulates_and_validates(tmp_path, name):
+    value = {
+        "base_compliance": 3.0,
+        "rest_curvature": 0.3,
+        "base_tilt": 0.05,
+        "contact_friction": 0.3,
+        "force_offset": 0.3,
+        "self_weight": 1.0,
+        "yield": 1.2,
+    }[name]
+    rc = main(
+        [
+            "simulate",
+            "--preset",
+            "twig",
+            "--out",
+            str(tmp_path / name),
+            "--effect",
+            f"{name}={value}",
+            "--heights",
+            "0.55",
+        ]
+    )
+    assert rc == 0
+    assert validate_dataset(tmp_path / name) == []
+    doc = json.loads((tmp_path / name / "specimen.json").read_text())
+    assert doc["truth"]["effects"] == {name: value}
+    plain = make_dataset(tmp_path / "plain", "twig", seed=0, heights_m=(0.55,))
+    f_eff = read_dataset(tmp_path / name).pushes[0].force.force_N[:60]
+    f_plain = read_dataset(plain).pushes[0].force.force_N[:60]
+    assert np.max(np.abs(f_eff - f_plain)) > 0.05  # the effect is visible in the data
+
+
+def test_seed_determinism_and_out_refused(tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert main(["simulate", "--preset", "grass", "--out", str(a), "--seed", "5"]) == 0
+    assert main(["simulate", "--preset", "grass", "--out", str(b), "--seed", "5"]) == 0
+    assert (a / "h90" / "force.csv").read_text() == (b / "h90" / "force.csv").read_text()
+    res = subprocess.run(
+        [sys.executable, "-m", "bayesrod.cli", "simulate", "--preset", "grass", "--out", str(a)],
+        capture_output=True,
+        text=True,
+    )
+    assert res.returncode != 0 and "not empty" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_frames_render_and_validate(tmp_path):
+    ds = make_dataset(tmp_path / "f", "grass", seed=4, frames=True, n_frames_engaged=3, n_frames_after=1)
+    assert validate_dataset(ds) == []
+    spec = read_dataset(ds)
+    import cv2
+
+    rec = spec.pushes[0].frames[0]
+    rgb = cv2.imread(str(rec.rgb), cv2.IMREAD_UNCHANGED)
+    depth = cv2.imread(str(rec.depth), cv2.IMREAD_UNCHANGED)
+    assert rgb.dtype == np.uint8 and rgb.shape == (480, 640, 3)
+    assert depth.dtype == np.uint16 and (depth == 0).mean() > 0.02  # missing depth exists
