@@ -88,6 +88,21 @@ def build_parser() -> argparse.ArgumentParser:
         help="assumed stem length [m]: the blueberry tables hold none (an explicit assumption)",
     )
     im.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
+    ft = sub.add_parser("fit", help="posterior of EI0, p and noise for a dataset (emcee)")
+    ft.add_argument("dataset", help="dataset directory")
+    ft.add_argument("--out", required=True, help="run directory to write")
+    ft.add_argument("--prior", default="default", help="prior name (default, grass, woody) or JSON file")
+    ft.add_argument("--effects", default="", help="comma list of effects to fit (currently: force_offset)")
+    ft.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    ft.add_argument("--forces-only", action="store_true", help="ignore centerlines")
+    ft.add_argument("--shapes-only", action="store_true", help="ignore forces")
+    ft.add_argument("--resume", action="store_true", help="continue an interrupted run in --out")
+    ft.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
+    ft.add_argument("--quiet", action="store_true", help="no progress bars")
+
+    dm = sub.add_parser("demo", help="the whole story on the bundled dataset: fit, bands, report")
+    dm.add_argument("--out", default="bayesrod-demo", help="output directory (default ./bayesrod-demo)")
+    dm.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
     return parser
 
 
@@ -147,7 +162,12 @@ def cmd_predict(args: argparse.Namespace) -> int:
     D = parse_values(args.displacement, "--displacement")
     _check_displacements(D)
     if args.posterior:
-        raise ValueError("--posterior: expected a fit run directory; fitting is not available in this version yet")
+        result = predict_posterior(args.posterior, args.height, D, effects)
+        if args.json:
+            print(json.dumps(result, indent=2))
+        else:
+            _print_posterior_prediction(result)
+        return 0
     EI0, p, L = _rod_from_args(args)
     _check_height(args.height, L)
     result = predict_point(EI0, p, L, args.height, D, effects)
@@ -180,6 +200,77 @@ def predict_point(EI0: float, p: float, L: float, h: float, D: np.ndarray, effec
         "model": {"EI0": EI0, "p": p, "length_m": L, "effects": effects.to_mapping()},
         "points": points,
     }
+
+
+def _load_run_samples(run: str) -> dict:
+    path = Path(run) / "samples.npz"
+    if not path.is_file():
+        raise ValueError(f"--posterior: expected a fit run directory holding samples.npz, got {run}")
+    with np.load(path) as z:
+        return {k: z[k] for k in z.files}
+
+
+def predict_posterior(run: str, h: float, D: np.ndarray, effects: Effects, n_draws: int = 400) -> dict:
+    """``predict --posterior``: force and stiffness bands from a fit's posterior draws."""
+    from .inference.summary import quantiles
+
+    samples = _load_run_samples(run)
+    L = float(samples.pop("length_m"))
+    _check_height(h, L)
+    rng = np.random.default_rng(0)
+    n = samples["EI0"].size
+    idx = rng.choice(n, size=min(n_draws, n), replace=False)
+    EI0, p = samples["EI0"][idx], samples["p"][idx]
+    sol = force_from_displacement(D[None, :], h, EI0[:, None], p[:, None], L, effects)
+    F = np.where(sol.slipped, np.nan, sol.force_N)
+    if "force_offset" in samples:
+        F = F + samples["force_offset"][idx, None]
+    slip_prob = sol.slipped.mean(axis=0)
+    kt = k_theta(h, EI0, p, L, effects.base_compliance)
+    kx = k_x(h, EI0, p, L, effects.base_compliance)
+
+    def q(x):
+        qq = quantiles(x)
+        return {k: (None if not np.isfinite(v) else float(v)) for k, v in qq.items()}
+
+    points = []
+    for i, d in enumerate(D):
+        col = F[:, i]
+        ok = np.isfinite(col)
+        points.append(
+            {
+                "displacement_m": float(d),
+                "force_N": q(col[ok]) if ok.sum() >= 2 else None,
+                "contact_s_m": q(sol.contact_s_m[ok, i]) if ok.sum() >= 2 else None,
+                "slipped": bool(slip_prob[i] > 0.5),
+                "slip_probability": float(slip_prob[i]),
+            }
+        )
+    return {
+        "height_m": float(h),
+        "k_theta_Nm_per_rad": q(kt),
+        "k_x_N_per_m": q(kx),
+        "posterior": {"run": str(run), "draws": int(idx.size), "length_m": L},
+        "points": points,
+    }
+
+
+def _print_posterior_prediction(result: dict) -> None:
+    kt, kx = result["k_theta_Nm_per_rad"], result["k_x_N_per_m"]
+    print(
+        f"Posterior prediction from {result['posterior']['run']} ({result['posterior']['draws']} draws), "
+        f"L = {result['posterior']['length_m']:g} m, h = {result['height_m']:g} m"
+    )
+    print(
+        f"k_theta = {kt['median']:.4g} [{kt['q05']:.4g}, {kt['q95']:.4g}] N m/rad,  "
+        f"k_x = {kx['median']:.4g} [{kx['q05']:.4g}, {kx['q95']:.4g}] N/m  (median [90% interval])"
+    )
+    print(f"{'displacement [m]':>17} {'force median [N]':>17} {'90% interval [N]':>22}  P(slipped)")
+    for pt in result["points"]:
+        f = pt["force_N"]
+        band = f"[{f['q05']:.4f}, {f['q95']:.4f}]" if f else "-"
+        med = f"{f['median']:.4f}" if f else "-"
+        print(f"{pt['displacement_m']:17.4f} {med:>17} {band:>22}  {pt['slip_probability']:.2f}")
 
 
 def _print_prediction(result: dict, EI0: float, p: float, L: float, effects: Effects) -> None:
@@ -237,7 +328,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     cfg = SimConfig.from_preset(args.preset, seed=args.seed, noise=args.noise, effects=effects, **overrides)
     for h in cfg.heights_m:
         _check_height(h, cfg.length_m)
-    pushes = simulate(cfg)
+    pushes = simulate(cfg, progress=sys.stderr.isatty())
     with atomic_dir(args.out, args.force) as tmp:
         write_simulated(
             cfg, pushes, tmp, frames=args.frames, camera=default_camera(cfg.length_m) if args.frames else None
@@ -279,6 +370,68 @@ def cmd_import(args: argparse.Namespace) -> int:
         if cane["status"] != "imported":
             print(f"  {cane['cane']} rejected: {cane['reason']}")
     print(f"details: {Path(args.out) / 'import_report.json'}")
+    return 0
+
+
+@_command("fit")
+def cmd_fit(args: argparse.Namespace) -> int:
+    from .fit import fit_dataset
+    from .io import check_out_dir
+
+    if args.forces_only and args.shapes_only:
+        raise ValueError("--forces-only, --shapes-only: expected at most one, got both")
+    effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
+    if not args.resume:
+        check_out_dir(args.out, args.force)
+        if args.force and Path(args.out).is_dir():
+            import shutil
+
+            shutil.rmtree(args.out)
+    summary = fit_dataset(
+        args.dataset,
+        args.out,
+        prior=args.prior,
+        effects=effects,
+        seed=args.seed,
+        use_forces=not args.shapes_only,
+        use_shapes=not args.forces_only,
+        resume=args.resume,
+        progress=not args.quiet,
+    )
+    _print_fit(summary, args.out)
+    return 0
+
+
+def _print_fit(summary: dict, out) -> None:
+    for name, q in summary["parameters"].items():
+        print(f"  {name:>15} = {q['median']:.4g}  [{q['q05']:.4g}, {q['q95']:.4g}]  (median [90% interval])")
+    for row in summary["k_theta"]:
+        print(f"  k_theta({row['height_m']:g} m) = {row['median']:.4g}  [{row['q05']:.4g}, {row['q95']:.4g}] N m/rad")
+    c = summary["convergence"]
+    print(f"  R-hat max {c['rhat_max']:.4f}, bulk ESS min {c['ess_bulk_min']:.0f}, {summary['sampler']['seconds']:g} s")
+    print(f"wrote {out}/summary.json, posterior.nc, report.html")
+
+
+@_command("demo")
+def cmd_demo(args: argparse.Namespace) -> int:
+    from importlib import resources
+
+    from .fit import fit_dataset
+    from .io import check_out_dir
+
+    check_out_dir(args.out, args.force)
+    if args.force and Path(args.out).is_dir():
+        import shutil
+
+        shutil.rmtree(args.out)
+    dataset = resources.files("bayesrod") / "data" / "default"
+    print(f"bayesrod demo: fitting the bundled dataset ({dataset}) ...")
+    summary = fit_dataset(str(dataset), Path(args.out) / "fit", seed=0)
+    _print_fit(summary, Path(args.out) / "fit")
+    truth = summary.get("truth")
+    if truth:
+        print(f"  (simulated truth: EI0 = {truth['EI0']:g} N m^2, p = {truth['p']:g})")
+    print(f"report: {(Path(args.out) / 'fit' / 'report.html').resolve()}")
     return 0
 
 

@@ -21,7 +21,7 @@ from . import __version__
 from .dataset.model import FORMAT
 from .io import write_csv, write_json
 from .physics import Effects, force_from_displacement
-from .physics.elastica import centerline_at
+from .physics.elastica import centerline_at, force_from_displacement_nd
 from .physics.lumped import wire_elongation_from_dx
 from .presets import get_preset
 
@@ -133,13 +133,21 @@ class SimulatedPush:
 def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> SimulatedPush:
     L, EI0, p, eff = cfg.length_m, cfg.EI0, cfg.p, cfg.effects
     # Branch end (slip) on a dense grid of contact displacements, then refine.
-    D_grid = np.linspace(0.0, 1.3 * L, 261)
+    D_grid = np.linspace(0.0, 1.3 * L, 66)
     dense = force_from_displacement(D_grid, h, EI0, p, L, eff)
     ok = ~dense.slipped
     if ok.sum() < 3:
         raise ValueError(f"height_m: expected a height the stem can be pushed at, got {h:g} m (slips at once)")
-    D_end = D_grid[ok].max()
-    D_dense = np.linspace(0.0, D_end, 400)
+    # The model's own slip point, to 1e-7 L: the stem slips exactly where its branch ends.
+    lo = D_grid[ok].max()
+    hi = lo + (D_grid[1] - D_grid[0])
+    for _ in range(4):  # four batched rounds of 32 candidates: (hi - lo) / 32^4 ~ 2e-8 L
+        cand = np.linspace(lo, hi, 33)
+        slipped = force_from_displacement(cand, h, EI0, p, L, eff).slipped
+        first = int(np.argmax(slipped)) if slipped.any() else cand.size
+        lo, hi = cand[max(first - 1, 0)], cand[min(first, cand.size - 1)]
+    D_end = lo
+    D_dense = np.linspace(0.0, D_end, 120)
     sol = force_from_displacement(D_dense, h, EI0, p, L, eff)
     D_dense, F_true = D_dense[~sol.slipped], sol.true_force_N[~sol.slipped]
     robot_dense = D_dense + wire_deflection(F_true)
@@ -169,9 +177,8 @@ def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> Simulat
     t_all = np.concatenate([t_frames, t_after])
     D_frames = np.interp(t_frames * ROBOT_SPEED, robot_dense, D_dense)
     D_all = np.concatenate([D_frames, np.zeros(t_after.size)])
-    shp = force_from_displacement(D_all, h, EI0, p, L, eff, keep_shape=True)
+    grid_nd = force_from_displacement_nd(D_all / L, h / L, p, eff.nondim(L, EI0), keep_shape=True)["grid"]
     s = np.linspace(0.0, L, cfg.n_points)
-    grid_nd = np.concatenate([shp.shape_xz_m / L, _phi_grid(D_all, h, EI0, p, L, eff)], axis=1)
     true = np.moveaxis(centerline_at(grid_nd, s / L), -1, 0) * L  # (frames, 2, points)
     obs = true + rng.normal(0.0, cfg.noise.shape_sd_m, true.shape)
     hide = np.abs(true[:, 1, :] - h) < cfg.noise.occlusion_half_height_m
@@ -196,18 +203,13 @@ def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> Simulat
     )
 
 
-def _phi_grid(D, h, EI0, p, L, eff):
-    """Tangent angles on the march grid (the SI wrapper keeps only x, z)."""
-    from .physics.elastica import force_from_displacement_nd
-
-    res = force_from_displacement_nd(np.asarray(D) / L, h / L, p, eff.nondim(L, EI0), keep_shape=True)
-    return res["grid"][:, 2:3]
-
-
-def simulate(cfg: SimConfig) -> list[SimulatedPush]:
+def simulate(cfg: SimConfig, progress: bool = False) -> list[SimulatedPush]:
     """Simulate every push of ``cfg`` (deterministic for a given seed)."""
+    from tqdm.auto import tqdm
+
     rng = np.random.default_rng(cfg.seed)
-    return [simulate_push(cfg, h, rng) for h in cfg.heights_m]
+    heights = tqdm(cfg.heights_m, desc="simulating pushes", unit="push", disable=not progress, leave=False)
+    return [simulate_push(cfg, h, rng) for h in heights]
 
 
 def write_simulated(
@@ -265,6 +267,8 @@ def write_simulated(
                 "s_m": np.tile(sp.s_m, sp.frame_time_s.size),
                 "x_m": sp.shapes_true[:, 0, :].ravel(),
                 "z_m": sp.shapes_true[:, 1, :].ravel(),
+                # exact contact displacement of the frame; -1 after the slip (unloaded stem)
+                "contact_x_m": np.repeat(np.nan_to_num(sp.frame_contact_x_m, nan=-1.0), sp.s_m.size),
             },
         )
         entry["truth_shapes"] = f"{sp.id}/truth_shapes.csv"

@@ -1,0 +1,189 @@
+"""Priors: JSON files (``priors/*.json``) to vectorised log densities.
+
+Each parameter is sampled in an unbounded or simply bounded space: log for
+positive quantities (log-normal, half-normal), identity otherwise. Densities in
+the sampling space include the Jacobian, so emcee sees the right target.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+from scipy import special, stats
+
+from ..physics.effects import EFFECT_NAMES
+
+_DISTS = {"lognormal", "normal", "truncnormal", "halfnormal", "uniform"}
+
+
+@dataclass(frozen=True)
+class ParamPrior:
+    """Prior of one scalar parameter (natural units) and its sampling transform."""
+
+    name: str
+    dist: str
+    args: tuple
+    unit: str = ""
+
+    @property
+    def log_space(self) -> bool:
+        return self.dist in ("lognormal", "halfnormal")
+
+    def to_sample(self, x):
+        return np.log(x) if self.log_space else np.asarray(x, float)
+
+    def from_sample(self, u):
+        return np.exp(u) if self.log_space else np.asarray(u, float)
+
+    def logpdf_sample(self, u) -> np.ndarray:
+        """Log density of the sampling-space value u (vectorised); -inf outside the support."""
+        u = np.asarray(u, float)
+        a = self.args
+        if self.dist == "lognormal":  # u = log x ~ N(log median, sigma)
+            return -0.5 * ((u - math.log(a[0])) / a[1]) ** 2 - math.log(a[1] * math.sqrt(2 * math.pi))
+        if self.dist == "halfnormal":  # x = e^u, p(u) = p(x) x
+            x = np.exp(u)
+            return math.log(2) - 0.5 * (x / a[0]) ** 2 - math.log(a[0] * math.sqrt(2 * math.pi)) + u
+        if self.dist == "normal":
+            return -0.5 * ((u - a[0]) / a[1]) ** 2 - math.log(a[1] * math.sqrt(2 * math.pi))
+        if self.dist == "truncnormal":
+            mean, sd, lo, hi = a
+            z = special.ndtr((hi - mean) / sd) - special.ndtr((lo - mean) / sd)
+            out = -0.5 * ((u - mean) / sd) ** 2 - math.log(sd * math.sqrt(2 * math.pi) * z)
+            return np.where((u >= lo) & (u <= hi), out, -np.inf)
+        if self.dist == "uniform":
+            lo, hi = a
+            return np.where((u >= lo) & (u <= hi), -math.log(hi - lo), -np.inf)
+        raise AssertionError(self.dist)
+
+    def bounds(self) -> tuple[float, float]:
+        """Support in natural units."""
+        if self.dist == "truncnormal":
+            return self.args[2], self.args[3]
+        if self.dist == "uniform":
+            return self.args
+        if self.log_space:
+            return 0.0, math.inf
+        return -math.inf, math.inf
+
+    def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """Draws in natural units."""
+        a = self.args
+        if self.dist == "lognormal":
+            return a[0] * np.exp(a[1] * rng.standard_normal(n))
+        if self.dist == "halfnormal":
+            return np.abs(a[0] * rng.standard_normal(n))
+        if self.dist == "normal":
+            return a[0] + a[1] * rng.standard_normal(n)
+        if self.dist == "truncnormal":
+            mean, sd, lo, hi = a
+            return stats.truncnorm.rvs((lo - mean) / sd, (hi - mean) / sd, loc=mean, scale=sd, size=n, random_state=rng)
+        return rng.uniform(a[0], a[1], n)
+
+    def quantile(self, q: float) -> float:
+        a = self.args
+        if self.dist == "lognormal":
+            return float(a[0] * math.exp(a[1] * stats.norm.ppf(q)))
+        if self.dist == "halfnormal":
+            return float(stats.halfnorm.ppf(q, scale=a[0]))
+        if self.dist == "normal":
+            return float(stats.norm.ppf(q, a[0], a[1]))
+        if self.dist == "truncnormal":
+            mean, sd, lo, hi = a
+            return float(stats.truncnorm.ppf(q, (lo - mean) / sd, (hi - mean) / sd, loc=mean, scale=sd))
+        return float(a[0] + q * (a[1] - a[0]))
+
+
+def _parse_param(name: str, spec: dict, source: str) -> ParamPrior:
+    where = f"{source}: {name}"
+    if not isinstance(spec, dict) or spec.get("dist") not in _DISTS:
+        raise ValueError(
+            f"{where}.dist: expected one of {', '.join(sorted(_DISTS))}, got "
+            f"{spec.get('dist') if isinstance(spec, dict) else spec!r}"
+        )
+    d = spec["dist"]
+    keys = {
+        "lognormal": ("median", "sigma_log"),
+        "normal": ("mean", "sd"),
+        "halfnormal": ("scale",),
+        "truncnormal": ("mean", "sd", "low", "high"),
+        "uniform": ("low", "high"),
+    }[d]
+    vals = []
+    for k in keys:
+        v = spec.get(k)
+        if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
+            raise ValueError(f"{where}.{k}: expected a finite number for a {d} prior, got {v!r}")
+        vals.append(float(v))
+    positive = {"lognormal": (0, 1), "normal": (1,), "halfnormal": (0,), "truncnormal": (1,), "uniform": ()}[d]
+    for i in positive:
+        if vals[i] <= 0:
+            raise ValueError(f"{where}.{keys[i]}: expected a value > 0, got {vals[i]}")
+    if d in ("truncnormal", "uniform") and not vals[-2] < vals[-1]:
+        raise ValueError(f"{where}: expected low < high, got {vals[-2]} and {vals[-1]}")
+    return ParamPrior(name, d, tuple(vals), spec.get("unit", ""))
+
+
+@dataclass(frozen=True)
+class Prior:
+    """A named prior: core parameters and effect parameters."""
+
+    name: str
+    params: dict
+    effects: dict
+    source: str
+    doc: dict
+
+    def get(self, name: str) -> ParamPrior:
+        if name in self.params:
+            return self.params[name]
+        if name in self.effects:
+            return self.effects[name]
+        raise ValueError(f"prior {self.name}: expected a prior for {name}, got none in {self.source}")
+
+
+REQUIRED = ("EI0", "p", "sigma_force_N", "sigma_shape_m", "shape_sd_scale")
+
+
+def available_priors() -> list[str]:
+    return sorted(p.name[:-5] for p in resources.files("bayesrod.priors").iterdir() if p.name.endswith(".json"))
+
+
+def load_prior(name_or_path: str | None = None) -> Prior:
+    """Load a bundled prior by name (``default``, ``grass``, ``woody``) or a JSON file path."""
+    name_or_path = name_or_path or "default"
+    path = Path(name_or_path)
+    if path.suffix == ".json" or path.exists():
+        if not path.is_file():
+            raise ValueError(
+                f"--prior: expected a prior name ({', '.join(available_priors())}) or a JSON file, "
+                f"got {name_or_path!r} (no such file)"
+            )
+        text, source = path.read_text(), str(path)
+    else:
+        res = resources.files("bayesrod.priors") / f"{name_or_path}.json"
+        if not res.is_file():
+            raise ValueError(
+                f"--prior: expected one of {', '.join(available_priors())} or a JSON file, got {name_or_path!r}"
+            )
+        text, source = res.read_text(), f"priors/{name_or_path}.json"
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{source}: expected valid JSON, got {exc.msg} at line {exc.lineno}") from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("parameters"), dict):
+        raise ValueError(f"{source}: parameters: expected an object of parameter priors, got none")
+    params = {k: _parse_param(k, v, source) for k, v in doc["parameters"].items()}
+    missing = [k for k in REQUIRED if k not in params]
+    if missing:
+        raise ValueError(f"{source}: parameters.{missing[0]}: expected a prior, got none")
+    effects = {k: _parse_param(k, v, source) for k, v in (doc.get("effects") or {}).items()}
+    unknown = sorted(set(effects) - set(EFFECT_NAMES))
+    if unknown:
+        raise ValueError(f"{source}: effects.{unknown[0]}: expected one of {', '.join(EFFECT_NAMES)}, got it")
+    return Prior(doc.get("name", path.stem), params, effects, source, doc)

@@ -1,0 +1,238 @@
+"""Sampling: start point, independent emcee ensembles with an HDF5 backend, diagnostics.
+
+emcee only ever sees ``log_prob`` (vectorised over walkers). Several ensembles
+are started independently so that R-hat and bulk ESS (ArviZ, with every walker
+of every ensemble as a chain) are meaningful; runs extend in chunks until the
+targets are met or the step budget is spent, and resume from the HDF5 file
+after an interruption.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import minimize
+
+
+class CheckpointBackend:
+    """emcee's in-memory backend, checkpointed to an HDF5 group every ``flush_every`` steps.
+
+    emcee's own HDFBackend writes every step (about 2 ms each here); this
+    keeps the chain in memory and rewrites the group periodically, so an
+    interrupted run loses at most ``flush_every`` steps and resumes with
+    ``sampler.run_mcmc(None, n)``.
+    """
+
+    def __new__(cls, path: Path, name: str, flush_every: int = 200):
+        import emcee
+
+        class _Backend(emcee.backends.Backend):
+            def save_step(self, state, accepted):
+                super().save_step(state, accepted)
+                if self.iteration % flush_every == 0:
+                    self.flush()
+
+            def flush(self):
+                import h5py
+
+                if not self.initialized or self.iteration == 0:
+                    return
+                with h5py.File(path, "a") as f:
+                    if name in f:
+                        del f[name]
+                    g = f.create_group(name)
+                    g.create_dataset("chain", data=self.chain[: self.iteration])
+                    g.create_dataset("log_prob", data=self.log_prob[: self.iteration])
+                    g.create_dataset("accepted", data=self.accepted)
+                    kind, key, pos, has_gauss, cached = self.random_state
+                    g.create_dataset("rng_key", data=key)
+                    g.attrs.update(rng_kind=kind, rng_pos=pos, rng_has_gauss=has_gauss, rng_cached=cached)
+
+            def load(self, nwalkers, ndim) -> bool:
+                import h5py
+
+                if not Path(path).is_file():
+                    return False
+                with h5py.File(path, "r") as f:
+                    if name not in f or f[name]["chain"].shape[1:] != (nwalkers, ndim):
+                        return False
+                    g = f[name]
+                    self.reset(nwalkers, ndim)
+                    self.chain = g["chain"][()]
+                    self.log_prob = g["log_prob"][()]
+                    self.accepted = g["accepted"][()]
+                    self.iteration = self.chain.shape[0]
+                    a = g.attrs
+                    self.random_state = (
+                        str(a["rng_kind"]),
+                        g["rng_key"][()],
+                        int(a["rng_pos"]),
+                        int(a["rng_has_gauss"]),
+                        float(a["rng_cached"]),
+                    )
+                return True
+
+        return _Backend()
+
+
+def find_start(post, rng: np.random.Generator) -> np.ndarray:
+    """A high-posterior starting point: grid over p, closed-form EI0 on forces, then Nelder-Mead.
+
+    EI0 is a pure scale of the forces, so for each p of the likelihood's grid
+    the least-squares EI0 is sum(F g) / sum(g g) with g = f(p)/L^2.
+    """
+    lik = post.likelihood
+    best, best_lp = None, -np.inf
+    names = post.names
+    for p in lik.p_grid[1:-1]:
+        nat = {}
+        if lik.n_force:
+            g = lik.predict_nd_force(np.array([p]))[0] / lik.L**2
+            gg = float(g @ g)
+            EI0 = float(g @ lik.F_obs) / gg if gg > 0 else 1.0
+            EI0 = max(EI0, 1e-6)
+            rms = float(np.sqrt(np.mean((lik.F_obs - EI0 * g) ** 2)))
+            nat["sigma_force_N"] = max(rms, 1e-4)
+        else:
+            EI0 = post.priors[0].quantile(0.5)
+        nat.update(EI0=EI0, p=p)
+        if lik.n_points:
+            x, c = lik.predict_shape_x(np.array([p]))
+            rms = float(np.sqrt(np.mean(((lik.x_obs - x[0]) * c[0]) ** 2)))
+            if lik.shape_has_sd:
+                nat["shape_sd_scale"] = max(rms / float(np.sqrt(np.mean(lik.sd_obs**2))), 1e-3)
+            else:
+                nat["sigma_shape_m"] = max(rms, 1e-5)
+        for n, pr in zip(names, post.priors, strict=True):
+            if n not in nat:
+                nat[n] = pr.quantile(0.5) if not pr.log_space else pr.quantile(0.5)
+        theta = post.to_sample(nat)[0]
+        lp = post.log_prob(theta)
+        if lp > best_lp:
+            best, best_lp = theta, lp
+    if best is None:
+        raise ValueError("fit: expected a starting point with finite posterior density, found none on the p grid")
+    res = minimize(
+        lambda t: -post.log_prob(t), best, method="Nelder-Mead", options={"maxiter": 4000, "xatol": 1e-6, "fatol": 1e-6}
+    )
+    return res.x if np.isfinite(res.fun) and -res.fun >= best_lp else best
+
+
+@dataclass
+class SamplingResult:
+    """Chains of all ensembles after burn-in: ``chain`` (n_chains, n_draws, ndim), ``log_prob`` (n_chains, n_draws)."""
+
+    chain: np.ndarray
+    log_prob: np.ndarray
+    n_steps: int
+    burn: int
+    tau: np.ndarray
+    acceptance: float
+    diagnostics: dict | None = None
+
+
+def _ball(theta0, n, rng, post):
+    scale = np.full(theta0.size, 1e-3)
+    out = theta0 + scale * rng.standard_normal((n, theta0.size))
+    for i in range(n):
+        tries = 0
+        while not np.isfinite(post.log_prob(out[i])) and tries < 100:
+            out[i] = theta0 + scale * rng.standard_normal(theta0.size)
+            tries += 1
+    return out
+
+
+def run_ensembles(
+    post,
+    theta0,
+    *,
+    n_ensembles=4,
+    n_walkers=None,
+    chunk=500,
+    max_steps=8000,
+    min_steps=1000,
+    target_ess=1000.0,
+    target_rhat=1.01,
+    seed=0,
+    backend_path: Path | None = None,
+    progress=True,
+) -> SamplingResult:
+    """Run independent ensembles until bulk ESS >= target and R-hat <= target (or max_steps)."""
+    import emcee
+
+    ndim = post.ndim
+    n_walkers = n_walkers or max(16, 4 * ndim)
+    rng = np.random.default_rng(seed)
+    samplers = []
+    for k in range(n_ensembles):
+        backend = None
+        if backend_path is not None:
+            backend = CheckpointBackend(Path(backend_path), f"ensemble{k}")
+            if not backend.load(n_walkers, ndim):
+                backend.reset(n_walkers, ndim)
+        s = emcee.EnsembleSampler(
+            n_walkers,
+            ndim,
+            post.log_prob,
+            vectorize=True,
+            backend=backend,
+            moves=[(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)],
+        )
+        samplers.append(s)
+    for k, s in enumerate(samplers):
+        s.random_state = np.random.RandomState((seed * 7919 + k) % 2**32).get_state()
+    while True:
+        done = min(s.iteration for s in samplers)
+        todo = min(max(min_steps - done, chunk), max_steps - done)
+        for k, s in enumerate(samplers):
+            if todo <= 0:
+                break
+            init = _ball(theta0, n_walkers, rng, post) if s.iteration == 0 else None  # None: resume
+            if init is None and s.backend is not None and s.backend.random_state is not None:
+                s.random_state = s.backend.random_state
+            s.run_mcmc(
+                init,
+                todo,
+                progress=progress,
+                progress_kwargs={"desc": f"ensemble {k + 1}/{n_ensembles}", "leave": False},
+            )
+            if s.backend is not None and hasattr(s.backend, "flush"):
+                s.backend.flush()
+        res = _collect(samplers)
+        diag = diagnostics(res.chain, post.names)
+        enough = (
+            min(diag["ess_bulk"][n] for n in post.names[:2]) >= target_ess
+            and max(diag["rhat"].values()) <= target_rhat
+            and res.n_steps >= 50 * np.nanmax(res.tau)
+        )
+        if enough or todo <= 0 or res.n_steps >= max_steps:
+            res.diagnostics = diag
+            return res
+
+
+def _collect(samplers) -> SamplingResult:
+    n_steps = min(s.iteration for s in samplers)
+    chains = [s.get_chain()[:n_steps] for s in samplers]  # (steps, walkers, ndim)
+    lps = [s.get_log_prob()[:n_steps] for s in samplers]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        taus = np.array([s.get_autocorr_time(tol=0) for s in samplers])
+    tau = np.nanmax(taus, axis=0)
+    burn = int(min(max(n_steps // 3, 5 * np.nanmax(tau)), n_steps // 2))
+    chain = np.concatenate([np.swapaxes(c[burn:], 0, 1) for c in chains], axis=0)
+    lp = np.concatenate([np.swapaxes(x[burn:], 0, 1) for x in lps], axis=0)
+    acc = float(np.mean([np.mean(s.acceptance_fraction) for s in samplers]))
+    return SamplingResult(chain, lp, n_steps, burn, tau, acc)
+
+
+def diagnostics(chain: np.ndarray, names) -> dict:
+    """R-hat and bulk ESS per parameter (ArviZ), chains = walkers of all ensembles."""
+    import arviz as az
+
+    idata = az.from_dict(posterior={n: chain[:, :, i] for i, n in enumerate(names)})
+    rhat = az.rhat(idata)
+    ess = az.ess(idata, method="bulk")
+    return {"rhat": {n: float(rhat[n]) for n in names}, "ess_bulk": {n: float(ess[n]) for n in names}}

@@ -1,0 +1,77 @@
+"""Posterior summaries: quantiles, credible bands on EI(s) and k_theta(h), the ArviZ file, summary.json."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..physics import flexural_rigidity, k_theta
+
+
+def quantiles(x, axis=0) -> dict:
+    q = np.nanquantile(np.asarray(x, float), [0.05, 0.5, 0.95], axis=axis)
+    return {"median": q[1], "q05": q[0], "q95": q[2]}
+
+
+def _scalar_q(x) -> dict:
+    return {k: float(v) for k, v in quantiles(x).items()}
+
+
+def ei_band(EI0, p, length_m: float, s_m) -> dict:
+    """90% band and median of EI(s) (eq. EI_taper) over arc lengths ``s_m``: arrays of shape (len(s_m),)."""
+    EI = flexural_rigidity(np.asarray(s_m)[None, :], np.asarray(EI0)[:, None], np.asarray(p)[:, None], length_m)
+    return quantiles(EI)
+
+
+def k_theta_band(EI0, p, length_m: float, heights_m, base_compliance=None) -> dict:
+    """90% band and median of k_theta(h) (eq. kdist) over ``heights_m``."""
+    kb = np.inf if base_compliance is None else np.asarray(base_compliance)[:, None]
+    k = k_theta(np.asarray(heights_m)[None, :], np.asarray(EI0)[:, None], np.asarray(p)[:, None], length_m, kb)
+    return quantiles(k)
+
+
+def thin(samples: dict, n: int, rng: np.random.Generator) -> dict:
+    m = len(next(iter(samples.values())))
+    idx = rng.choice(m, size=min(n, m), replace=False)
+    return {k: np.asarray(v)[idx] for k, v in samples.items()}
+
+
+def to_inference_data(chain: np.ndarray, log_prob: np.ndarray, post, spec, attrs: dict):
+    """ArviZ InferenceData: posterior in natural units, chains = walkers of all ensembles."""
+    import arviz as az
+
+    nat = post.to_natural(chain.reshape(-1, post.ndim))
+    shape = chain.shape[:2]
+    posterior = {k: np.asarray(v).reshape(shape) for k, v in nat.items()}
+    idata = az.from_dict(posterior=posterior, sample_stats={"lp": log_prob})
+    clean = {k: (v if isinstance(v, (str, int, float)) else str(v)) for k, v in attrs.items()}
+    idata.posterior.attrs.update(clean)
+    return idata
+
+
+def build_summary(spec, post, samples: dict, diag: dict, fit_error: dict, effects, extra: dict) -> dict:
+    """summary.json (CONTRACT.md section 3), plus extensions under their own keys."""
+    L = spec.length_m
+    params = {name: _scalar_q(samples[name]) for name in post.names}
+    heights = [p.height_m for p in spec.pushes]
+    kb = samples.get("base_compliance")
+    kt = k_theta_band(samples["EI0"], samples["p"], L, heights, kb)
+    summary = {
+        "specimen": spec.specimen,
+        "species": spec.species,
+        "length_m": L,
+        "effects": list(effects),
+        "parameters": params,
+        "k_theta": [
+            {"height_m": h, "median": float(kt["median"][i]), "q05": float(kt["q05"][i]), "q95": float(kt["q95"][i])}
+            for i, h in enumerate(heights)
+        ],
+        "convergence": {
+            "rhat_max": float(max(diag["rhat"].values())),
+            "ess_bulk_min": float(min(diag["ess_bulk"].values())),
+            "rhat": diag["rhat"],
+            "ess_bulk": diag["ess_bulk"],
+        },
+        "fit_error": fit_error,
+    }
+    summary.update(extra)
+    return summary
