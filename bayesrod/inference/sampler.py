@@ -230,8 +230,9 @@ def _collect(samplers) -> SamplingResult:
 
 def diagnostics(chain: np.ndarray, names) -> dict:
     """R-hat and bulk ESS per parameter (ArviZ), chains = walkers of all ensembles."""
-    import arviz as az
+    from .summary import import_arviz
 
+    az = import_arviz()
     idata = az.from_dict(posterior={n: chain[:, :, i] for i, n in enumerate(names)})
     rhat = az.rhat(idata)
     ess = az.ess(idata, method="bulk")

@@ -7,6 +7,17 @@ import numpy as np
 from ..physics import flexural_rigidity, k_theta
 
 
+def import_arviz():
+    """ArviZ, imported without its refactor FutureWarning banner (noise for users)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        import arviz
+
+    return arviz
+
+
 def quantiles(x, axis=0) -> dict:
     q = np.nanquantile(np.asarray(x, float), [0.05, 0.5, 0.95], axis=axis)
     return {"median": q[1], "q05": q[0], "q95": q[2]}
@@ -37,8 +48,7 @@ def thin(samples: dict, n: int, rng: np.random.Generator) -> dict:
 
 def to_inference_data(chain: np.ndarray, log_prob: np.ndarray, post, spec, attrs: dict):
     """ArviZ InferenceData: posterior in natural units, chains = walkers of all ensembles."""
-    import arviz as az
-
+    az = import_arviz()
     nat = post.to_natural(chain.reshape(-1, post.ndim))
     shape = chain.shape[:2]
     posterior = {k: np.asarray(v).reshape(shape) for k, v in nat.items()}
