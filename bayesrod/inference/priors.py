@@ -150,8 +150,16 @@ class Prior:
 REQUIRED = ("EI0", "p", "sigma_force_N", "sigma_shape_m", "shape_sd_scale")
 
 
+def _priors_dir():
+    """The prior files: the installed ``bayesrod.priors`` package, or ``priors/`` of a source checkout."""
+    try:
+        return resources.files("bayesrod.priors")
+    except ModuleNotFoundError:  # running from a source tree (e.g. pytest in a fresh clone)
+        return Path(__file__).resolve().parents[2] / "priors"
+
+
 def available_priors() -> list[str]:
-    return sorted(p.name[:-5] for p in resources.files("bayesrod.priors").iterdir() if p.name.endswith(".json"))
+    return sorted(p.name[:-5] for p in _priors_dir().iterdir() if p.name.endswith(".json"))
 
 
 def load_prior(name_or_path: str | None = None) -> Prior:
@@ -166,7 +174,7 @@ def load_prior(name_or_path: str | None = None) -> Prior:
             )
         text, source = path.read_text(), str(path)
     else:
-        res = resources.files("bayesrod.priors") / f"{name_or_path}.json"
+        res = _priors_dir() / f"{name_or_path}.json"
         if not res.is_file():
             raise ValueError(
                 f"--prior: expected one of {', '.join(available_priors())} or a JSON file, got {name_or_path!r}"
