@@ -44,7 +44,6 @@ class PushData:
     height_m: float
     D_m: NDArray  # (n,) contact displacement of each engaged force sample
     F_N: NDArray  # (n,) measured force
-    engaged: NDArray  # (n,) bool, all True (kept for residual reports)
     frame_D_m: NDArray  # (m,) contact displacement of each engaged frame
     frame_index: NDArray  # (k,) frame of each observed point
     x_m: NDArray  # (k,)
@@ -82,7 +81,6 @@ def prepare_data(spec: Specimen, use_forces: bool = True, use_shapes: bool = Tru
                 push.height_m,
                 D if use_forces else D[:0],
                 F if use_forces else F[:0],
-                np.ones(D.size if use_forces else 0, bool),
                 np.array(fD),
                 np.concatenate(fi) if fi else np.zeros(0, int),
                 np.concatenate(xs) if xs else np.zeros(0),
@@ -187,7 +185,6 @@ class RodLikelihood:
         self.effects = tuple(effects)
         self.data = prepare_data(spec, use_forces, use_shapes)
         self.n_force = int(sum(d.F_N.size for d in self.data))
-        self.n_engaged = int(sum(d.engaged.sum() for d in self.data))
         self.n_points = int(sum(d.x_m.size for d in self.data))
         if self.n_force == 0 and self.n_points == 0:
             raise ValueError(f"{spec.specimen}: expected engaged force samples or centerline points, got none")
@@ -206,14 +203,13 @@ class RodLikelihood:
     # ------------------------------------------------------------------ tables
     def _build_tables(self) -> None:
         L, pg = self.L, self.p_grid
-        fF, fobs, eng, xs, cs, xobs, zobs, sd = [], [], [], [], [], [], [], []
+        fF, fobs, xs, cs, xobs, zobs, sd = [], [], [], [], [], [], []
         for d in self.data:
             eta = d.height_m / L
             curves = ForceCurves(eta, pg)
             if d.D_m.size:
                 fF.append(curves.force(d.D_m / L))
                 fobs.append(d.F_N)
-                eng.append(d.engaged)
             if d.x_m.size:
                 xp, cp = self._shape_table(d, eta, curves)
                 xs.append(xp)
@@ -225,7 +221,6 @@ class RodLikelihood:
         P = pg.size
         self.f_table = np.concatenate(fF, axis=1) if fF else np.zeros((P, 0))
         self.F_obs = np.concatenate(fobs) if fobs else np.zeros(0)
-        self.engaged = np.concatenate(eng) if eng else np.zeros(0, bool)
         self.x_table = np.concatenate(xs, axis=1) if xs else np.zeros((P, 0))
         self.cos_table = np.concatenate(cs, axis=1) if cs else np.zeros((P, 0))
         self.x_obs = np.concatenate(xobs) if xobs else np.zeros(0)
@@ -303,7 +298,7 @@ class RodLikelihood:
         """RMS force error [N] and shape error [mm] at one parameter set (CONTRACT summary.fit_error)."""
         res = self.residuals({k: np.atleast_1d(v) for k, v in params.items()})
         out = {}
-        f = res["force"][:, self.engaged] if "force" in res else None
+        f = res.get("force")  # engaged samples only (see prepare_data)
         out["force_rmse_N"] = float(np.sqrt(np.mean(f**2))) if f is not None and f.size else None
         out["shape_rmse_mm"] = float(1000 * np.sqrt(np.mean(res["shape"] ** 2))) if "shape" in res else None
         return out

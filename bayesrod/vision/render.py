@@ -142,7 +142,7 @@ def render_push_frames(cfg, sp, folder: Path, camera: dict, rng: np.random.Gener
         rgb, dmm = render_frame(
             bg_rgb,
             bg_depth,
-            sp.shapes_true_dense[k] if hasattr(sp, "shapes_true_dense") else sp.shapes_true[k],
+            sp.shapes_true[k],
             sp.s_m,
             cfg.length_m,
             cfg.p,
