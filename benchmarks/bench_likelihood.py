@@ -84,11 +84,15 @@ def main():
     ess_s_fast = ess / t_fit
     ess_s_naive = ess / (calls["n"] * per_eval_naive)
     print(f"data: {lik.n_force} force samples, {lik.n_points} centerline points, {len(spec.pushes)} pushes")
-    print(f"table likelihood: tables {t_tables:.1f} s, fit {t_fit:.1f} s in total, {calls['n']} walker evaluations, "
-          f"bulk ESS min(EI0, p) = {ess:.0f} -> {ess_s_fast:.1f} ESS/s ({per_eval_fast * 1e6:.1f} us per evaluation, "
-          "everything included)")
-    print(f"naive solve_ivp likelihood: {per_eval_naive:.2f} s per evaluation (median of {args.repeat}) -> "
-          f"{ess_s_naive:.2e} ESS/s for the same number of evaluations")
+    print(
+        f"table likelihood: tables {t_tables:.1f} s, fit {t_fit:.1f} s in total, {calls['n']} walker evaluations, "
+        f"bulk ESS min(EI0, p) = {ess:.0f} -> {ess_s_fast:.1f} ESS/s ({per_eval_fast * 1e6:.1f} us per evaluation, "
+        "everything included)"
+    )
+    print(
+        f"naive solve_ivp likelihood: {per_eval_naive:.2f} s per evaluation (median of {args.repeat}) -> "
+        f"{ess_s_naive:.2e} ESS/s for the same number of evaluations"
+    )
     print(f"ratio: x{ess_s_fast / ess_s_naive:.3g}")
 
 
