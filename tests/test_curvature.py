@@ -1,0 +1,88 @@
+"""GP curvature: 90% bands cover the truth on analytic arcs and elastica shapes; derivative variance checks."""
+
+import numpy as np
+import pytest
+
+from bayesrod.physics.elastica import contact_from_force_nd
+from bayesrod.vision.curvature import fit_curvature_gp
+
+
+def _coverage(s, theta_true, kappa_true, sd, rng, reps=6):
+    cov = []
+    for _ in range(reps):
+        gp = fit_curvature_gp(s, theta_true(s) + rng.normal(0, sd, s.size))
+        q = np.linspace(s[2], s[-3], 120)  # interior points
+        pred = gp.predict(q)
+        half = 1.6449 * np.sqrt(pred["kappa_var"])
+        cov.append(np.mean(np.abs(pred["kappa"] - kappa_true(q)) <= half))
+    return float(np.mean(cov))
+
+
+# Measured 2026-11-21: the 90% kappa bands cover 100% (arcs) and 99.6% (elastica): too wide for
+# truths smoother than the Matern-3/2 prior. Calibrating them is open work of issue 4.
+OVERCOVER = pytest.mark.xfail(strict=True, reason="kappa bands over-cover (100%); calibration open in issue 4")
+
+
+@OVERCOVER
+@pytest.mark.parametrize(
+    "name,theta,kappa",
+    [
+        ("circle", lambda s: 0.2 + 2.0 * s, lambda s: np.full_like(s, 2.0)),
+        ("clothoid", lambda s: 3.0 * s**2, lambda s: 6.0 * s),
+        ("sine", lambda s: 0.3 * np.sin(6 * s), lambda s: 1.8 * np.cos(6 * s)),
+    ],
+)
+def test_band_covers_analytic_arcs(name, theta, kappa):
+    s = np.linspace(0, 0.8, 80)
+    cover = _coverage(s, theta, kappa, 0.01, np.random.default_rng(1))
+    assert 0.80 <= cover <= 0.99, cover
+
+
+@OVERCOVER
+def test_band_covers_elastica_curvature():
+    f, eta, p = 1.2, 0.5625, 0.43
+    res = contact_from_force_nd(f, eta, p, n_steps=256, keep_shape=True)
+    sig = np.linspace(0, 1, 257)
+    phi = res["grid"][:, 2]
+    keep = sig < 0.95 * float(res["sig_c"])  # below the contact, where the rod is loaded
+    L = 0.8
+    s = sig[keep][::3] * L
+    th = np.interp(s, sig * L, phi)
+
+    def theta(x):
+        return np.interp(x, sig * L, phi)
+
+    def kappa(x):
+        return np.interp(x, sig * L, np.gradient(phi, sig * L))
+
+    cover = _coverage(s, theta, kappa, 0.005, np.random.default_rng(2))
+    assert th.size > 20 and 0.80 <= cover <= 0.99, cover
+
+
+def test_derivative_mean_and_variance_match_finite_differences():
+    rng = np.random.default_rng(3)
+    s = np.linspace(0, 1, 40)
+    gp = fit_curvature_gp(s, np.sin(3 * s) + rng.normal(0, 0.02, s.size))
+    q = np.array([0.3, 0.55, 0.8])
+    h = 1e-5
+    pred = gp.predict(q)
+    fd_mean = (gp.predict(q + h)["theta"] - gp.predict(q - h)["theta"]) / (2 * h)
+    np.testing.assert_allclose(pred["kappa"], fd_mean, rtol=1e-4, atol=1e-6)
+    # Var[(f(q+h) - f(q-h)) / 2h] from the posterior covariance -> Var[f'(q)] as h -> 0
+    from scipy.linalg import cho_solve
+
+    hh = 1e-4
+    for x in q:
+        pts = np.array([x - hh, x + hh])
+        k, _ = gp._k(pts, gp.s)
+        kpp, _ = gp._k(pts, pts)
+        cov = kpp - k @ cho_solve((gp.chol, True), k.T)
+        fd_var = (cov[0, 0] + cov[1, 1] - 2 * cov[0, 1]) / (2 * hh) ** 2
+        assert gp.predict([x])["kappa_var"][0] == pytest.approx(fd_var, rel=2e-2)
+
+
+def test_bad_input():
+    with pytest.raises(ValueError, match="s_m, theta_rad"):
+        fit_curvature_gp([0, 1, 2], [0, 1])
+    with pytest.raises(ValueError, match="finite"):
+        fit_curvature_gp([0, 1, 2, 3], [0, np.nan, 1, 2])
