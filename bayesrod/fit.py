@@ -96,8 +96,8 @@ def fit_dataset(
         "prior": pr.name,
         "data": {"n_force": lik.n_force, "n_shape_points": lik.n_points, "heights_m": list(spec.heights_m)},
         "sampler": {
-            "ensembles": 4,
-            "walkers_per_ensemble": res.chain.shape[0] // 4,
+            "ensembles": res.n_ensembles,
+            "walkers_per_ensemble": res.chain.shape[0] // res.n_ensembles,
             "steps": res.n_steps,
             "burn_in": res.burn,
             "autocorr_time": [float(t) for t in res.tau],

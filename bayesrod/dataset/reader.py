@@ -145,7 +145,7 @@ class _Collector:
                     values[i] = v
             if bad > MAX_PER_COLUMN:
                 self.add(name, f"column {col}", "finite numbers", f"{bad - MAX_PER_COLUMN} more bad rows not listed")
-            out[col] = values if col in text_cols else values
+            out[col] = values
         short = [i + 1 for i, r in enumerate(body) if len(r) < len(header)]
         if short:
             self.add(name, "row length", f"{len(header)} fields per row", f"fewer in rows {_rows(short)}")

@@ -101,8 +101,6 @@ class ForceCurves:
     """
 
     def __init__(self, eta: float, p_grid: NDArray, n_f: int = 160):
-        self.eta = eta
-        self.p = p_grid
         P = p_grid.size
         lo = np.zeros(P)
         hi = np.full(P, 2.0 / eta**2)
@@ -121,7 +119,6 @@ class ForceCurves:
         r = contact_from_force_nd(f, eta, p_grid[:, None])
         d = r["xi_c"] - r["xi_c"][:, :1]
         self.d_end = d[:, -1]
-        self.f_end = lo
         self._interp = []
         for k in range(P):
             dk, fk = d[k], f[k]

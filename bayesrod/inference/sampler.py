@@ -108,7 +108,7 @@ def find_start(post, rng: np.random.Generator) -> np.ndarray:
                 nat["sigma_shape_m"] = max(rms, 1e-5)
         for n, pr in zip(names, post.priors, strict=True):
             if n not in nat:
-                nat[n] = pr.quantile(0.5) if not pr.log_space else pr.quantile(0.5)
+                nat[n] = pr.quantile(0.5)
         theta = post.to_sample(nat)[0]
         lp = post.log_prob(theta)
         if lp > best_lp:
@@ -131,6 +131,7 @@ class SamplingResult:
     burn: int
     tau: np.ndarray
     acceptance: float
+    n_ensembles: int = 1
     diagnostics: dict | None = None
 
 
@@ -225,7 +226,7 @@ def _collect(samplers) -> SamplingResult:
     chain = np.concatenate([np.swapaxes(c[burn:], 0, 1) for c in chains], axis=0)
     lp = np.concatenate([np.swapaxes(x[burn:], 0, 1) for x in lps], axis=0)
     acc = float(np.mean([np.mean(s.acceptance_fraction) for s in samplers]))
-    return SamplingResult(chain, lp, n_steps, burn, tau, acc)
+    return SamplingResult(chain, lp, n_steps, burn, tau, acc, n_ensembles=len(samplers))
 
 
 def diagnostics(chain: np.ndarray, names) -> dict:

@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .effects import Effects
+from .lumped import kx_nd
 
 __all__ = [
     "ContactSolution",
@@ -616,13 +617,10 @@ def force_from_displacement_nd(
         "yielded": yielded & ~slipped,
         "xi_c0": ref["xi_c"],
     }
+    res = {k: v.reshape(P["shape"]) for k, v in out.items()}
     if keep_shape:
-        out["grid"] = sol["grid"]
-        shape = P["shape"]
-        res = {k: v.reshape(shape) for k, v in out.items() if k != "grid"}
-        res["grid"] = sol["grid"].reshape(sol["grid"].shape[:2] + tuple(shape))
-        return res
-    return {k: v.reshape(P["shape"]) for k, v in out.items()}
+        res["grid"] = sol["grid"].reshape(sol["grid"].shape[:2] + tuple(P["shape"]))
+    return res
 
 
 def _plastic_branch(P, iy, target, n_steps):
@@ -657,8 +655,6 @@ def _plastic_branch(P, iy, target, n_steps):
 
 def _linear_kx_nd(P):
     """Small-deflection k_x L^3/EI0 (with base compliance), for initial guesses."""
-    from .lumped import kx_nd
-
     c = P["c_base"]
     kx = kx_nd(P["eta"], P["p"])
     return 1.0 / (1.0 / kx + c * P["eta"] ** 2)
