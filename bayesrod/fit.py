@@ -75,8 +75,9 @@ def fit_dataset(
         f"{spec.specimen}: {lik.n_force} engaged force samples, {lik.n_points} centerline points, "
         f"{len(spec.pushes)} pushes; parameters {', '.join(post.names)}"
     )
+    two_stage, direct = _two_stage(spec, use_shapes, log)
     rng = np.random.default_rng(seed)
-    theta0 = find_start(post, rng)
+    theta0 = find_start(post, rng, init=two_stage)
     res = run_ensembles(
         post,
         theta0,
@@ -108,6 +109,8 @@ def fit_dataset(
     }
     if truth:
         extra["truth"] = truth
+    if two_stage:
+        extra["two_stage"] = two_stage
     summary = build_summary(spec, post, samples, diag, fit_error, effects, extra)
     idata = to_inference_data(
         res.chain,
@@ -132,9 +135,24 @@ def fit_dataset(
     (out / ".samples.npz.tmp").replace(out / "samples.npz")
     summary["sampler"]["seconds"] = round(time.perf_counter() - t0, 1)
     write_json(out / "summary.json", summary)
-    figs = write_figures(spec, lik, samples, out / "figures", truth)
+    figs = write_figures(spec, lik, samples, out / "figures", truth, direct=direct)
     write_report(out / "report.html", summary, figs, spec)
     return summary
+
+
+def _two_stage(spec, use_shapes: bool, log) -> tuple[dict | None, object]:
+    """The seed's deterministic estimate, when the data allow it (shapes with enough points)."""
+    from .inference.direct import two_stage_fit
+
+    if not use_shapes or not any(p.shapes for p in spec.pushes):
+        return None, None
+    try:
+        ts = two_stage_fit(spec)
+    except ValueError as e:
+        log(f"two-stage estimate skipped: {e}")
+        return None, None
+    log(f"two-stage (seed) estimate: EI0 = {ts.EI0:.4g} N m^2, p = {ts.p:.4g} (R^2 {ts.r2:.3f})")
+    return ts.to_dict(), ts.direct
 
 
 def _assumptions(spec) -> list[str]:
@@ -153,7 +171,7 @@ def _assumptions(spec) -> list[str]:
     return a
 
 
-def write_figures(spec, lik, samples, folder: Path, truth=None) -> dict:
+def write_figures(spec, lik, samples, folder: Path, truth=None, direct=None) -> dict:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -165,7 +183,7 @@ def write_figures(spec, lik, samples, folder: Path, truth=None) -> dict:
     files = {}
     sub = {k: v[:: max(1, len(v) // 2000)] for k, v in samples.items()}
     for name, fn in (
-        ("ei_band", lambda ax: plot_ei_band(sub, spec.length_m, ax=ax, truth=truth)),
+        ("ei_band", lambda ax: plot_ei_band(sub, spec.length_m, ax=ax, truth=truth, direct=direct)),
         ("k_theta_band", lambda ax: plot_k_theta_band(sub, spec.length_m, spec.heights_m, ax=ax)),
         ("force_fit", lambda ax: plot_force_fit(spec, lik, sub, ax=ax, unseen_height=_unseen(spec))),
     ):

@@ -16,8 +16,12 @@ def _ax(ax):
     return ax
 
 
-def plot_ei_band(samples: dict, length_m: float, ax=None, truth: dict | None = None, color="C3"):
-    """EI(s) median and 90% credible band (seed Fig. ei_direct_vs_taper, with uncertainty)."""
+def plot_ei_band(samples: dict, length_m: float, ax=None, truth: dict | None = None, color="C3", direct=None):
+    """EI(s) median and 90% credible band (seed Fig. ei_direct_vs_taper, with uncertainty).
+
+    ``direct`` (a :class:`~bayesrod.inference.direct.DirectEstimate`) adds the pooled direct-estimate
+    bins with 90% error bars (1.645 standard errors).
+    """
     ax = _ax(ax)
     s = np.linspace(0, length_m * 0.98, 200)
     band = ei_band(samples["EI0"], samples["p"], length_m, s)
@@ -27,6 +31,19 @@ def plot_ei_band(samples: dict, length_m: float, ax=None, truth: dict | None = N
     if truth:
         t = truth["EI0"] * np.clip(1 - s / length_m, 0, 1) ** (4 * truth["p"])
         (artists["truth"],) = ax.plot(s, t, "k--", lw=1, label="truth (simulated)")
+    if direct is not None:
+        ok = np.isfinite(direct.EI)
+        lo = np.maximum(direct.EI[ok] - 1.645 * direct.se[ok], direct.EI[ok] * 0.05)
+        artists["direct"] = ax.errorbar(
+            direct.s_m[ok],
+            direct.EI[ok],
+            yerr=[direct.EI[ok] - lo, 1.645 * direct.se[ok]],
+            fmt="o",
+            ms=3,
+            color="k",
+            ecolor="0.4",
+            label="direct estimate per bin (eq. direct_estimator)",
+        )
     ax.set(xlabel="arc length s [m]", ylabel="EI(s) [N m$^2$]", yscale="log", title="Flexural rigidity profile")
     ax.legend()
     return artists

@@ -78,18 +78,28 @@ class CheckpointBackend:
         return _Backend()
 
 
-def find_start(post, rng: np.random.Generator) -> np.ndarray:
+def find_start(post, rng: np.random.Generator, init: dict | None = None) -> np.ndarray:
     """A high-posterior starting point: grid over p, closed-form EI0 on forces, then Nelder-Mead.
 
     EI0 is a pure scale of the forces, so for each p of the likelihood's grid
-    the least-squares EI0 is sum(F g) / sum(g g) with g = f(p)/L^2.
+    the least-squares EI0 is sum(F g) / sum(g g) with g = f(p)/L^2. ``init``
+    (e.g. the seed's two-stage estimate, ``{"EI0": .., "p": ..}``) is tried too.
     """
     lik = post.likelihood
     best, best_lp = None, -np.inf
     names = post.names
-    for p in lik.p_grid[1:-1]:
+    candidates = [(float(p), None) for p in lik.p_grid[1:-1]]
+    if init and np.isfinite(init.get("p", np.nan)) and np.isfinite(init.get("EI0", np.nan)):
+        candidates.append((float(np.clip(init["p"], lik.p_grid[1], lik.p_grid[-2])), float(init["EI0"])))
+    for p, EI0_init in candidates:
         nat = {}
-        if lik.n_force:
+        if EI0_init is not None and lik.n_force:
+            g = lik.predict_nd_force(np.array([p]))[0] / lik.L**2
+            EI0 = EI0_init
+            nat["sigma_force_N"] = max(float(np.sqrt(np.mean((lik.F_obs - EI0 * g) ** 2))), 1e-4)
+        elif EI0_init is not None:
+            EI0 = EI0_init
+        elif lik.n_force:
             g = lik.predict_nd_force(np.array([p]))[0] / lik.L**2
             gg = float(g @ g)
             EI0 = float(g @ lik.F_obs) / gg if gg > 0 else 1.0

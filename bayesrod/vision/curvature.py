@@ -37,10 +37,17 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import cho_solve
 
+TREND_SD = 10.0  # prior sd [rad] of the linear trend's intercept and of its change over the span
+
 
 @dataclass(frozen=True)
 class CurvatureGP:
-    """Fitted GP on theta(s); call :meth:`predict` for theta and kappa with variances."""
+    """Fitted GP on theta(s); call :meth:`predict` for theta and kappa with variances.
+
+    The prior is a broad linear trend (intercept and slope, sd ``TREND_SD`` over the span,
+    marginalised) plus a Matern-3/2 process: a stem bent at constant curvature is then
+    not shrunk toward a straight line, which a constant-mean GP does at low signal-to-noise.
+    """
 
     s: NDArray  # (n,) training arc lengths [m]
     alpha: NDArray  # (n,) K^-1 (theta - mean)
@@ -49,6 +56,8 @@ class CurvatureGP:
     signal_var: float  # s2 [rad^2]
     length_scale: float  # l [m]
     noise_cov: NDArray  # (n, n) noise covariance of theta [rad^2]
+    centre: float  # trend coordinate u = (s - centre) / span
+    span: float
 
     @property
     def noise_var(self) -> float:
@@ -56,11 +65,14 @@ class CurvatureGP:
         return float(np.mean(np.diag(self.noise_cov)))
 
     def _k(self, a: NDArray, b: NDArray):
+        """k(a, b) and d k / d a, Matern-3/2 plus the linear trend."""
         r = a[:, None] - b[None, :]
         c = np.sqrt(3.0) / self.length_scale
         e = np.exp(-c * np.abs(r))
-        k = self.signal_var * (1 + c * np.abs(r)) * e
-        ks = -self.signal_var * c**2 * r * e  # d k / d a
+        ua = (a - self.centre) / self.span
+        ub = (b - self.centre) / self.span
+        k = self.signal_var * (1 + c * np.abs(r)) * e + TREND_SD**2 * (1 + ua[:, None] * ub[None, :])
+        ks = -self.signal_var * c**2 * r * e + TREND_SD**2 * np.broadcast_to(ub[None, :], r.shape) / self.span
         return k, ks
 
     def predict(self, s_query: ArrayLike) -> dict[str, NDArray]:
@@ -79,9 +91,11 @@ class CurvatureGP:
         kappa = ks @ self.alpha
         v = cho_solve((self.chol, True), k.T)
         W = cho_solve((self.chol, True), ks.T).T  # (m, n): kappa = W (theta - mean)
-        c2 = 3.0 / self.length_scale**2
-        var_theta = np.maximum(self.signal_var - np.sum(k * v.T, axis=1), 0.0)
-        var_kappa = np.maximum(self.signal_var * c2 - np.sum(ks * W, axis=1), 0.0)
+        uq = (q - self.centre) / self.span
+        prior_theta = self.signal_var + TREND_SD**2 * (1 + uq**2)
+        prior_kappa = self.signal_var * 3.0 / self.length_scale**2 + TREND_SD**2 / self.span**2
+        var_theta = np.maximum(prior_theta - np.sum(k * v.T, axis=1), 0.0)
+        var_kappa = np.maximum(prior_kappa - np.sum(ks * W, axis=1), 0.0)
         se2 = np.maximum(np.einsum("mi,ij,mj->m", W, self.noise_cov, W), 0.0)
         return {
             "theta": theta,
@@ -93,22 +107,22 @@ class CurvatureGP:
         }
 
 
-def _matern32(s: NDArray, s2: float, ell: float) -> NDArray:
-    r = np.abs(s[:, None] - s[None, :])
-    c = np.sqrt(3.0) / ell
-    return s2 * (1 + c * r) * np.exp(-c * r)
+def _fit_hyper(s, y, cov, span, centre, n_restarts, rng):
+    """Type-II maximum likelihood of (s2, l[, white noise]) with scikit-learn's Matern-3/2 kernel.
 
-
-def _fit_known_cov(s, y, cov, span, n_restarts, rng):
-    """Marginal-likelihood fit of (s2, l) with a known noise covariance (scikit-learn's Matern kernel)."""
+    ``cov`` is the known noise covariance, or None to fit a white-noise variance too.
+    """
     from scipy.optimize import minimize
     from sklearn.gaussian_process.kernels import Matern
 
     X = s[:, None]
+    u = (s - centre) / span
+    trend = TREND_SD**2 * (1 + np.outer(u, u))
+    eye = np.eye(s.size)
 
     def nll(logp):
-        s2, ell = np.exp(logp)
-        K = s2 * Matern(ell, nu=1.5)(X) + cov
+        s2, ell = np.exp(logp[:2])
+        K = s2 * Matern(ell, nu=1.5)(X) + trend + (cov if cov is not None else np.exp(logp[2]) * eye)
         try:
             L = np.linalg.cholesky(K)
         except np.linalg.LinAlgError:
@@ -116,11 +130,15 @@ def _fit_known_cov(s, y, cov, span, n_restarts, rng):
         a = np.linalg.solve(L, y)
         return 0.5 * a @ a + np.sum(np.log(np.diag(L)))
 
-    bounds = [(np.log(1e-10), np.log(1e3)), (np.log(1e-2 * span), np.log(10 * span))]
-    starts = [np.log([max(np.var(y), 1e-6), f * span]) for f in (0.2, 1.0, 0.05)]
-    starts += [np.array([rng.uniform(*b) for b in bounds]) for _ in range(max(n_restarts - 2, 0))]
-    best = min((minimize(nll, x0, method="L-BFGS-B", bounds=bounds) for x0 in starts), key=lambda r: r.fun)
-    return tuple(np.exp(best.x))
+    bounds = [(np.log(1e-12), np.log(1e3)), (np.log(1e-2 * span), np.log(10 * span))]
+    v0 = max(float(np.var(y)), 1e-8)
+    starts = [[np.log(v0), np.log(f * span)] for f in (0.2, 1.0, 0.05)]
+    if cov is None:
+        bounds.append((np.log(1e-12), np.log(1.0)))
+        starts = [x + [np.log(0.1 * v0)] for x in starts]
+    starts += [[rng.uniform(*b) for b in bounds] for _ in range(max(n_restarts - 2, 0))]
+    best = min((minimize(nll, np.array(x0), method="L-BFGS-B", bounds=bounds) for x0 in starts), key=lambda r: r.fun)
+    return np.exp(best.x)
 
 
 def fit_curvature_gp(
@@ -132,7 +150,7 @@ def fit_curvature_gp(
     n_restarts: int = 2,
     seed: int = 0,
 ) -> CurvatureGP:
-    """Fit a Matern-3/2 GP to theta(s) by marginal likelihood.
+    """Fit the GP (linear trend + Matern-3/2) to theta(s) by marginal likelihood.
 
     Parameters
     ----------
@@ -142,11 +160,8 @@ def fit_curvature_gp(
         Known white noise of theta [rad].
     noise_cov : (n, n) array, optional
         Known noise covariance of theta [rad^2], e.g. from :func:`tangent_angles`.
-        Without either, a white-noise level is fitted too (scikit-learn WhiteKernel).
+        Without either, a white-noise level is fitted too.
     """
-    from sklearn.gaussian_process import GaussianProcessRegressor
-    from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
-
     s = np.asarray(s_m, float)
     y = np.asarray(theta_rad, float)
     if s.shape != y.shape or s.ndim != 1 or s.size < 4:
@@ -154,41 +169,25 @@ def fit_curvature_gp(
     if not (np.all(np.isfinite(s)) and np.all(np.isfinite(y))):
         raise ValueError("s_m, theta_rad: expected finite values, got NaN or inf")
     span = float(np.ptp(s)) or 1.0
+    centre = float(np.mean(s))
     mean = float(np.mean(y))
+    rng = np.random.default_rng(seed)
     if noise_cov is not None:
         cov = np.asarray(noise_cov, float)
         if cov.shape != (s.size, s.size) or not np.all(np.isfinite(cov)):
             raise ValueError(f"noise_cov: expected a finite ({s.size}, {s.size}) matrix, got shape {cov.shape}")
-        s2, ell = _fit_known_cov(s, y - mean, cov, span, n_restarts, np.random.default_rng(seed))
+    elif noise_sd_rad is not None:
+        cov = float(noise_sd_rad) ** 2 * np.eye(s.size)
     else:
-        kernel = ConstantKernel(max(np.var(y), 1e-6), (1e-8, 1e3)) * Matern(
-            0.2 * span, (1e-3 * span, 10 * span), nu=1.5
-        )
-        if noise_sd_rad is None:
-            kernel = kernel + WhiteKernel(1e-4, (1e-12, 1.0))
-            alpha = 1e-10
-        else:
-            alpha = float(noise_sd_rad) ** 2
-        gp = GaussianProcessRegressor(
-            kernel, alpha=alpha, normalize_y=False, n_restarts_optimizer=n_restarts, random_state=seed
-        )
-        import warnings
-
-        from sklearn.exceptions import ConvergenceWarning
-
-        with warnings.catch_warnings():  # a length scale at its bound is a legitimate (very smooth) answer
-            warnings.simplefilter("ignore", ConvergenceWarning)
-            gp.fit(s[:, None], y - mean)
-        k = gp.kernel_
-        if noise_sd_rad is None:
-            prod, noise = k.k1, float(k.k2.noise_level) + alpha
-        else:
-            prod, noise = k, alpha
-        s2, ell = float(prod.k1.constant_value), float(prod.k2.length_scale)
-        cov = noise * np.eye(s.size)
-    K = _matern32(s, s2, ell) + cov
+        cov = None
+    hyper = _fit_hyper(s, y - mean, cov, span, centre, n_restarts, rng)
+    s2, ell = float(hyper[0]), float(hyper[1])
+    if cov is None:
+        cov = float(hyper[2]) * np.eye(s.size)
+    gp = CurvatureGP(s, np.zeros(s.size), np.eye(s.size), mean, s2, ell, cov, centre, span)
+    K = gp._k(s, s)[0] + cov
     chol = np.linalg.cholesky(K)
-    return CurvatureGP(s, cho_solve((chol, True), y - mean), chol, mean, s2, ell, cov)
+    return CurvatureGP(s, cho_solve((chol, True), y - mean), chol, mean, s2, ell, cov, centre, span)
 
 
 def tangent_angles(x_m: ArrayLike, z_m: ArrayLike, sd_m: ArrayLike) -> dict[str, NDArray]:

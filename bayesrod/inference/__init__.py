@@ -1,0 +1,1 @@
+"""Priors, likelihood, sampler, summaries and the deterministic two-stage estimate."""
