@@ -295,8 +295,11 @@ def seed_error_metrics(frames: list[FrameSample], EI0: float, p: float, length_m
         dxdz = np.gradient(xz[:, 0], zeta, edge_order=1) if np.all(np.diff(zeta) > 0) else np.zeros_like(zeta)
         cos = 1.0 / np.sqrt(1.0 + np.interp(fs.z_m[idx], zeta, dxdz) ** 2)
         rmse.append(1000 * float(np.sqrt(np.mean(((fs.x_m[idx] - xp) * cos) ** 2))))
-    med = lambda a: float(np.median(a)) if a else float("nan")
-    return med(rmse), med(F_err)
+    return _median_or_nan(rmse), _median_or_nan(F_err)
+
+
+def _median_or_nan(a: list) -> float:
+    return float(np.median(a)) if a else float("nan")
 
 
 def two_stage_fit(spec: Specimen, *, n_bins: int = 24, s_min_m: float = S_MIN_M) -> TwoStageFit:
