@@ -77,6 +77,11 @@ def build_parser() -> argparse.ArgumentParser:
     sm.add_argument("--effect", action="append", metavar="NAME=VALUE", help="add a model effect (repeatable)")
     sm.add_argument("--heights", help="override the preset's heights [m]: X,Y,Z or start:stop:num")
     sm.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
+    ex = sub.add_parser("extract", help="vision pipeline: RGB-D frames to centerlines (shapes with sd_m)")
+    ex.add_argument("dataset", help="dataset directory whose pushes have frames")
+    ex.add_argument("--out", required=True, help="directory for the copy of the dataset with extracted shapes")
+    ex.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
+    ex.add_argument("--quiet", action="store_true", help="no progress bar")
     im = sub.add_parser("import", help="turn raw force-displacement tables into datasets")
     im.add_argument("kind", choices=["blueberry"], help="table layout (see docs/data.md)")
     im.add_argument("src", help="folder of raw tables")
@@ -339,6 +344,17 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         f"{', '.join(f'{h:g}' for h in cfg.heights_m)} m, noise {args.noise}, effects {eff}"
         + (", with RGB-D frames" if args.frames else "")
     )
+    return 0
+
+
+@_command("extract")
+def cmd_extract(args: argparse.Namespace) -> int:
+    from .extraction import extract_dataset
+    from .io import check_out_dir
+
+    check_out_dir(args.out, args.force)
+    extract_dataset(args.dataset, args.out, force=args.force, progress=not args.quiet and sys.stderr.isatty())
+    print(f"wrote {args.out}: shapes_extracted.csv per push, extract_report.json, figures/extract_*.png")
     return 0
 
 

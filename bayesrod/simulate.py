@@ -38,6 +38,7 @@ class NoiseModel:
     shape_sd_m: float = 0.0015
     occlusion_half_height_m: float = 0.02  # centerline hidden within this of the sensor height
     tip_missing_fraction: float = 0.03  # thin tip not seen, as a fraction of L
+    shape_sd_reported_m: float | None = None  # sd_m written to shapes.csv (default: shape_sd_m)
 
     @classmethod
     def none(cls) -> NoiseModel:
@@ -254,7 +255,8 @@ def write_simulated(
             rows["time_s"].append(np.full(seen.sum(), t))
             rows["x_m"].append(sp.shapes_obs[k, 0, seen])
             rows["z_m"].append(sp.shapes_obs[k, 1, seen])
-            sd.append(np.full(seen.sum(), cfg.noise.shape_sd_m))
+            reported = cfg.noise.shape_sd_reported_m
+            sd.append(np.full(seen.sum(), cfg.noise.shape_sd_m if reported is None else reported))
         cols = {k: np.concatenate(v) for k, v in rows.items()}
         if cfg.noise.shape_sd_m > 0:
             cols["sd_m"] = np.concatenate(sd)

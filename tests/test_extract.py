@@ -1,0 +1,108 @@
+"""Vision: RGB-D frames to centerlines, checked against the simulator's true shapes."""
+
+import csv
+import hashlib
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from bayesrod.cli import main
+from bayesrod.dataset import read_dataset
+from bayesrod.vision.extract import extract_frame
+
+from .conftest import make_dataset
+
+
+def _frames_truth(root):
+    spec = json.loads((root / "specimen.json").read_text())
+    out = []
+    for push in spec["pushes"]:
+        truth = {}
+        for r in csv.DictReader(open(root / push["truth_shapes"])):
+            truth.setdefault(float(r["time_s"]), []).append((float(r["x_m"]), float(r["z_m"])))
+        for r in csv.DictReader(open(root / push["frames"] / "index.csv")):
+            t = min(truth, key=lambda k, r=r: abs(k - float(r["time_s"])))
+            rgb = cv2.cvtColor(cv2.imread(str(root / push["frames"] / r["rgb"])), cv2.COLOR_BGR2RGB)
+            dep = cv2.imread(str(root / push["frames"] / r["depth"]), cv2.IMREAD_UNCHANGED)
+            out.append((rgb, dep, np.array(truth[t]).T))
+    return spec, out
+
+
+def _accuracy(root):
+    spec, frames = _frames_truth(root)
+    errs, cover = [], []
+    for rgb, dep, tr in frames:
+        line = extract_frame(rgb, dep, spec["camera"])
+        st = np.concatenate([[0], np.cumsum(np.hypot(*np.diff(tr, axis=1)))])
+        sd = np.linspace(0, st[-1], 4000)
+        tx, tz = np.interp(sd, st, tr[0]), np.interp(sd, st, tr[1])
+        d = np.hypot(line.x_m[:, None] - tx[None], line.z_m[:, None] - tz[None])
+        errs.append(np.median(d.min(axis=1)))
+        # covered: true arc length whose nearest extracted point is within 3 px
+        near = np.hypot(tx[:, None] - line.x_m[None], tz[:, None] - line.z_m[None]).min(axis=1)
+        cover.append(np.mean(near < 3 * line.plane_depth_m / spec["camera"]["fx"]))
+        px = line.plane_depth_m / spec["camera"]["fx"]
+    return float(np.median(errs)), float(np.median(cover)), px
+
+
+@pytest.fixture(scope="module")
+def twig_frames(tmp_path_factory):
+    return make_dataset(tmp_path_factory.mktemp("frames") / "twig", "twig", seed=4, frames=True, n_frames_engaged=6)
+
+
+@pytest.fixture(scope="module")
+def grass_frames(tmp_path_factory):
+    return make_dataset(tmp_path_factory.mktemp("frames") / "grass", "grass", seed=4, frames=True, n_frames_engaged=6)
+
+
+def test_twig_centerline_within_a_pixel_and_covers_the_stem(twig_frames):
+    err, cover, px = _accuracy(twig_frames)
+    assert err <= px, (err, px)
+    assert cover >= 0.85, cover
+
+
+def test_grass_centerline_within_a_pixel(grass_frames):
+    err, _, px = _accuracy(grass_frames)
+    assert err <= px, (err, px)
+
+
+# Measured: grass coverage median 0.78 over 66 frames (worst 0.38): the sub-pixel upper half of the
+# blade reads the background's depth and, at large deflection, runs along the robot arm where the
+# colour tracker stops. Open in issue 4.
+@pytest.mark.xfail(strict=True, reason="grass thin tip not fully tracked (median coverage 0.78)")
+def test_grass_centerline_covers_the_stem(grass_frames):
+    _, cover, _ = _accuracy(grass_frames)
+    assert cover >= 0.85, cover
+
+
+def _tree_hash(root):
+    h = hashlib.sha256()
+    for p in sorted(root.rglob("*")):
+        if p.is_file():
+            h.update(p.relative_to(root).as_posix().encode())
+            h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+def test_extract_cli_writes_valid_copy_and_reports_skipped_frames(twig_frames, tmp_path, capsys):
+    import shutil
+
+    src = tmp_path / "src"
+    shutil.copytree(twig_frames, src)
+    blank = src / "h450" / "frames" / "depth_002.png"
+    cv2.imwrite(str(blank), np.zeros((480, 640), np.uint16))  # no depth at all: the stem cannot be found
+    before = _tree_hash(src)
+    out = tmp_path / "out"
+    assert main(["extract", str(src), "--out", str(out), "--quiet"]) == 0
+    assert _tree_hash(src) == before  # inputs never modified
+    spec = read_dataset(out)
+    assert all(p.shapes and all(f.sd_m is not None for f in p.shapes) for p in spec.pushes)
+    rep = json.loads((out / "extract_report.json").read_text())
+    skipped = rep["pushes"]["h450"]["skipped"]
+    assert [s["frame"] for s in skipped] == [2] and "depth" in skipped[0]["reason"]
+    assert len(spec.pushes[0].shapes) == len(spec.pushes[0].frames) - 1  # skipped, never invented
+    assert (out / "figures" / "extract_h450.png").is_file()
+    assert main(["extract", str(src), "--out", str(out)]) == 2  # non-empty --out refused
+    assert "not empty" in capsys.readouterr().err
