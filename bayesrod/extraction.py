@@ -80,7 +80,9 @@ def extract_dataset(dataset, out, *, force: bool = False, progress: bool = True,
             for rec in push.frames:
                 rgb, depth = _load(rec)
                 try:
-                    line = extract_frame(rgb, depth, camera, direction=push.direction, plane_depth_m=plane)
+                    line = extract_frame(
+                        rgb, depth, camera, direction=push.direction, plane_depth_m=plane, max_length_m=spec.length_m
+                    )
                 except ExtractionError as e:
                     skipped.append({"frame": rec.frame, "time_s": rec.time_s, "reason": str(e)})
                     bar.update()

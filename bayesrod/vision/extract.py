@@ -184,6 +184,7 @@ def stem_likeness(rgb: NDArray, mask: NDArray) -> NDArray:
 
 
 def track_tip(alpha: NDArray, uv: NDArray, *, threshold: float = 0.2, max_steps: int = 2000) -> NDArray:
+    # max_steps bounds the tracked length (1.5 px per step): extract_frame passes the stem's remaining length
     """Follow the stem beyond the depth-band path along the ridge of ``alpha``; returns added (k, 2) pixels.
 
     Steps of 1.5 px; each step picks the highest alpha among directions within 35 degrees of the
@@ -235,6 +236,7 @@ def extract_frame(
     spacing_m: float = 0.01,
     band_m: float = 0.02,
     track: bool = True,
+    max_length_m: float | None = None,
 ) -> Centerline:
     """Centerline of one RGB-D frame; raises :class:`ExtractionError` when the stem is not found."""
     from scipy.interpolate import make_splprep
@@ -247,7 +249,12 @@ def extract_frame(
     skel, uv = centerline_pixels(mask, base)
     uv = np.vstack([np.asarray(base, float)[None, :], uv])  # the clamped base is known
     if track:
-        uv = np.vstack([uv, track_tip(stem_likeness(rgb, mask), uv)])
+        steps = 2000
+        if max_length_m is not None:  # the stem is no longer than its length: bound the tracked part
+            so_far = float(np.sum(np.hypot(*np.diff(uv, axis=0).T))) * Z / camera["fx"]
+            steps = max(int((max_length_m - so_far) * camera["fx"] / Z / 1.5), 0)
+        if steps:
+            uv = np.vstack([uv, track_tip(stem_likeness(rgb, mask), uv, max_steps=steps)])
     step = np.hypot(*np.diff(uv, axis=0).T)
     gap = step > 2.5  # a bridged occlusion
     keep = np.concatenate([[True], step > 0])
@@ -264,6 +271,8 @@ def extract_frame(
     xf, zf = spl(fine)
     sf = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(xf), np.diff(zf)))])
     length = float(sf[-1])
+    if max_length_m is not None:
+        length = min(length, float(max_length_m))
     s_out = np.arange(0.0, length + 1e-12, spacing_m)
     u_out = np.interp(s_out, sf, fine)
     xo, zo = spl(u_out)
