@@ -40,7 +40,8 @@ def simulate_from_prior(prior_name: str, seed: int, out: Path, *, preset: str = 
     )
     ps = get_preset(preset)
     cfg = SimConfig.from_preset(preset, seed=seed, EI0=truth["EI0"], p=truth["p"], specimen=f"sbc-{seed}")
-    cfg = SimConfig(**{**cfg.__dict__, "noise": noise, "heights_m": tuple(ps["heights_m"])})
+    extra = {} if use_shapes else {"n_frames_engaged": 2}  # frames unused by a force-only fit
+    cfg = SimConfig(**{**cfg.__dict__, "noise": noise, "heights_m": tuple(ps["heights_m"]), **extra})
     out.mkdir(parents=True, exist_ok=True)
     write_simulated(cfg, simulate(cfg), out)
     return truth
@@ -59,7 +60,6 @@ def fit_for_calibration(
     res = run_ensembles(post, theta0, seed=seed, progress=False, target_ess=target_ess, max_steps=6000)
     flat = res.chain.reshape(-1, post.ndim)
     nat = post.to_natural(flat)
-    idx = np.linspace(0, flat.shape[0] - 1, n_rank).astype(int)
     rng = np.random.default_rng(seed)
     idx = rng.permutation(flat.shape[0])[:n_rank]  # random thinning: ranks need (nearly) independent draws
     out = {"rhat_max": float(max(res.diagnostics["rhat"].values())), "names": post.names}
