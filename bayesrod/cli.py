@@ -97,7 +97,12 @@ def build_parser() -> argparse.ArgumentParser:
     ft.add_argument("dataset", help="dataset directory")
     ft.add_argument("--out", required=True, help="run directory to write")
     ft.add_argument("--prior", default="default", help="prior name (default, grass, woody) or JSON file")
-    ft.add_argument("--effects", default="", help="comma list of effects to fit (currently: force_offset)")
+    ft.add_argument(
+        "--effects",
+        default="",
+        help="comma list of effects to fit: force_offset and at most one of base_compliance, rest_curvature, "
+        "base_tilt, contact_friction, self_weight, yield",
+    )
     ft.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     ft.add_argument("--forces-only", action="store_true", help="ignore centerlines")
     ft.add_argument("--shapes-only", action="store_true", help="ignore forces")

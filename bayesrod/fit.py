@@ -19,7 +19,7 @@ import numpy as np
 
 from . import __version__
 from .dataset import read_dataset
-from .inference.likelihood import LogPosterior, RodLikelihood
+from .inference.likelihood import LogPosterior, build_likelihood
 from .inference.priors import load_prior
 from .inference.sampler import find_start, run_ensembles
 from .inference.summary import build_summary, to_inference_data
@@ -68,8 +68,7 @@ def fit_dataset(
             )
     out.mkdir(parents=True, exist_ok=True)
     write_json(cfg_path, config)
-    lo, hi = pr.get("p").bounds()
-    lik = RodLikelihood(spec, p_range=(lo, min(hi, 3.0)), effects=effects, use_forces=use_forces, use_shapes=use_shapes)
+    lik = build_likelihood(spec, pr, effects, use_forces=use_forces, use_shapes=use_shapes)
     post = LogPosterior(lik, pr)
     log(
         f"{spec.specimen}: {lik.n_force} engaged force samples, {lik.n_points} centerline points, "

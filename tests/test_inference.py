@@ -83,8 +83,10 @@ def test_forces_only_and_shapes_only(twig_noisy):
     spec = read_dataset(twig_noisy)
     assert RodLikelihood(spec, use_shapes=False).names == ["EI0", "p", "sigma_force_N"]
     assert RodLikelihood(spec, use_forces=False).names == ["EI0", "p", "shape_sd_scale"]
-    with pytest.raises(ValueError, match="--effects"):
-        RodLikelihood(spec, effects=("yield",))
+    with pytest.raises(ValueError, match="--effects: expected effects from"):
+        RodLikelihood(spec, effects=("gravity",))
+    with pytest.raises(ValueError, match="at most one"):
+        RodLikelihood(spec, effects=("yield", "base_tilt"))
 
 
 def test_sampler_resumes_from_checkpoint(twig_lik, tmp_path):
@@ -159,3 +161,37 @@ def test_force_only_fit_of_a_blueberry_cane(tmp_path):
     assert s["convergence"]["rhat_max"] <= 1.02
     assert len(s["k_theta"]) == 3 and all(r["q05"] < r["median"] < r["q95"] for r in s["k_theta"])
     assert any("1.6 m" in a for a in s["assumptions"])
+
+
+def _fit_effect(tmp_path, name, value, use_shapes, n_effect=None, prior="woody"):
+    from bayesrod.inference.likelihood import build_likelihood
+    from bayesrod.inference.sampler import find_start
+    from bayesrod.physics import Effects
+
+    ds = make_dataset(tmp_path / "ds", "twig", seed=5, effects=Effects.from_mapping({name: value}))
+    spec = read_dataset(ds)
+    pr = load_prior(prior)
+    lik = build_likelihood(spec, pr, (name,), use_shapes=use_shapes, n_effect=n_effect)
+    post = LogPosterior(lik, pr)
+    res = run_ensembles(post, find_start(post, np.random.default_rng(0)), progress=False, target_ess=400)
+    nat = post.to_natural(res.chain.reshape(-1, post.ndim))
+    return {k: np.quantile(v, [0.005, 0.5, 0.995]) for k, v in nat.items()}, res
+
+
+def test_fit_recovers_an_undeclared_base_compliance(tmp_path):
+    """Forces only, compliance 20 N m/rad on the twig (base rotation ~14% of the deflection)."""
+    q, res = _fit_effect(tmp_path, "base_compliance", 20.0, use_shapes=False, n_effect=9)
+    assert q["base_compliance"][0] < 20.0 < q["base_compliance"][2], q
+    assert q["EI0"][0] < 2.63 < q["EI0"][2] and q["p"][0] < 0.43 < q["p"][2], q
+    assert max(res.diagnostics["rhat"].values()) < 1.02
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "name,value,shapes",
+    [("rest_curvature", 0.3, True), ("base_tilt", 0.05, True), ("contact_friction", 0.3, False), ("yield", 2.0, False)],
+)
+def test_fit_recovers_each_tabled_effect(tmp_path, name, value, shapes):
+    q, _ = _fit_effect(tmp_path, name, value, use_shapes=shapes)
+    assert q[name][0] < value < q[name][2], q  # 99% interval
+    assert q["EI0"][0] < 2.63 < q["EI0"][2], q

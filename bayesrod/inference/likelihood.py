@@ -33,7 +33,71 @@ from ..dataset.model import Specimen
 from ..physics.elastica import centerline_at, contact_from_force_nd
 
 _LOG_2PI = math.log(2 * math.pi)
-FITTABLE_EFFECTS = ("force_offset",)
+# force_offset is exact (additive); the others enter through a second table axis (at most one of them)
+TABLE_EFFECTS = ("base_compliance", "rest_curvature", "base_tilt", "contact_friction", "self_weight", "yield")
+FITTABLE_EFFECTS = ("force_offset",) + TABLE_EFFECTS
+
+
+@dataclass(frozen=True)
+class EffectAxis:
+    """Second table axis for one effect: a bounded coordinate u, uniform grid, and the map to the solver.
+
+    u is chosen so that the neutral value is u = 0 and the range is finite:
+    base_compliance u = c/(1+c) with c = EI0/(k L); self_weight u = w0 L^3/EI0;
+    yield u = EI0/(M_y L) (0 = no yield); rest_curvature u = kappa0 L; base_tilt and
+    contact_friction u = the value itself.
+    """
+
+    name: str
+    grid: NDArray  # (E,)
+
+    def nondim(self, u: NDArray) -> dict:
+        """Solver groups (Effects.nondim keys) at coordinates u."""
+        u = np.asarray(u, float)
+        if self.name == "base_compliance":
+            return {"c_base": u / (1.0 - u)}
+        if self.name == "self_weight":
+            return {"w0": u}
+        if self.name == "yield":
+            with np.errstate(divide="ignore"):
+                return {"m_yield": np.where(u > 0, 1.0 / np.maximum(u, 1e-300), np.inf)}
+        return {{"rest_curvature": "kappa0", "base_tilt": "tilt", "contact_friction": "mu"}[self.name]: u}
+
+    def coordinate(self, value: NDArray, EI0: NDArray, L: float) -> NDArray:
+        """u of SI effect values (W,) at EI0 (W,)."""
+        value = np.asarray(value, float)
+        if self.name == "base_compliance":
+            c = EI0 / (value * L)
+            return c / (1.0 + c)
+        if self.name == "self_weight":
+            return value * L**3 / EI0
+        if self.name == "yield":
+            return EI0 / (value * L)
+        if self.name == "rest_curvature":
+            return value * L
+        return value
+
+    @classmethod
+    def from_prior(cls, name: str, prior, EI0_range: tuple[float, float], L: float, n: int = 13) -> EffectAxis:
+        """Grid covering the prior's central 99.8% at any EI0 in ``EI0_range``."""
+        lo_q, hi_q = prior.quantile(0.001), prior.quantile(0.999)
+        probe = cls(name, np.zeros(1))
+        us = [probe.coordinate(v, e, L) for v in (lo_q, hi_q) for e in EI0_range]
+        lo, hi = float(np.min(us)), float(np.max(us))
+        caps = {
+            "base_compliance": (0.0, 0.95),
+            "self_weight": (0.0, 6.0),  # below the buckling load of the tapered rod
+            "yield": (0.0, 50.0),
+            "rest_curvature": (-2.0, 2.0),
+            "base_tilt": (-0.6, 0.6),
+            "contact_friction": (-0.9, 0.9),
+        }[name]
+        if name in ("base_compliance", "self_weight", "yield"):
+            lo = 0.0  # include the neutral value
+        lo, hi = max(lo, caps[0]), min(hi, caps[1])
+        if hi <= lo:
+            hi = lo + 1e-3
+        return cls(name, np.linspace(lo, hi, n))
 
 
 @dataclass(frozen=True)
@@ -100,29 +164,41 @@ class ForceCurves:
     ``d_end`` so that tables stay continuous in p; slip is decided separately.
     """
 
-    def __init__(self, eta: float, p_grid: NDArray, n_f: int = 160):
+    def __init__(self, eta: float, p_grid: NDArray, n_f: int = 160, effects_nd: dict | None = None):
         P = p_grid.size
+        self.effects_nd = effects_nd
+
+        def ok(f):
+            r = contact_from_force_nd(f, eta, p_grid, effects_nd)
+            return r["found"] & ~r["yielded"]
+
         lo = np.zeros(P)
         hi = np.full(P, 2.0 / eta**2)
         for _ in range(60):  # expand until no contact
-            found = contact_from_force_nd(hi, eta, p_grid)["found"]
+            found = ok(hi)
             if not found.any():
                 break
             lo = np.where(found, hi, lo)
             hi = np.where(found, 2 * hi, hi)
         for _ in range(48):
             mid = 0.5 * (lo + hi)
-            found = contact_from_force_nd(mid, eta, p_grid)["found"]
+            found = ok(mid)
             lo, hi = np.where(found, mid, lo), np.where(found, hi, mid)
         u = np.linspace(0.0, 1.0, n_f)
         f = lo[:, None] * (1.0 - (1.0 - u[None, :]) ** 2)
-        r = contact_from_force_nd(f, eta, p_grid[:, None])
+        r = contact_from_force_nd(f, eta, p_grid[:, None], effects_nd)
         d = r["xi_c"] - r["xi_c"][:, :1]
         self.d_end = d[:, -1]
         self._interp = []
         for k in range(P):
             dk, fk = d[k], f[k]
-            keep = np.concatenate([[True], np.diff(dk) > 0])
+            fin = np.where(np.isfinite(dk), dk, -np.inf)
+            prev = np.concatenate([[-np.inf], np.maximum.accumulate(fin)[:-1]])
+            keep = np.isfinite(dk) & (fin > prev)  # strictly increasing, finite
+            if keep.sum() < 2:  # no equilibrium with contact (e.g. a stem curled away): zero force
+                self.d_end[k] = 0.0
+                self._interp.append(PchipInterpolator([0.0, 1.0], [0.0, 0.0], extrapolate=True))
+                continue
             self._interp.append(PchipInterpolator(dk[keep], fk[keep], extrapolate=True))
 
     def force(self, d: NDArray) -> NDArray:
@@ -170,13 +246,30 @@ class RodLikelihood:
         ``sigma_shape_m``), then effects.
     """
 
-    def __init__(self, spec: Specimen, p_range=(0.0, 3.0), effects=(), use_forces=True, use_shapes=True, n_p: int = 61):
+    def __init__(
+        self,
+        spec: Specimen,
+        p_range=(0.0, 3.0),
+        effects=(),
+        use_forces=True,
+        use_shapes=True,
+        n_p: int = 61,
+        effect_axis: EffectAxis | None = None,
+    ):
         unsupported = [e for e in effects if e not in FITTABLE_EFFECTS]
         if unsupported:
             raise ValueError(
-                f"--effects: expected effects the fit supports ({', '.join(FITTABLE_EFFECTS)}), "
-                f"got {', '.join(unsupported)} (the others enter with bayesrod diagnose)"
+                f"--effects: expected effects from {', '.join(FITTABLE_EFFECTS)}, got {', '.join(unsupported)}"
             )
+        tabled = [e for e in effects if e in TABLE_EFFECTS]
+        if len(tabled) > 1:
+            raise ValueError(
+                f"--effects: expected at most one of {', '.join(TABLE_EFFECTS)} (plus force_offset), "
+                f"got {', '.join(tabled)}"
+            )
+        if tabled and (effect_axis is None or effect_axis.name != tabled[0]):
+            raise ValueError(f"effect {tabled[0]}: expected an EffectAxis for it (see EffectAxis.from_prior)")
+        self.axis = effect_axis if tabled else None
         self.spec = spec
         self.L = float(spec.length_m)
         self.effects = tuple(effects)
@@ -199,11 +292,26 @@ class RodLikelihood:
 
     # ------------------------------------------------------------------ tables
     def _build_tables(self) -> None:
+        """Tables (E, P, N): E = 1 without a tabled effect."""
+        if self.axis is None:
+            self._build_tables_at(None)
+            for k in ("f_table", "x_table", "cos_table"):
+                setattr(self, k, getattr(self, k)[None])
+            return
+        stacks = {"f_table": [], "x_table": [], "cos_table": []}
+        for u in self.axis.grid:
+            self._build_tables_at(self.axis.nondim(u))
+            for k in stacks:
+                stacks[k].append(getattr(self, k))
+        for k, v in stacks.items():
+            setattr(self, k, np.stack(v))
+
+    def _build_tables_at(self, eff_nd: dict | None) -> None:
         L, pg = self.L, self.p_grid
         fF, fobs, xs, cs, xobs, zobs, sd = [], [], [], [], [], [], []
         for d in self.data:
             eta = d.height_m / L
-            curves = ForceCurves(eta, pg)
+            curves = ForceCurves(eta, pg, effects_nd=eff_nd)
             if d.D_m.size:
                 fF.append(curves.force(d.D_m / L))
                 fobs.append(d.F_N)
@@ -216,7 +324,7 @@ class RodLikelihood:
                 if self.shape_has_sd:
                     sd.append(d.sd_m)
         P = pg.size
-        self.f_table = np.concatenate(fF, axis=1) if fF else np.zeros((P, 0))
+        self.f_table = np.concatenate(fF, axis=1) if fF else np.zeros((P, 0))  # (P, N); stacked to (E, P, N)
         self.F_obs = np.concatenate(fobs) if fobs else np.zeros(0)
         self.x_table = np.concatenate(xs, axis=1) if xs else np.zeros((P, 0))
         self.cos_table = np.concatenate(cs, axis=1) if cs else np.zeros((P, 0))
@@ -228,7 +336,7 @@ class RodLikelihood:
         L, pg = self.L, self.p_grid
         f_t = curves.force(d.frame_D_m / L)  # (P, M), clamped at each node's slip
         P, M = f_t.shape
-        r = contact_from_force_nd(f_t, eta, pg[:, None], keep_shape=True)
+        r = contact_from_force_nd(f_t, eta, pg[:, None], curves.effects_nd, keep_shape=True)
         sig = np.linspace(0.0, 1.0, 961)  # 0.5 mm spacing on a 0.47 m stem: x(z) error < 1 um
         xz = centerline_at(r["grid"], sig)  # (2, 961, P, M)
         dx = np.gradient(xz[0], sig, axis=0)
@@ -246,7 +354,38 @@ class RodLikelihood:
         return xp, cp
 
     # -------------------------------------------------------------- evaluation
-    def predict_nd_force(self, p: NDArray) -> NDArray:
+    def _weights(self, p: NDArray, u: NDArray | None):
+        """Gather indices and weights: p (W,4); effect axis (W,4) or a single node."""
+        ip, wp = _lagrange4(self.p_grid, p)
+        if self.axis is None:
+            return ip, wp, np.zeros((p.size, 1), int), np.ones((p.size, 1))
+        ie, we = _lagrange4(self.axis.grid, np.asarray(u, float))
+        return ip, wp, ie, we
+
+    def _interp(self, table: NDArray, p: NDArray, u: NDArray | None) -> NDArray:
+        p = np.atleast_1d(np.asarray(p, float))
+        if self.axis is not None and u is None:
+            u = np.zeros(p.shape)  # the neutral value of every tabled effect
+        ip, wp, ie, we = self._weights(p, u)
+        g = table[ie[:, :, None], ip[:, None, :]]  # (W, 4e, 4p, N)
+        return np.einsum("wb,wa,wban->wn", we, wp, g)
+
+    def effect_coordinate(self, params: dict) -> NDArray | None:
+        """Table coordinate of the tabled effect (W,), or None."""
+        if self.axis is None:
+            return None
+        return self.axis.coordinate(
+            np.atleast_1d(params[self.axis.name]), np.atleast_1d(np.asarray(params["EI0"], float)), self.L
+        )
+
+    def in_table(self, params: dict) -> NDArray:
+        """True where the tabled effect's coordinate lies inside the table (always True without one)."""
+        u = self.effect_coordinate(params)
+        if u is None:
+            return np.ones(np.atleast_1d(params["p"]).shape, bool)
+        return (u >= self.axis.grid[0]) & (u <= self.axis.grid[-1])
+
+    def predict_nd_force(self, p: NDArray, u: NDArray | None = None) -> NDArray:
         """Nondimensional force at every engaged sample, (W, N).
 
         The slip is not used as a hard constraint: past a p's branch end the force is held at its
@@ -254,25 +393,24 @@ class RodLikelihood:
         yet slipped" for engaged samples and bias p; the end of the branch is also where the model
         is most sensitive to what it leaves out (friction, the probe's shape).
         """
-        idx, w = _lagrange4(self.p_grid, p)
-        return np.einsum("wk,wkn->wn", w, self.f_table[idx])
+        return self._interp(self.f_table, p, u)
 
-    def predict_shape_x(self, p: NDArray) -> tuple[NDArray, NDArray]:
-        idx, w = _lagrange4(self.p_grid, p)
-        return np.einsum("wk,wkn->wn", w, self.x_table[idx]), np.einsum("wk,wkn->wn", w, self.cos_table[idx])
+    def predict_shape_x(self, p: NDArray, u: NDArray | None = None) -> tuple[NDArray, NDArray]:
+        return self._interp(self.x_table, p, u), self._interp(self.cos_table, p, u)
 
     def residuals(self, params: dict) -> dict:
         """Force and shape residuals (observed - predicted) for parameter arrays of shape (W,)."""
         p = np.atleast_1d(np.asarray(params["p"], float))
         EI0 = np.atleast_1d(np.asarray(params["EI0"], float))
         out = {}
+        u = self.effect_coordinate(params)
         if self.n_force:
-            F = EI0[:, None] / self.L**2 * self.predict_nd_force(p)
+            F = EI0[:, None] / self.L**2 * self.predict_nd_force(p, u)
             if "force_offset" in params:
                 F = F + np.atleast_1d(params["force_offset"])[:, None]
             out["force"] = self.F_obs[None, :] - F
         if self.n_points:
-            x, c = self.predict_shape_x(p)
+            x, c = self.predict_shape_x(p, u)
             out["shape"] = (self.x_obs[None, :] - x) * c
         return out
 
@@ -345,6 +483,57 @@ class LogPosterior:
         out = np.full(theta2.shape[0], -np.inf)
         if ok.any():
             nat = {k: v[ok] for k, v in self.to_natural(theta2).items()}
-            ll = self.likelihood.log_likelihood(nat)
+            inside = self.likelihood.in_table(nat)
+            ll = np.full(inside.shape, -np.inf)
+            if inside.any():
+                ll[inside] = self.likelihood.log_likelihood({k: v[inside] for k, v in nat.items()})
             out[ok] = np.where(np.isfinite(ll), lp[ok] + ll, -np.inf)
         return float(out[0]) if single else out
+
+
+def scale_estimate(lik: RodLikelihood) -> float | None:
+    """Least-squares EI0 of the plain model on the forces, at the best p of the grid (None without forces)."""
+    if not lik.n_force:
+        return None
+    best, best_rms = None, np.inf
+    for p in lik.p_grid[1:-1]:
+        g = lik.predict_nd_force(np.array([p]))[0] / lik.L**2
+        gg = float(g @ g)
+        if gg <= 0:
+            continue
+        EI0 = float(g @ lik.F_obs) / gg
+        rms = float(np.sqrt(np.mean((lik.F_obs - EI0 * g) ** 2)))
+        if EI0 > 0 and rms < best_rms:
+            best, best_rms = EI0, rms
+    return best
+
+
+def build_likelihood(
+    spec: Specimen, prior, effects=(), *, use_forces=True, use_shapes=True, n_effect: int | None = None
+) -> RodLikelihood:
+    """The likelihood for ``effects``; a tabled effect gets its axis from the prior and a plain EI0 estimate.
+
+    The effect axis must cover the effect's prior at every plausible EI0 (the axis of compliance,
+    self-weight and yield scales with EI0): EI0 is taken within a factor 2 of the plain model's
+    least-squares scale on the forces, or over the EI0 prior's central 99.8% without forces.
+    Walkers outside the table get zero density (docs/inference.md). ``n_effect`` nodes on the
+    effect axis: 13 for forces only, 25 with shapes (their posteriors are ~10x narrower; with 13
+    nodes the interpolation shifted a rest-curvature fit by one posterior sd, with 25 by < 0.1 sd).
+    """
+    if n_effect is None:
+        n_effect = 25 if use_shapes and any(p.shapes for p in spec.pushes) else 13
+    lo, hi = prior.get("p").bounds()
+    p_range = (lo, min(hi, 3.0))
+    tabled = [e for e in effects if e in TABLE_EFFECTS]
+    axis = None
+    if tabled:
+        plain = RodLikelihood(spec, p_range=p_range, use_forces=use_forces, use_shapes=False)
+        EI0_hat = scale_estimate(plain)
+        if EI0_hat is None:
+            rng = (prior.get("EI0").quantile(0.001), prior.get("EI0").quantile(0.999))
+        else:
+            rng = (EI0_hat / 2.0, EI0_hat * 2.0)
+        axis = EffectAxis.from_prior(tabled[0], prior.get(tabled[0]), rng, float(spec.length_m), n=n_effect)
+    return RodLikelihood(
+        spec, p_range=p_range, effects=effects, use_forces=use_forces, use_shapes=use_shapes, effect_axis=axis
+    )

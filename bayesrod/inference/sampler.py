@@ -118,7 +118,9 @@ def find_start(post, rng: np.random.Generator, init: dict | None = None) -> np.n
                 nat["sigma_shape_m"] = max(rms, 1e-5)
         for n, pr in zip(names, post.priors, strict=True):
             if n not in nat:
-                nat[n] = pr.quantile(0.5)
+                # effects start near their neutral value: stiff base, late yield, little weight
+                q = {"base_compliance": 0.99, "yield": 0.99, "self_weight": 0.01}.get(n, 0.5)
+                nat[n] = pr.quantile(q)
         theta = post.to_sample(nat)[0]
         lp = post.log_prob(theta)
         if lp > best_lp:
