@@ -222,7 +222,7 @@ def _load_run_samples(run: str) -> dict:
 
 def predict_posterior(run: str, h: float, D: np.ndarray, effects: Effects, n_draws: int = 400) -> dict:
     """``predict --posterior``: force and stiffness bands from a fit's posterior draws."""
-    from .inference.summary import quantiles
+    from .inference.summary import predictive_forces, quantiles
 
     samples = _load_run_samples(run)
     L = float(samples.pop("length_m"))
@@ -231,13 +231,12 @@ def predict_posterior(run: str, h: float, D: np.ndarray, effects: Effects, n_dra
     n = samples["EI0"].size
     idx = rng.choice(n, size=min(n_draws, n), replace=False)
     EI0, p = samples["EI0"][idx], samples["p"][idx]
-    sol = force_from_displacement(D[None, :], h, EI0[:, None], p[:, None], L, effects)
-    F = np.where(sol.slipped, np.nan, sol.force_N)
-    if "force_offset" in samples:
-        F = F + samples["force_offset"][idx, None]
-    slip_prob = sol.slipped.mean(axis=0)
-    kt = k_theta(h, EI0, p, L, effects.base_compliance)
-    kx = k_x(h, EI0, p, L, effects.base_compliance)
+    pred = predictive_forces(samples, idx, D, h, L, effects)
+    F = pred["force_N"]
+    slip_prob = pred["slipped"].mean(axis=0)
+    kb = samples["base_compliance"][idx] if "base_compliance" in samples else effects.base_compliance
+    kt = k_theta(h, EI0, p, L, kb)
+    kx = k_x(h, EI0, p, L, kb)
 
     def q(x):
         qq = quantiles(x)
@@ -251,7 +250,7 @@ def predict_posterior(run: str, h: float, D: np.ndarray, effects: Effects, n_dra
             {
                 "displacement_m": float(d),
                 "force_N": q(col[ok]) if ok.sum() >= 2 else None,
-                "contact_s_m": q(sol.contact_s_m[ok, i]) if ok.sum() >= 2 else None,
+                "contact_s_m": q(pred["contact_s_m"][ok, i]) if ok.sum() >= 2 else None,
                 "slipped": bool(slip_prob[i] > 0.5),
                 "slip_probability": float(slip_prob[i]),
             }

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .inference.summary import ei_band, k_theta_band, quantiles
-from .physics import force_from_displacement
+from .inference.summary import ei_band, k_theta_band, predictive_forces, quantiles
 
 
 def _ax(ax):
@@ -81,10 +80,7 @@ def plot_force_fit(spec, lik, samples: dict, ax=None, n_draws=100, unseen_height
         col = f"C{k}"
         Dmax = float(d.D_m.max()) if d is not None and d.D_m.size else 0.3 * spec.length_m
         D = np.linspace(0, Dmax, 40)
-        sol = force_from_displacement(D[None, :], h, samples["EI0"][idx, None], samples["p"][idx, None], spec.length_m)
-        F = np.where(sol.slipped, np.nan, sol.force_N)
-        if "force_offset" in samples:
-            F = F + samples["force_offset"][idx, None]
+        F = predictive_forces(samples, idx, D, h, spec.length_m)["force_N"]
         q = quantiles(F)
         label = f"h = {h:g} m" + (" (not pushed)" if d is None else "")
         artists["bands"].append(ax.fill_between(D, q["q05"], q["q95"], color=col, alpha=0.3, label=label))

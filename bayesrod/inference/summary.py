@@ -40,6 +40,35 @@ def k_theta_band(EI0, p, length_m: float, heights_m, base_compliance=None) -> di
     return quantiles(k)
 
 
+def predictive_forces(samples: dict, idx, D, h: float, L: float, effects=None) -> dict:
+    """Force the sensor reads at contact displacements D (m,) for posterior draws ``idx`` (n,).
+
+    Fitted effects in ``samples`` (any catalog name) override the same effect in ``effects``
+    draw by draw. Returns ``force_N`` (n, m) with NaN after the slip, ``slipped`` and
+    ``contact_s_m`` (n, m).
+    """
+    from ..physics import Effects, force_from_displacement
+    from ..physics.effects import EFFECT_NAMES
+
+    base = (effects or Effects()).to_mapping()
+    fitted = [k for k in EFFECT_NAMES if k in samples]
+    D = np.asarray(D, float)
+    idx = np.asarray(idx)
+    EI0, p = np.asarray(samples["EI0"])[idx], np.asarray(samples["p"])[idx]
+    if not fitted:
+        sol = force_from_displacement(D[None, :], h, EI0[:, None], p[:, None], L, Effects.from_mapping(base))
+        F, slipped, s_c = sol.force_N, sol.slipped, sol.contact_s_m
+    else:
+        rows = []
+        for j, i in enumerate(idx):
+            eff = Effects.from_mapping({**base, **{k: float(samples[k][i]) for k in fitted}})
+            rows.append(force_from_displacement(D, h, EI0[j], p[j], L, eff))
+        F = np.stack([r.force_N for r in rows])
+        slipped = np.stack([r.slipped for r in rows])
+        s_c = np.stack([r.contact_s_m for r in rows])
+    return {"force_N": np.where(slipped, np.nan, F), "slipped": slipped, "contact_s_m": s_c}
+
+
 def thin(samples: dict, n: int, rng: np.random.Generator) -> dict:
     m = len(next(iter(samples.values())))
     idx = rng.choice(m, size=min(n, m), replace=False)
