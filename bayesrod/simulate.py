@@ -160,6 +160,13 @@ def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> Simulat
     engaged = robot <= x_slip
     D = np.interp(robot[engaged], robot_dense, D_dense)
     eng = force_from_displacement(D, h, EI0, p, L, eff)
+    for k in range(12):  # the branch end folds: a sample within ~1e-6 L of it may land past it; step back
+        if not eng.slipped.any():
+            break
+        D = np.where(eng.slipped, np.maximum(D - 1e-6 * L * 4**k, 0.0), D)
+        eng = force_from_displacement(D, h, EI0, p, L, eff)
+    if eng.slipped.any():
+        raise RuntimeError(f"simulate: {int(eng.slipped.sum())} engaged samples past the slip at h = {h:g} m")
     dx = wire_deflection(eng.true_force_N)
     robot[engaged] = D + dx  # exact robot position for the exact D (negligibly off uniform)
     force = np.full(robot.size, eff.force_offset)

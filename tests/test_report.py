@@ -1,0 +1,38 @@
+"""The HTML report renders in headless Chromium with its figures (issue 6); skipped without Chromium."""
+
+import importlib.util
+import re
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+spec = importlib.util.spec_from_file_location("check_report_render", REPO / "scripts" / "check_report_render.py")
+render = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(render)
+
+needs_chromium = pytest.mark.skipif(render.chromium() is None, reason="chromium not installed (apt install chromium)")
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    from bayesrod.fit import fit_dataset
+
+    out = tmp_path_factory.mktemp("run") / "run"
+    fit_dataset(REPO / "bayesrod" / "data" / "default", out, progress=False, target_ess=200, log=lambda *a: None)
+    return out
+
+
+def test_report_is_self_contained(run_dir):
+    html = (run_dir / "report.html").read_text()
+    assert len(re.findall(r'<img [^>]*src="data:image/png;base64,', html)) >= 4
+    assert 'src="http' not in html and "Assumptions" in html and "Converged" in html
+
+
+@needs_chromium
+def test_report_renders_with_figures(run_dir, tmp_path):
+    res = render.check(run_dir / "report.html", tmp_path / "shot.png")
+    assert res["ok"], res
+    broken = tmp_path / "broken.html"
+    broken.write_text(re.sub(r"base64,[A-Za-z0-9+/=]*", "base64,", (run_dir / "report.html").read_text()))
+    assert not render.check(broken)["ok"]  # the check can fail
