@@ -134,7 +134,9 @@ def fit_dataset(
     (out / ".samples.npz.tmp").replace(out / "samples.npz")
     summary["sampler"]["seconds"] = round(time.perf_counter() - t0, 1)
     write_json(out / "summary.json", summary)
-    figs = write_figures(spec, lik, samples, out / "figures", truth, direct=direct)
+    figs = write_figures(
+        spec, lik, samples, out / "figures", truth, direct=direct, idata=idata, median=median, n_ens=res.n_ensembles
+    )
     write_report(out / "report.html", summary, figs, spec)
     return summary
 
@@ -170,20 +172,41 @@ def _assumptions(spec) -> list[str]:
     return a
 
 
-def write_figures(spec, lik, samples, folder: Path, truth=None, direct=None) -> dict:
+def _lumped_points(lik) -> list:
+    """Per-height k_theta from the torque balance on the linear region (the seed's lumped branch)."""
+    from .physics.lumped import fit_torque_balance, link_angle
+
+    pts = []
+    for d in lik.data:
+        if d.D_m.size >= 3:
+            try:
+                pts.append(
+                    (d.height_m, fit_torque_balance(link_angle(d.D_m, d.height_m), d.F_N, d.height_m)["k_theta"])
+                )
+            except ValueError:
+                continue
+    return pts
+
+
+def write_figures(
+    spec, lik, samples, folder: Path, truth=None, direct=None, idata=None, median=None, n_ens: int = 4
+) -> dict:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .plots import plot_corner, plot_ei_band, plot_force_fit, plot_k_theta_band
+    from .plots import plot_corner, plot_ei_band, plot_force_fit, plot_k_theta_band, plot_rank, plot_residuals
 
     folder.mkdir(parents=True, exist_ok=True)
     files = {}
     sub = {k: v[:: max(1, len(v) // 2000)] for k, v in samples.items()}
     for name, fn in (
         ("ei_band", lambda ax: plot_ei_band(sub, spec.length_m, ax=ax, truth=truth, direct=direct)),
-        ("k_theta_band", lambda ax: plot_k_theta_band(sub, spec.length_m, spec.heights_m, ax=ax)),
+        (
+            "k_theta_band",
+            lambda ax: plot_k_theta_band(sub, spec.length_m, spec.heights_m, ax=ax, lumped=_lumped_points(lik)),
+        ),
         ("force_fit", lambda ax: plot_force_fit(spec, lik, sub, ax=ax, unseen_height=_unseen(spec))),
     ):
         fig, ax = plt.subplots(figsize=(6.4, 4.2))
@@ -196,6 +219,20 @@ def write_figures(spec, lik, samples, folder: Path, truth=None, direct=None) -> 
     fig.savefig(folder / "corner.png", dpi=90)
     plt.close(fig)
     files["corner"] = folder / "corner.png"
+    if median is not None:
+        fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+        plot_residuals(lik, median, axes=axes)
+        fig.tight_layout()
+        fig.savefig(folder / "residuals.png", dpi=100)
+        plt.close(fig)
+        files["residuals"] = folder / "residuals.png"
+    if idata is not None:
+        fig, axes = plt.subplots(1, 2, figsize=(10, 3.4))
+        plot_rank(idata, n_ens, axes=axes)
+        fig.tight_layout()
+        fig.savefig(folder / "rank.png", dpi=100)
+        plt.close(fig)
+        files["rank"] = folder / "rank.png"
     return files
 
 
@@ -236,6 +273,24 @@ def write_report(path: Path, summary: dict, figs: dict, spec) -> None:
     fe = summary["fit_error"]
     fe_txt = ", ".join(f"{k} = {v:.3g}" for k, v in fe.items() if v is not None)
     assumptions = "".join(f"<li>{html.escape(a)}</li>" for a in summary.get("assumptions", []))
+    ts = summary.get("two_stage")
+    ts_html = ""
+    if ts:
+        ts_html = (
+            "<h3>The seed's deterministic two-stage estimate (for comparison)</h3>"
+            f"<p>Direct estimator (eq. direct_estimator) in {ts['n_bins']} arc-length bins, p by the weighted "
+            f"log-linear fit (eq. p_fit, R<sup>2</sup> = {ts['taper_fit_r2']:.3f}), EI0 from the contact-point "
+            f"residual (eq. EI0_fit): EI0 = {ts['EI0']:.4g} N m<sup>2</sup>, p = {ts['p']:.4g} "
+            f"(&plusmn; {ts['p_se']:.2g}); the seed's error metrics at that taper: median shape RMSE "
+            f"{ts['median_shape_rmse_mm']:.3g} mm, median force error {ts['median_force_error_N']:.3g} N. "
+            "Its p is biased by curvature smoothing (docs/inference.md); the posterior above uses the whole "
+            "elastica.</p>"
+        )
+    smp = summary.get("sampler", {})
+    prov = spec.extra.get("provenance")
+    prov_html = f"<pre>{html.escape(json.dumps(prov, indent=1))}</pre>" if prov else ""
+    truth = summary.get("truth")
+    truth_html = f"<p>Simulated dataset; the truth: {html.escape(json.dumps(truth))}</p>" if truth else ""
     doc = f"""<!doctype html><html><head><meta charset="utf-8"><title>bayesrod: {html.escape(spec.specimen)}</title>
 <style>body{{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}}table{{border-collapse:collapse}}
 td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}}figure{{display:inline-block;margin:6px}}
@@ -248,11 +303,17 @@ Effects: {html.escape(", ".join(summary["effects"]) or "none")}.</p>
 <p>Units: EI0 in N m<sup>2</sup>, p dimensionless, sigma_force_N in N, sigma_shape_m in m.</p>
 <h3>Lumped stiffness k<sub>&theta;</sub>(h) [N m/rad] at the pushed heights</h3>
 <table><tr><th>h [m]</th><th>median</th><th>5%</th><th>95%</th></tr>{kt}</table>
+{ts_html}
 <h2>Convergence</h2><p class="{"ok" if ok else "bad"}">{verdict}</p>
+<p>emcee: {smp.get("ensembles")} independent ensembles of {smp.get("walkers_per_ensemble")} walkers
+(differential-evolution moves), {smp.get("steps")} steps each after a burn-in of {smp.get("burn_in")};
+acceptance {smp.get("acceptance", float("nan")):.2f}; {smp.get("seconds")} s. R-hat and bulk ESS by ArviZ over
+the ensembles; the rank plot shows one histogram per ensemble.</p>
 <p>Fit error at the posterior median: {html.escape(fe_txt)}.</p>
 <h2>Figures</h2>{imgs}
 <h2>Assumptions</h2><ul>{assumptions}</ul>
 <h2>Data</h2><p>{html.escape(str(spec.root))}: {summary["data"]["n_force"]} engaged force samples,
-{summary["data"]["n_shape_points"]} centerline points.</p>
+{summary["data"]["n_shape_points"]} centerline points, heights
+{", ".join(f"{h:g}" for h in summary["data"]["heights_m"])} m.</p>{truth_html}{prov_html}
 <p>Generated by bayesrod {__version__}.</p></body></html>"""
     write_text_atomic(path, doc)

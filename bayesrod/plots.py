@@ -48,14 +48,35 @@ def plot_ei_band(samples: dict, length_m: float, ax=None, truth: dict | None = N
     return artists
 
 
-def plot_k_theta_band(samples: dict, length_m: float, heights_pushed, ax=None, color="C0"):
-    """k_theta(h) (eq. kdist) median and 90% band over heights, pushed heights marked."""
+def plot_k_theta_band(samples: dict, length_m: float, heights_pushed, ax=None, color="C0", lumped=None):
+    """k_theta(h) (eq. kdist) median and 90% band over heights, pushed heights marked.
+
+    ``lumped``: optional list of (height_m, k_theta) from the per-height torque-balance fit
+    (eq. torque_balance with the link angle atan(x_c/h) of the camera-free recovery; the seed's
+    Fig. height_invariance), drawn as points. The link angle is not the tangent rotation that
+    eq. kdist uses (for constant EI they give 3EI/h against 2EI/h), so the points are compared with
+    the posterior band of the quantity they estimate, h^2 k_x(h) (eq. kx), drawn dashed.
+    """
     ax = _ax(ax)
     h = np.linspace(0.05 * length_m, 0.95 * length_m, 120)
     band = k_theta_band(samples["EI0"], samples["p"], length_m, h, samples.get("base_compliance"))
     fill = ax.fill_between(h, band["q05"], band["q95"], color=color, alpha=0.3, label="90% credible band")
     (line,) = ax.plot(h, band["median"], color=color, label="posterior median")
     marks = [ax.axvline(x, color="0.5", ls=":", lw=1) for x in heights_pushed]
+    pts = None
+    if lumped:
+        from .physics import k_x
+
+        kb = samples.get("base_compliance")
+        kb = np.inf if kb is None else np.asarray(kb)[:, None]
+        link = quantiles(
+            h[None, :] ** 2
+            * k_x(h[None, :], np.asarray(samples["EI0"])[:, None], np.asarray(samples["p"])[:, None], length_m, kb)
+        )
+        ax.fill_between(h, link["q05"], link["q95"], color="0.5", alpha=0.25)
+        ax.plot(h, link["median"], "--", color="0.3", lw=1, label=r"link-angle stiffness $h^2 k_x$ (posterior)")
+        hh, kk = np.array(lumped, float).T
+        pts = ax.plot(hh, kk, "ks", ms=5, label="per-height torque-balance fit (link angle)")[0]
     ax.set(
         xlabel="contact height h [m]",
         ylabel=r"$k_\theta$ [N m/rad]",
@@ -63,7 +84,7 @@ def plot_k_theta_band(samples: dict, length_m: float, heights_pushed, ax=None, c
         title="Lumped rotational stiffness (eq. kdist)",
     )
     ax.legend()
-    return {"band": fill, "median": line, "pushed": marks}
+    return {"band": fill, "median": line, "pushed": marks, "lumped": pts}
 
 
 def plot_force_fit(spec, lik, samples: dict, ax=None, n_draws=100, unseen_height=None, rng=None):
@@ -106,3 +127,76 @@ def plot_corner(samples: dict, names=("EI0", "p"), truth: dict | None = None, fi
     return corner.corner(
         data, labels=list(names), quantiles=[0.05, 0.5, 0.95], show_titles=True, truths=truths, fig=fig, title_fmt=".4g"
     )
+
+
+def plot_residuals(lik, params: dict, axes=None):
+    """Residuals at one parameter set: force against contact displacement, shape against height z.
+
+    ``axes``: two axes (a new figure if None). Returns the drawn artists.
+    """
+    if axes is None:
+        import matplotlib.pyplot as plt
+
+        _, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+    res = lik.residuals({k: np.atleast_1d(v) for k, v in params.items()})
+    artists = {"force": [], "shape": []}
+    off_f = off_s = 0
+    for k, d in enumerate(lik.data):
+        col = f"C{k}"
+        n = d.D_m.size
+        if "force" in res and n:
+            artists["force"].append(
+                axes[0].plot(
+                    d.D_m, res["force"][0, off_f : off_f + n], ".", ms=3, color=col, label=f"h = {d.height_m:g} m"
+                )[0]
+            )
+            off_f += n
+        m = d.x_m.size
+        if "shape" in res and m:
+            artists["shape"].append(
+                axes[1].plot(d.z_m, 1000 * res["shape"][0, off_s : off_s + m], ".", ms=1, alpha=0.4, color=col)[0]
+            )
+            off_s += m
+    for ax in axes:
+        ax.axhline(0, color="k", lw=0.8)
+    axes[0].set(
+        xlabel="contact displacement [m]", ylabel="force residual [N]", title="Force residuals (observed - model)"
+    )
+    axes[1].set(
+        xlabel="height z of the point [m]", ylabel="shape residual [mm]", title="Shape residuals (normal distance)"
+    )
+    if artists["force"]:
+        axes[0].legend(fontsize=8)
+    return artists
+
+
+def plot_rank(idata, n_ensembles: int, var_names=("EI0", "p"), axes=None, bins: int = 20):
+    """Rank histograms per independent ensemble (Vehtari et al. 2021): flat and overlapping = agreement.
+
+    The posterior's chains are the walkers of all ensembles; walkers of one ensemble are not
+    independent, so ranks are pooled per ensemble. Returns the drawn step lines per variable.
+    """
+    from scipy.stats import rankdata
+
+    if axes is None:
+        import matplotlib.pyplot as plt
+
+        _, axes = plt.subplots(1, len(var_names), figsize=(5 * len(var_names), 3.4))
+    axes = np.atleast_1d(axes)
+    out = {}
+    for ax, name in zip(axes, var_names, strict=True):
+        x = np.asarray(idata.posterior[name])  # (chains, draws)
+        r = rankdata(x.ravel()).reshape(x.shape)
+        groups = np.array_split(np.arange(x.shape[0]), n_ensembles)
+        edges = np.linspace(0, r.size, bins + 1)
+        lines = []
+        for k, g in enumerate(groups):
+            cnt, _ = np.histogram(r[g].ravel(), bins=edges)
+            lines.append(
+                ax.step(np.arange(bins), cnt / cnt.mean(), where="mid", color=f"C{k}", label=f"ensemble {k + 1}")[0]
+            )
+        ax.axhline(1.0, color="k", lw=0.8, ls=":")
+        ax.set(title=f"rank plot: {name}", xlabel="rank bin (all draws)", ylabel="count / mean", ylim=(0, 2))
+        ax.legend(fontsize=7, ncol=2)
+        out[name] = lines
+    return out
