@@ -34,7 +34,7 @@ def _run(seed):
 def summarise(rows, out: Path):
     from scipy.stats import binom, chisquare
 
-    ok = [r for r in rows if "error" not in r]
+    ok = [r for r in rows if not r.get("error")]
     lines = [
         f"SBC over {len(ok)} replicates ({len(rows) - len(ok)} failed), prior scripts/sbc_prior.json, "
         "99 posterior draws per replicate.",
