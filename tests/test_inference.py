@@ -87,6 +87,8 @@ def test_forces_only_and_shapes_only(twig_noisy):
         RodLikelihood(spec, effects=("gravity",))
     with pytest.raises(ValueError, match="at most one"):
         RodLikelihood(spec, effects=("yield", "base_tilt"))
+    with pytest.raises(ValueError, match="self_weight cannot be fitted yet"):
+        RodLikelihood(spec, effects=("self_weight",))
 
 
 def test_sampler_resumes_from_checkpoint(twig_lik, tmp_path):
