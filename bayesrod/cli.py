@@ -101,7 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--effects",
         default="",
         help="comma list of effects to fit: force_offset and at most one of base_compliance, rest_curvature, "
-        "base_tilt, contact_friction, yield",
+        "base_tilt, contact_friction; yield (with --forces-only)",
     )
     ft.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     ft.add_argument("--forces-only", action="store_true", help="ignore centerlines")

@@ -86,7 +86,9 @@ def test_forces_only_and_shapes_only(twig_noisy):
     with pytest.raises(ValueError, match="--effects: expected effects from"):
         RodLikelihood(spec, effects=("gravity",))
     with pytest.raises(ValueError, match="at most one"):
-        RodLikelihood(spec, effects=("yield", "base_tilt"))
+        RodLikelihood(spec, effects=("rest_curvature", "base_tilt"))
+    with pytest.raises(ValueError, match="--forces-only"):
+        RodLikelihood(spec, effects=("yield",))
     with pytest.raises(ValueError, match="self_weight cannot be fitted yet"):
         RodLikelihood(spec, effects=("self_weight",))
 

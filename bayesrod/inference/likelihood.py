@@ -34,8 +34,11 @@ from ..physics.elastica import centerline_at, contact_from_force_nd
 
 _LOG_2PI = math.log(2 * math.pi)
 # force_offset is exact (additive); the others enter through a second table axis (at most one of them)
-TABLE_EFFECTS = ("base_compliance", "rest_curvature", "base_tilt", "contact_friction", "yield")
-FITTABLE_EFFECTS = ("force_offset",) + TABLE_EFFECTS
+TABLE_EFFECTS = ("base_compliance", "rest_curvature", "base_tilt", "contact_friction")
+# exact without a table: the offset adds; a yielding base caps the force at M_y / h (eq. torque balance
+# about the base: F h = M_0 <= M_y), the elastic curve below it is the plain model's
+CLOSED_EFFECTS = ("force_offset", "yield")
+FITTABLE_EFFECTS = CLOSED_EFFECTS + TABLE_EFFECTS
 # self_weight has an EffectAxis too, but its forward solves (a secant on the base moment per solve)
 # take 80 s per table node and height: a fit would take about an hour. Not offered until that is fast.
 
@@ -277,6 +280,11 @@ class RodLikelihood:
         if tabled and (effect_axis is None or effect_axis.name != tabled[0]):
             raise ValueError(f"effect {tabled[0]}: expected an EffectAxis for it (see EffectAxis.from_prior)")
         self.axis = effect_axis if tabled else None
+        if "yield" in effects and use_shapes and any(p.shapes for p in spec.pushes):
+            raise ValueError(
+                "--effects yield: expected a force-only fit (add --forces-only): the forces on the plastic "
+                "branch are exact (F = M_y/h) but the shapes there are not modelled"
+            )
         self.spec = spec
         self.L = float(spec.length_m)
         self.effects = tuple(effects)
@@ -315,13 +323,14 @@ class RodLikelihood:
 
     def _build_tables_at(self, eff_nd: dict | None) -> None:
         L, pg = self.L, self.p_grid
-        fF, fobs, xs, cs, xobs, zobs, sd = [], [], [], [], [], [], []
+        fF, fobs, fh, xs, cs, xobs, zobs, sd = [], [], [], [], [], [], [], []
         for d in self.data:
             eta = d.height_m / L
             curves = ForceCurves(eta, pg, effects_nd=eff_nd)
             if d.D_m.size:
                 fF.append(curves.force(d.D_m / L))
                 fobs.append(d.F_N)
+                fh.append(np.full(d.F_N.size, d.height_m))
             if d.x_m.size:
                 xp, cp = self._shape_table(d, eta, curves)
                 xs.append(xp)
@@ -333,6 +342,7 @@ class RodLikelihood:
         P = pg.size
         self.f_table = np.concatenate(fF, axis=1) if fF else np.zeros((P, 0))  # (P, N); stacked to (E, P, N)
         self.F_obs = np.concatenate(fobs) if fobs else np.zeros(0)
+        self.F_height = np.concatenate(fh) if fh else np.zeros(0)
         self.x_table = np.concatenate(xs, axis=1) if xs else np.zeros((P, 0))
         self.cos_table = np.concatenate(cs, axis=1) if cs else np.zeros((P, 0))
         self.x_obs = np.concatenate(xobs) if xobs else np.zeros(0)
@@ -413,6 +423,8 @@ class RodLikelihood:
         u = self.effect_coordinate(params)
         if self.n_force:
             F = EI0[:, None] / self.L**2 * self.predict_nd_force(p, u)
+            if "yield" in params:
+                F = np.minimum(F, np.atleast_1d(params["yield"])[:, None] / self.F_height[None, :])
             if "force_offset" in params:
                 F = F + np.atleast_1d(params["force_offset"])[:, None]
             out["force"] = self.F_obs[None, :] - F
