@@ -30,18 +30,32 @@ def _frames_truth(root):
     return spec, out
 
 
+def _densify(line, per_segment=10):
+    xs, zs = [line.x_m[:1]], [line.z_m[:1]]
+    for i in range(1, line.s_m.size):
+        if line.s_m[i] - line.s_m[i - 1] < 0.015:  # consecutive 1-cm points; a bigger step is a gap
+            f = np.linspace(0, 1, per_segment + 1)[1:]
+            xs.append(line.x_m[i - 1] + f * (line.x_m[i] - line.x_m[i - 1]))
+            zs.append(line.z_m[i - 1] + f * (line.z_m[i] - line.z_m[i - 1]))
+        else:
+            xs.append(line.x_m[i : i + 1])
+            zs.append(line.z_m[i : i + 1])
+    return np.concatenate(xs), np.concatenate(zs)
+
+
 def _accuracy(root):
     spec, frames = _frames_truth(root)
     errs, cover = [], []
     for rgb, dep, tr in frames:
-        line = extract_frame(rgb, dep, spec["camera"])
+        line = extract_frame(rgb, dep, spec["camera"], max_length_m=spec["length_m"])
         st = np.concatenate([[0], np.cumsum(np.hypot(*np.diff(tr, axis=1)))])
         sd = np.linspace(0, st[-1], 4000)
         tx, tz = np.interp(sd, st, tr[0]), np.interp(sd, st, tr[1])
         d = np.hypot(line.x_m[:, None] - tx[None], line.z_m[:, None] - tz[None])
         errs.append(np.median(d.min(axis=1)))
-        # covered: true arc length whose nearest extracted point is within 3 px
-        near = np.hypot(tx[:, None] - line.x_m[None], tz[:, None] - line.z_m[None]).min(axis=1)
+        # covered: true arc length within 3 px of the extracted curve (its 1-cm points joined, not across gaps)
+        ex, ez = _densify(line)
+        near = np.hypot(tx[:, None] - ex[None], tz[:, None] - ez[None]).min(axis=1)
         cover.append(np.mean(near < 3 * line.plane_depth_m / spec["camera"]["fx"]))
         px = line.plane_depth_m / spec["camera"]["fx"]
     return float(np.median(errs)), float(np.median(cover)), px
@@ -68,10 +82,10 @@ def test_grass_centerline_within_a_pixel(grass_frames):
     assert err <= px, (err, px)
 
 
-# Measured: grass coverage median 0.78 over 66 frames (worst 0.38): the sub-pixel upper half of the
-# blade reads the background's depth and, at large deflection, runs along the robot arm where the
-# colour tracker stops. Open in issue 4.
-@pytest.mark.xfail(strict=True, reason="grass thin tip not fully tracked (median coverage 0.78)")
+# Measured (seed 3, 66 frames): grass coverage median 0.67 (twig 0.93): the sub-pixel upper half of
+# the blade reads the background's depth; at large deflection it runs along the robot arm, where the
+# colour tracker loses it after the probe. Open in issue 4.
+@pytest.mark.xfail(strict=True, reason="grass thin tip not fully tracked (median coverage 0.67)")
 def test_grass_centerline_covers_the_stem(grass_frames):
     _, cover, _ = _accuracy(grass_frames)
     assert cover >= 0.85, cover

@@ -183,25 +183,28 @@ def stem_likeness(rgb: NDArray, mask: NDArray) -> NDArray:
     return np.sum((img - bg) * dirv, axis=-1) / den
 
 
-def track_tip(alpha: NDArray, uv: NDArray, *, threshold: float = 0.2, max_steps: int = 2000) -> NDArray:
+def track_tip(
+    alpha: NDArray, uv: NDArray, *, threshold: float = 0.2, max_steps: int = 2000, coast_steps: int = 45
+) -> NDArray:
     # max_steps bounds the tracked length (1.5 px per step): extract_frame passes the stem's remaining length
     """Follow the stem beyond the depth-band path along the ridge of ``alpha``; returns added (k, 2) pixels.
 
     Steps of 1.5 px; each step picks the highest alpha among directions within 35 degrees of the
     current heading (sampled bilinearly), and the heading turns by at most that much per step.
-    Stops after 4 consecutive steps below ``threshold`` (those are not kept) or at the image edge.
+    Where alpha stays below ``threshold`` it coasts straight for up to ``coast_steps`` steps (kept only if
+    the stem reappears), then stops; also at the image edge.
     """
     from scipy.ndimage import map_coordinates
 
     H, W = alpha.shape
     k = min(12, uv.shape[0] - 1)
     if k < 2:
-        return np.zeros((0, 2))
+        return np.zeros((0, 2)), np.zeros(0, bool)
     head = uv[-1] - uv[-1 - k]
     head = head / (np.linalg.norm(head) or 1.0)
     pos = uv[-1].astype(float)
     angles = np.deg2rad(np.linspace(-35, 35, 15))
-    out, weak = [], []
+    out, weak, coasted = [], [], []
     for _ in range(max_steps):
         ca, sa = np.cos(angles), np.sin(angles)
         dirs = np.stack([head[0] * ca - head[1] * sa, head[0] * sa + head[1] * ca], axis=1)
@@ -212,18 +215,38 @@ def track_tip(alpha: NDArray, uv: NDArray, *, threshold: float = 0.2, max_steps:
         a = map_coordinates(alpha, [cand[:, 1], cand[:, 0]], order=1)
         a = np.where(inside, a - 0.002 * np.abs(np.rad2deg(angles)), -np.inf)  # prefer going straight
         j = int(np.argmax(a))
-        pos = cand[j]
-        head = 0.6 * head + 0.4 * dirs[j]
-        head /= np.linalg.norm(head)
         if a[j] < threshold:
+            # no stem here (faint, or crossing the arm or clutter): coast straight on -- above the contact the
+            # stem carries no moment and is straight -- and keep these steps only if the stem reappears
+            pos = pos + 1.5 * head
+            # re-acquire: the stem may lie a few pixels beside the straight coast
+            normal = np.array([-head[1], head[0]])
+            offs = np.arange(-5.0, 5.5, 1.0)
+            side = pos[None, :] + offs[:, None] * normal[None, :]
+            ok_side = (side[:, 0] >= 1) & (side[:, 0] < W - 2) & (side[:, 1] >= 1) & (side[:, 1] < H - 2)
+            a_side = np.where(ok_side, map_coordinates(alpha, [side[:, 1], side[:, 0]], order=1), -np.inf)
+            i_best = int(np.argmax(a_side - 0.01 * np.abs(offs)))
+            if a_side[i_best] >= threshold and len(weak) >= 2:
+                pos = side[i_best]
+                out.extend(weak)
+                coasted.extend([True] * len(weak))
+                weak = []
+                out.append(pos)
+                coasted.append(False)
+                continue
             weak.append(pos)
-            if len(weak) >= 4:
+            if len(weak) >= coast_steps:
                 break
         else:
+            pos = cand[j]
+            head = 0.6 * head + 0.4 * dirs[j]
+            head /= np.linalg.norm(head)
             out.extend(weak)
+            coasted.extend([True] * len(weak))
             weak = []
             out.append(pos)
-    return np.array(out).reshape(-1, 2)
+            coasted.append(False)
+    return np.array(out).reshape(-1, 2), np.array(coasted, bool)
 
 
 def extract_frame(
@@ -248,17 +271,23 @@ def extract_frame(
         raise ExtractionError("no pixels in the stem's depth band")
     skel, uv = centerline_pixels(mask, base)
     uv = np.vstack([np.asarray(base, float)[None, :], uv])  # the clamped base is known
+    unseen = np.zeros(uv.shape[0], bool)
     if track:
         steps = 2000
         if max_length_m is not None:  # the stem is no longer than its length: bound the tracked part
             so_far = float(np.sum(np.hypot(*np.diff(uv, axis=0).T))) * Z / camera["fx"]
             steps = max(int((max_length_m - so_far) * camera["fx"] / Z / 1.5), 0)
         if steps:
-            uv = np.vstack([uv, track_tip(stem_likeness(rgb, mask), uv, max_steps=steps)])
+            pts, coasted = track_tip(stem_likeness(rgb, mask), uv, max_steps=steps)
+            uv = np.vstack([uv, pts])
+            unseen = np.concatenate([np.zeros(uv.shape[0] - pts.shape[0], bool), coasted])
+    else:
+        unseen = np.zeros(uv.shape[0], bool)
     step = np.hypot(*np.diff(uv, axis=0).T)
     gap = step > 2.5  # a bridged occlusion
     keep = np.concatenate([[True], step > 0])
-    uv, gap = uv[keep], np.concatenate([[False], gap])[keep]
+    gap = np.concatenate([[False], gap]) | unseen  # bridged jumps and coasted (unseen) tracker steps
+    uv, gap = uv[keep], gap[keep]
     if uv.shape[0] < 6:
         raise ExtractionError(f"the stem path has {uv.shape[0]} pixels, expected at least 6")
     fx, fy = camera["fx"], camera["fy"]
