@@ -82,6 +82,12 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("--out", required=True, help="directory for the copy of the dataset with extracted shapes")
     ex.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
     ex.add_argument("--quiet", action="store_true", help="no progress bar")
+    cp = sub.add_parser("compare", help="compare species: hierarchical model over fitted specimens")
+    cp.add_argument("inputs", nargs="+", metavar="RUN_OR_DATASET", help="fit run directories or datasets")
+    cp.add_argument("--out", required=True, help="output directory (compare.json, figures/)")
+    cp.add_argument("--height", type=float, help="also contrast k_theta at this contact height [m]")
+    cp.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    cp.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
     im = sub.add_parser("import", help="turn raw force-displacement tables into datasets")
     im.add_argument("kind", choices=["blueberry"], help="table layout (see docs/data.md)")
     im.add_argument("src", help="folder of raw tables")
@@ -359,6 +365,23 @@ def cmd_extract(args: argparse.Namespace) -> int:
     check_out_dir(args.out, args.force)
     extract_dataset(args.dataset, args.out, force=args.force, progress=not args.quiet and sys.stderr.isatty())
     print(f"wrote {args.out}: shapes_extracted.csv per push, extract_report.json, figures/extract_*.png")
+    return 0
+
+
+@_command("compare")
+def cmd_compare(args: argparse.Namespace) -> int:
+    from .compare import compare
+    from .io import check_out_dir
+
+    check_out_dir(args.out, args.force)
+    res = compare(args.inputs, args.out, height_m=args.height, seed=args.seed, force=args.force)
+    for c in res["contrasts"]:
+        if c["parameter"] == "EI0":
+            print(
+                f"EI0 {c['a']} / {c['b']}: {c['ratio_median']:.3g} [{c['ratio_q05']:.3g}, {c['ratio_q95']:.3g}] "
+                f"(90%), P({c['a']} stiffer) = {c['prob_a_greater']:.3f}"
+            )
+    print(f"wrote {args.out}/compare.json and figures/forest.png")
     return 0
 
 

@@ -1,0 +1,90 @@
+"""Species comparison: the hierarchical model finds real differences and not false ones."""
+
+import json
+
+import numpy as np
+import pytest
+
+from bayesrod.cli import main
+from bayesrod.inference.hierarchical import SpecimenPosterior, contrasts, sample_species
+
+TAU = (0.3, 0.08)  # realistic between-specimen spread: EI0 +-35%, p +-0.08
+
+
+def _species(rng, name, EI0, p, n, L=0.8, meas=(0.01, 0.005)):
+    out = []
+    for j in range(n):
+        theta = np.array([np.log(EI0), p]) + rng.normal(0, TAU)
+        m = theta + rng.normal(0, meas)
+        out.append(SpecimenPosterior(f"{name}-{j}", name, L, m + rng.normal(0, meas, (1500, 2))))
+    return out
+
+
+def test_twofold_difference_is_found():
+    rng = np.random.default_rng(0)
+    sp = _species(rng, "stiff", 5.26, 0.43, 4) + _species(rng, "soft", 2.63, 0.43, 3, L=0.7)
+    fit = sample_species(sp, seed=1)
+    c = {x["parameter"]: x for x in contrasts(fit, sp, 0.4)}
+    # species are sorted: "soft" is a, "stiff" is b
+    assert c["EI0"]["ratio_q05"] <= 0.5 <= c["EI0"]["ratio_q95"] and c["EI0"]["ratio_q95"] < 1.0, c["EI0"]
+    assert c["EI0"]["prob_a_greater"] < 0.05
+    assert c["p"]["difference_q05"] <= 0 <= c["p"]["difference_q95"]
+    assert "k_theta" in c and fit["rhat_max"] < 1.02
+
+
+def _null_hits(n_rep):
+    hits = 0
+    for r in range(n_rep):
+        rng = np.random.default_rng(100 + r)
+        sp = _species(rng, "A", 2.63, 0.43, 4) + _species(rng, "B", 2.63, 0.43, 4)
+        c = contrasts(sample_species(sp, seed=r, n_steps=1500), sp)[0]
+        hits += c["ratio_q05"] <= 1.0 <= c["ratio_q95"]
+    return hits
+
+
+def test_same_species_split_in_two_rarely_differs():
+    """8 replications of two groups of 4 from one species: P(<= 5 of 8 | 90%) = 3.8%."""
+    assert _null_hits(8) >= 6
+
+
+@pytest.mark.slow
+def test_same_species_split_in_two_rarely_differs_20_replications():
+    """The issue's check: over 20 replications the 90% interval for the ratio contains 1 in >= 85%."""
+    assert _null_hits(20) >= 17
+
+
+def _fake_run(path, specimen, species, draws, L=0.8):
+    path.mkdir(parents=True)
+    (path / "summary.json").write_text(json.dumps({"specimen": specimen, "species": species, "length_m": L}))
+    np.savez(path / "samples.npz", length_m=L, EI0=np.exp(draws[:, 0]), p=draws[:, 1])
+
+
+def test_compare_cli_writes_contract_json_and_warns(tmp_path, capsys):
+    rng = np.random.default_rng(3)
+    runs = []
+    for s in _species(rng, "oak", 5.0, 0.4, 3) + _species(rng, "reed", 1.0, 1.2, 1):
+        _fake_run(tmp_path / s.specimen, s.specimen, s.species, s.draws)
+        runs.append(str(tmp_path / s.specimen))
+    out = tmp_path / "cmp"
+    assert main(["compare", *runs, "--out", str(out), "--height", "0.3"]) == 0
+    res = json.loads((out / "compare.json").read_text())
+    assert res["groups"] == {"oak": ["oak-0", "oak-1", "oak-2"], "reed": ["reed-0"]}
+    for c in res["contrasts"]:
+        assert {"a", "b", "parameter", "ratio_median", "ratio_q05", "ratio_q95", "prob_a_greater"} <= set(c)
+    ei0 = next(c for c in res["contrasts"] if c["parameter"] == "EI0")
+    assert ei0["ratio_q05"] > 1.0  # oak (a) stiffer than reed
+    assert any("one specimen only" in w for w in res["warnings"])
+    assert (out / "figures" / "forest.png").is_file()
+    capsys.readouterr()
+    assert main(["compare", runs[0], runs[1], "--out", str(tmp_path / "x")]) == 2  # one species only
+    assert "at least 2 species" in capsys.readouterr().err
+
+
+def test_compare_needs_species(tmp_path, capsys):
+    d = np.column_stack([np.log(np.full(100, 2.0)), np.full(100, 0.4)])
+    _fake_run(tmp_path / "a", "a", None, d)
+    _fake_run(tmp_path / "b", "b", "x", d)
+    assert main(["compare", str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "species" in err and "Traceback" not in err
+    assert not (tmp_path / "o").exists()  # nothing half-written
