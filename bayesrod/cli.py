@@ -82,6 +82,15 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("--out", required=True, help="directory for the copy of the dataset with extracted shapes")
     ex.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
     ex.add_argument("--quiet", action="store_true", help="no progress bar")
+    fm = sub.add_parser("fit-many", help="fit every dataset of a folder on a Dask cluster; survey table")
+    fm.add_argument("root", metavar="DIR_OF_DATASETS", help="folder whose sub-directories are datasets")
+    fm.add_argument("--out", required=True, help="output folder (runs/, survey.csv, survey.parquet)")
+    fm.add_argument("--scheduler", metavar="ADDRESS", help="existing Dask scheduler (default: a local cluster)")
+    fm.add_argument("--workers", type=int, default=2, help="local cluster workers (default 2)")
+    fm.add_argument("--prior", default="default", help="prior name or JSON file")
+    fm.add_argument("--seed", type=int, default=0, help="random seed of every fit (default 0)")
+    fm.add_argument("--forces-only", action="store_true", help="ignore centerlines")
+    fm.add_argument("--quiet", action="store_true", help="no progress bar")
     cp = sub.add_parser("compare", help="compare species: hierarchical model over fitted specimens")
     cp.add_argument("inputs", nargs="+", metavar="RUN_OR_DATASET", help="fit run directories or datasets")
     cp.add_argument("--out", required=True, help="output directory (compare.json, figures/)")
@@ -366,6 +375,27 @@ def cmd_extract(args: argparse.Namespace) -> int:
     extract_dataset(args.dataset, args.out, force=args.force, progress=not args.quiet and sys.stderr.isatty())
     print(f"wrote {args.out}: shapes_extracted.csv per push, extract_report.json, figures/extract_*.png")
     return 0
+
+
+@_command("fit-many")
+def cmd_fit_many(args: argparse.Namespace) -> int:
+    from .survey import fit_many
+
+    if args.workers < 1:
+        raise ValueError(f"--workers: expected at least 1, got {args.workers}")
+    res = fit_many(
+        args.root,
+        args.out,
+        scheduler=args.scheduler,
+        n_workers=args.workers,
+        options={"prior": args.prior, "seed": args.seed, "use_shapes": not args.forces_only},
+        progress=not args.quiet and sys.stderr.isatty(),
+    )
+    print(
+        f"wrote {args.out}: {res['fitted']} of {res['datasets']} specimens in survey.csv / survey.parquet"
+        + (f"; {len(res['failed'])} failed (failures.json)" if res["failed"] else "")
+    )
+    return 1 if res["failed"] else 0
 
 
 @_command("compare")

@@ -42,8 +42,14 @@ def gather(inputs, work: Path, *, seed: int = 0, log=print) -> list[SpecimenPost
     from .fit import fit_dataset
 
     out = []
-    for raw in inputs:
+    expanded = []
+    for raw in inputs:  # a fit-many output stands for all its finished runs
         path = Path(raw)
+        if (path / "survey.csv").is_file() and (path / "runs").is_dir():
+            expanded += [d.with_suffix("") for d in sorted((path / "runs").glob("*.done"))]
+        else:
+            expanded.append(path)
+    for path in expanded:
         if _is_run(path):
             out.append(load_run(path))
         elif (path / "specimen.json").is_file():
