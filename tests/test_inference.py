@@ -198,7 +198,8 @@ def test_fit_recovers_an_undeclared_base_compliance(tmp_path):
         # (25 and 49 nodes agree); base tilt failed the same way. Open (docs/validation.md).
         pytest.param("rest_curvature", 0.3, True, marks=pytest.mark.xfail(strict=True, reason="small bias, open")),
         pytest.param("base_tilt", 0.05, True, marks=pytest.mark.xfail(strict=True, reason="small bias, open")),
-        ("contact_friction", 0.3, False),
+        # Measured: mu 0.283 [0.277, 0.289] (99%) for 0.3, EI0 and p fine; 10 min (tables 5.4 s per node).
+        pytest.param("contact_friction", 0.3, False, marks=pytest.mark.xfail(strict=True, reason="mu biased ~6%")),
         ("yield", 2.0, False),
     ],
 )
