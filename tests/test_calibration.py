@@ -10,15 +10,15 @@ PRIOR = str(Path(__file__).resolve().parents[1] / "scripts" / "sbc_prior.json")
 
 
 def test_small_sbc_forces_only():
-    """5 replicates drawn from the prior: 90% intervals of EI0 and p cover the truth.
+    """4 replicates drawn from the prior: 90% intervals of EI0 and p cover the truth.
 
-    10 intervals at nominal 90%: P(at most 6 covered) = 1.3%, so a calibrated posterior fails
-    about once in 80 seeds (the test is seeded, so deterministic here); intervals half as wide as
-    they should be (nominal ~60%) fail with probability 0.62.
+    8 intervals at nominal 90%: P(at most 5 covered) = 3.8%, so a calibrated posterior fails
+    about once in 26 seeds (the test is seeded, so deterministic here); intervals half as wide as
+    they should be (nominal ~60%) fail with probability 0.68. The full study: scripts/sbc.py.
     """
-    rows = [sbc_replicate(seed, PRIOR, use_shapes=False, target_ess=200) for seed in range(100, 105)]
+    rows = [sbc_replicate(seed, PRIOR, use_shapes=False, target_ess=200) for seed in range(100, 104)]
     covered = sum(r["EI0_covered"] + r["p_covered"] for r in rows)
-    assert covered >= 7, rows
+    assert covered >= 6, rows
     for k in ("EI0", "p"):
         ranks = np.array([r[f"{k}_rank"] for r in rows])
         assert 0 <= ranks.min() and ranks.max() <= 99
