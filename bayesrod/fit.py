@@ -219,20 +219,19 @@ def write_figures(
     fig.savefig(folder / "corner.png", dpi=90)
     plt.close(fig)
     files["corner"] = folder / "corner.png"
+
+    def pair(name, draw, height):
+        fig, axes = plt.subplots(1, 2, figsize=(10, height))
+        draw(axes)
+        fig.tight_layout()
+        fig.savefig(folder / f"{name}.png", dpi=100)
+        plt.close(fig)
+        files[name] = folder / f"{name}.png"
+
     if median is not None:
-        fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
-        plot_residuals(lik, median, axes=axes)
-        fig.tight_layout()
-        fig.savefig(folder / "residuals.png", dpi=100)
-        plt.close(fig)
-        files["residuals"] = folder / "residuals.png"
+        pair("residuals", lambda axes: plot_residuals(lik, median, axes=axes), 3.6)
     if idata is not None:
-        fig, axes = plt.subplots(1, 2, figsize=(10, 3.4))
-        plot_rank(idata, n_ens, axes=axes)
-        fig.tight_layout()
-        fig.savefig(folder / "rank.png", dpi=100)
-        plt.close(fig)
-        files["rank"] = folder / "rank.png"
+        pair("rank", lambda axes: plot_rank(idata, n_ens, axes=axes), 3.4)
     return files
 
 
