@@ -148,7 +148,9 @@ def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> Simulat
         first = int(np.argmax(slipped)) if slipped.any() else cand.size
         lo, hi = cand[max(first - 1, 0)], cand[min(first, cand.size - 1)]
     D_end = lo
-    D_dense = np.linspace(0.0, D_end, 120)
+    # dense enough for linear interpolation of D(robot) at frame times: the wire deflection grows like
+    # F^(1/3) near first contact, so D(robot) bends sharply there (120 points left 0.3 mm shape errors)
+    D_dense = D_end * np.linspace(0.0, 1.0, 1500) ** 1.5
     sol = force_from_displacement(D_dense, h, EI0, p, L, eff)
     D_dense, F_true = D_dense[~sol.slipped], sol.true_force_N[~sol.slipped]
     robot_dense = D_dense + wire_deflection(F_true)
