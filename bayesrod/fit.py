@@ -66,9 +66,10 @@ def fit_dataset(
                 f"--resume: expected the same {diff[0]} as the interrupted run, got "
                 f"{config[diff[0]]!r} instead of {old.get(diff[0])!r}"
             )
+    # the likelihood first: bad --effects or data without engaged samples leave no half-made run behind
+    lik = build_likelihood(spec, pr, effects, use_forces=use_forces, use_shapes=use_shapes)
     out.mkdir(parents=True, exist_ok=True)
     write_json(cfg_path, config)
-    lik = build_likelihood(spec, pr, effects, use_forces=use_forces, use_shapes=use_shapes)
     post = LogPosterior(lik, pr)
     log(
         f"{spec.specimen}: {lik.n_force} engaged force samples, {lik.n_points} centerline points, "

@@ -207,3 +207,10 @@ def test_fit_recovers_each_tabled_effect(tmp_path, name, value, shapes):
     q, _ = _fit_effect(tmp_path, name, value, use_shapes=shapes)
     assert q[name][0] < value < q[name][2], q  # 99% interval
     assert q["EI0"][0] < 2.63 < q["EI0"][2], q
+
+
+def test_bad_effects_leave_no_run_behind(tmp_path, capsys, twig_noisy):
+    out = tmp_path / "run"
+    assert main(["fit", str(twig_noisy), "--out", str(out), "--effects", "self_weight"]) == 2
+    assert "self_weight cannot be fitted yet" in capsys.readouterr().err
+    assert not out.exists()
