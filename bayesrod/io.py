@@ -92,3 +92,31 @@ def write_csv(path: str | os.PathLike, columns: Mapping[str, np.ndarray | list],
             cells.append(str(v) if isinstance(v, (str, np.str_)) else fmt % v)
         lines.append(",".join(cells))
     write_text_atomic(path, "\n".join(lines) + "\n")
+
+
+def read_rows(path: str | os.PathLike) -> list[dict]:
+    """Rows of a results CSV written by :func:`append_rows` (strings), or [] when it does not exist yet."""
+    import csv
+
+    path = Path(path)
+    if not path.is_file():
+        return []
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def append_rows(path: str | os.PathLike, fields: list[str], rows, new_file: bool):
+    """Append each row of the iterable ``rows`` to a CSV as it arrives (flushed), header first when new.
+
+    For long studies that resume: finished rows survive an interruption. Yields the rows.
+    """
+    import csv
+
+    with Path(path).open("a", newline="") as fh:
+        w = csv.DictWriter(fh, fields)
+        if new_file:
+            w.writeheader()
+        for r in rows:
+            w.writerow(r)
+            fh.flush()
+            yield r

@@ -12,7 +12,6 @@ compare.csv and compare.md (the table in docs/validation.md). Resumable.
 from __future__ import annotations
 
 import argparse
-import csv
 import tempfile
 from pathlib import Path
 
@@ -21,6 +20,7 @@ import numpy as np
 from bayesrod.dataset import read_dataset
 from bayesrod.inference.calibration import fit_for_calibration
 from bayesrod.inference.direct import two_stage_fit
+from bayesrod.io import append_rows, read_rows
 from bayesrod.simulate import SimConfig, simulate, write_simulated
 
 FIELDS = ["preset", "seed", "EI0_true", "p_true", "ts_EI0", "ts_p", "bayes_EI0", "bayes_p"]
@@ -84,20 +84,13 @@ def main():
     a = ap.parse_args()
     a.out.mkdir(parents=True, exist_ok=True)
     path = a.out / "compare.csv"
-    rows = list(csv.DictReader(path.open())) if path.is_file() else []
+    rows = read_rows(path)
+    new_file = not rows
     done = {(r["preset"], int(r["seed"])) for r in rows}
     from tqdm import tqdm
 
     todo = [(p, s) for p in ("twig", "grass") for s in range(1, a.seeds + 1) if (p, s) not in done]
-    with path.open("a", newline="") as fh:
-        w = csv.DictWriter(fh, FIELDS)
-        if not rows:
-            w.writeheader()
-        for p, s in tqdm(todo, desc="datasets"):
-            r = one(p, s)
-            w.writerow(r)
-            fh.flush()
-            rows.append(r)
+    rows += list(append_rows(path, FIELDS, (one(p, s) for p, s in tqdm(todo, desc="datasets")), new_file))
     md = table(rows)
     (a.out / "compare.md").write_text(md)
     print(md)

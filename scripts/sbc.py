@@ -13,13 +13,13 @@ already in sbc.csv are not recomputed.
 from __future__ import annotations
 
 import argparse
-import csv
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
 from bayesrod.inference.calibration import sbc_replicate
+from bayesrod.io import append_rows, read_rows
 
 PRIOR = str(Path(__file__).with_name("sbc_prior.json"))
 
@@ -75,7 +75,8 @@ def main():
     a = ap.parse_args()
     a.out.mkdir(parents=True, exist_ok=True)
     path = a.out / "sbc.csv"
-    rows = list(csv.DictReader(path.open())) if path.is_file() else []
+    rows = read_rows(path)
+    new_file = not rows
     for r in rows:
         for k, v in list(r.items()):
             if v in ("True", "False"):
@@ -88,14 +89,9 @@ def main():
 
     fields = ["seed", "rhat_max", "EI0_true", "EI0_median", "EI0_rank", "EI0_covered"]
     fields += ["p_true", "p_median", "p_rank", "p_covered", "error"]
-    with ProcessPoolExecutor(a.jobs) as ex, path.open("a", newline="") as fh:
-        w = csv.DictWriter(fh, fields)
-        if not rows:
-            w.writeheader()
-        for r in tqdm(ex.map(_run, todo), total=len(todo), desc="SBC replicates"):
-            w.writerow(r)
-            fh.flush()
-            rows.append(r)
+    with ProcessPoolExecutor(a.jobs) as ex:
+        done_rows = append_rows(path, fields, ex.map(_run, todo), new_file)
+        rows += list(tqdm(done_rows, total=len(todo), desc="SBC replicates"))
     summarise([r for r in rows if int(r["seed"]) < a.replicates], a.out)
 
 

@@ -32,7 +32,7 @@ def test_two_stage_noisy_twig(twig_noisy):
     assert 0.5 < r.shape_rmse_mm < 4 and r.force_error_N < 0.2
 
 
-def test_fit_p_recovers_slope_and_weights_matter():
+def test_fit_p_recovers_slope_with_noisy_base_bins_and_needs_three_bins():
     rng = np.random.default_rng(0)
     s = np.linspace(0.03, 0.6, 20)
     rel = np.where(s < 0.2, 0.5, 0.02)  # noisy bins near the base

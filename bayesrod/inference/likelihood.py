@@ -39,8 +39,8 @@ TABLE_EFFECTS = ("base_compliance", "rest_curvature", "base_tilt", "contact_fric
 # about the base: F h = M_0 <= M_y), the elastic curve below it is the plain model's
 CLOSED_EFFECTS = ("force_offset", "yield")
 FITTABLE_EFFECTS = CLOSED_EFFECTS + TABLE_EFFECTS
-# self_weight has an EffectAxis too, but its forward solves (a secant on the base moment per solve)
-# take 80 s per table node and height: a fit would take about an hour. Not offered until that is fast.
+# self_weight is not offered: its forward solves (a secant on the base moment per solve) take 80 s per
+# table node and height, so a fit would take about an hour.
 
 
 @dataclass(frozen=True)
@@ -48,9 +48,8 @@ class EffectAxis:
     """Second table axis for one effect: a bounded coordinate u, uniform grid, and the map to the solver.
 
     u is chosen so that the neutral value is u = 0 and the range is finite:
-    base_compliance u = c/(1+c) with c = EI0/(k L); self_weight u = w0 L^3/EI0;
-    yield u = EI0/(M_y L) (0 = no yield); rest_curvature u = kappa0 L; base_tilt and
-    contact_friction u = the value itself.
+    base_compliance u = c/(1+c) with c = EI0/(k L); rest_curvature u = kappa0 L; base_tilt
+    and contact_friction u = the value itself.
     """
 
     name: str
@@ -61,11 +60,6 @@ class EffectAxis:
         u = np.asarray(u, float)
         if self.name == "base_compliance":
             return {"c_base": u / (1.0 - u)}
-        if self.name == "self_weight":
-            return {"w0": u}
-        if self.name == "yield":
-            with np.errstate(divide="ignore"):
-                return {"m_yield": np.where(u > 0, 1.0 / np.maximum(u, 1e-300), np.inf)}
         return {{"rest_curvature": "kappa0", "base_tilt": "tilt", "contact_friction": "mu"}[self.name]: u}
 
     def coordinate(self, value: NDArray, EI0: NDArray, L: float) -> NDArray:
@@ -74,10 +68,6 @@ class EffectAxis:
         if self.name == "base_compliance":
             c = EI0 / (value * L)
             return c / (1.0 + c)
-        if self.name == "self_weight":
-            return value * L**3 / EI0
-        if self.name == "yield":
-            return EI0 / (value * L)
         if self.name == "rest_curvature":
             return value * L
         return value
@@ -91,14 +81,12 @@ class EffectAxis:
         lo, hi = float(np.min(us)), float(np.max(us))
         caps = {
             "base_compliance": (0.0, 0.95),
-            "self_weight": (0.0, 6.0),  # below the buckling load of the tapered rod
-            "yield": (0.0, 50.0),
             "rest_curvature": (-2.0, 2.0),
             "base_tilt": (-0.6, 0.6),
             "contact_friction": (-0.9, 0.9),
         }[name]
-        if name in ("base_compliance", "self_weight", "yield"):
-            lo = 0.0  # include the neutral value
+        if name == "base_compliance":
+            lo = 0.0  # include the neutral value (a clamp)
         lo, hi = max(lo, caps[0]), min(hi, caps[1])
         if hi <= lo:
             hi = lo + 1e-3
@@ -510,21 +498,26 @@ class LogPosterior:
         return float(out[0]) if single else out
 
 
+def force_scale_fit(lik: RodLikelihood, p: float, EI0: float | None = None) -> tuple[float, float]:
+    """EI0 and the RMS force residual of the plain model at taper ``p`` (needs forces).
+
+    EI0 is a pure scale of the forces, so its least-squares value is sum(F g) / sum(g g) with
+    g = f(p) / L^2; pass ``EI0`` to get only the residual at that value.
+    """
+    g = lik.predict_nd_force(np.array([p]))[0] / lik.L**2
+    if EI0 is None:
+        gg = float(g @ g)
+        EI0 = float(g @ lik.F_obs) / gg if gg > 0 else np.nan
+    return EI0, float(np.sqrt(np.mean((lik.F_obs - EI0 * g) ** 2)))
+
+
 def scale_estimate(lik: RodLikelihood) -> float | None:
     """Least-squares EI0 of the plain model on the forces, at the best p of the grid (None without forces)."""
     if not lik.n_force:
         return None
-    best, best_rms = None, np.inf
-    for p in lik.p_grid[1:-1]:
-        g = lik.predict_nd_force(np.array([p]))[0] / lik.L**2
-        gg = float(g @ g)
-        if gg <= 0:
-            continue
-        EI0 = float(g @ lik.F_obs) / gg
-        rms = float(np.sqrt(np.mean((lik.F_obs - EI0 * g) ** 2)))
-        if EI0 > 0 and rms < best_rms:
-            best, best_rms = EI0, rms
-    return best
+    fits = [force_scale_fit(lik, p) for p in lik.p_grid[1:-1]]
+    fits = [(e, r) for e, r in fits if np.isfinite(e) and e > 0]
+    return min(fits, key=lambda er: er[1])[0] if fits else None
 
 
 def build_likelihood(

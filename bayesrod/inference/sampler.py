@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize
 
+from .likelihood import force_scale_fit
+
 
 class CheckpointBackend:
     """emcee's in-memory backend, checkpointed to an HDF5 group every ``flush_every`` steps.
@@ -82,7 +84,7 @@ def find_start(post, rng: np.random.Generator, init: dict | None = None) -> np.n
     """A high-posterior starting point: grid over p, closed-form EI0 on forces, then Nelder-Mead.
 
     EI0 is a pure scale of the forces, so for each p of the likelihood's grid
-    the least-squares EI0 is sum(F g) / sum(g g) with g = f(p)/L^2. ``init``
+    its least-squares value is closed form (``force_scale_fit``). ``init``
     (e.g. the seed's two-stage estimate, ``{"EI0": .., "p": ..}``) is tried too.
     """
     lik = post.likelihood
@@ -93,21 +95,12 @@ def find_start(post, rng: np.random.Generator, init: dict | None = None) -> np.n
         candidates.append((float(np.clip(init["p"], lik.p_grid[1], lik.p_grid[-2])), float(init["EI0"])))
     for p, EI0_init in candidates:
         nat = {}
-        if EI0_init is not None and lik.n_force:
-            g = lik.predict_nd_force(np.array([p]))[0] / lik.L**2
-            EI0 = EI0_init
-            nat["sigma_force_N"] = max(float(np.sqrt(np.mean((lik.F_obs - EI0 * g) ** 2))), 1e-4)
-        elif EI0_init is not None:
-            EI0 = EI0_init
-        elif lik.n_force:
-            g = lik.predict_nd_force(np.array([p]))[0] / lik.L**2
-            gg = float(g @ g)
-            EI0 = float(g @ lik.F_obs) / gg if gg > 0 else 1.0
-            EI0 = max(EI0, 1e-6)
-            rms = float(np.sqrt(np.mean((lik.F_obs - EI0 * g) ** 2)))
+        if lik.n_force:
+            EI0, rms = force_scale_fit(lik, p, EI0_init)
+            EI0 = max(EI0, 1e-6) if np.isfinite(EI0) else 1.0
             nat["sigma_force_N"] = max(rms, 1e-4)
         else:
-            EI0 = post.priors[0].quantile(0.5)
+            EI0 = EI0_init if EI0_init is not None else post.priors[0].quantile(0.5)
         nat.update(EI0=EI0, p=p)
         if lik.n_points:
             x, c = lik.predict_shape_x(np.array([p]))
@@ -118,8 +111,8 @@ def find_start(post, rng: np.random.Generator, init: dict | None = None) -> np.n
                 nat["sigma_shape_m"] = max(rms, 1e-5)
         for n, pr in zip(names, post.priors, strict=True):
             if n not in nat:
-                # effects start near their neutral value: stiff base, late yield, little weight
-                q = {"base_compliance": 0.99, "yield": 0.99, "self_weight": 0.01}.get(n, 0.5)
+                # effects start near their neutral value: a stiff base, a late yield
+                q = {"base_compliance": 0.99, "yield": 0.99}.get(n, 0.5)
                 nat[n] = pr.quantile(q)
         theta = post.to_sample(nat)[0]
         lp = post.log_prob(theta)
