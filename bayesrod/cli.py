@@ -125,6 +125,47 @@ def build_parser() -> argparse.ArgumentParser:
     ft.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
     ft.add_argument("--quiet", action="store_true", help="no progress bars")
 
+    de = sub.add_parser("design", help="rank contact heights for the next push by expected information gain")
+    de.add_argument("source", metavar="DATASET_OR_RUN", help="fit run directory, or a dataset (fitted first)")
+    de.add_argument("--out", required=True, help="output directory (design.json, figures/design.png)")
+    de.add_argument("--candidates", metavar="START:STOP:NUM", help="heights to rank [m] (default 0.05L:0.95L:19)")
+    de.add_argument("--displacement", type=float, help="planned contact displacement [m] (default: the data's)")
+    de.add_argument("--samples", type=int, help="planned force samples (default: the data's median per push)")
+    de.add_argument(
+        "--force-range", metavar="LOW,HIGH", help="sensor range [N] (default: the dataset's sensor.force_range_N)"
+    )
+    de.add_argument("--confidence", type=float, default=0.9, help="P(peak force in range) required (default 0.9)")
+    de.add_argument(
+        "--target",
+        default="params",
+        choices=["params", "ei", "k_theta"],
+        help="information about (log EI0, p) (default), the EI(s) band, or k_theta at --target-height",
+    )
+    de.add_argument("--target-height", type=float, help="height [m] for --target k_theta")
+    de.add_argument(
+        "--method",
+        choices=["nmc", "gaussian"],
+        help="nested Monte Carlo (default for params) or linearised (default and only choice for ei, k_theta)",
+    )
+    de.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    de.add_argument("--forces-only", action="store_true", help="when fitting a dataset first: ignore centerlines")
+    de.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
+    de.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    dg = sub.add_parser("diagnose", help="residual analysis: which missing effect explains the misfit; refit")
+    dg.add_argument("dataset", help="dataset directory")
+    dg.add_argument("--out", required=True, help="output directory (diagnose.json, figures/, report.html)")
+    dg.add_argument("--candidates", help="comma list of effects to test (default: the whole catalog)")
+    dg.add_argument("--forces-only", action="store_true", help="ignore centerlines")
+    dg.add_argument("--alpha", type=float, default=0.01, help="family-wise test level per round (default 0.01)")
+    dg.add_argument(
+        "--min-heldout-gain",
+        type=float,
+        default=0.10,
+        help="relative drop of the leave-one-height-out force error an effect must bring (default 0.10)",
+    )
+    dg.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
+
     dm = sub.add_parser("demo", help="the whole story on the bundled dataset: fit, bands, report")
     dm.add_argument("--out", default="bayesrod-demo", help="output directory (default ./bayesrod-demo)")
     dm.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
@@ -483,6 +524,84 @@ def _print_fit(summary: dict, out) -> None:
     c = summary["convergence"]
     print(f"  R-hat max {c['rhat_max']:.4f}, bulk ESS min {c['ess_bulk_min']:.0f}, {summary['sampler']['seconds']:g} s")
     print(f"wrote {out}/summary.json, posterior.nc, report.html")
+
+
+@_command("design")
+def cmd_design(args: argparse.Namespace) -> int:
+    from .design import run_design
+    from .io import check_out_dir
+
+    check_out_dir(args.out, args.force)
+    rng = None
+    if args.force_range:
+        try:
+            rng = [float(v) for v in args.force_range.split(",")]
+        except ValueError:
+            rng = None
+        if rng is None or len(rng) != 2:
+            raise ValueError(f"--force-range: expected LOW,HIGH in N, got {args.force_range!r}")
+    method = args.method or ("nmc" if args.target == "params" else "gaussian")
+    res = run_design(
+        args.source,
+        args.out,
+        candidates=args.candidates,
+        displacement_m=args.displacement,
+        n_samples=args.samples,
+        force_range_N=rng,
+        confidence=args.confidence,
+        target=args.target,
+        target_height_m=args.target_height,
+        method=method,
+        seed=args.seed,
+        forces_only=args.forces_only,
+        progress=not args.quiet,
+    )
+    for r in res["candidates"]:
+        g = r["expected_information_gain_nats"]
+        mark = "*" if r["height_m"] == res["recommended_height_m"] else " "
+        why = "" if r["feasible"] else f"  infeasible: {r['reason']}"
+        print(f" {mark} h = {r['height_m']:.3f} m  EIG {'-' if g is None else f'{g:.3f}'} nats{why}")
+    if res["recommended_height_m"] is None:
+        print(f"no feasible height among the candidates; wrote {args.out}/design.json", file=sys.stderr)
+        return 1
+    print(f"recommended next height: {res['recommended_height_m']:.3f} m; wrote {args.out}/design.json")
+    return 0
+
+
+@_command("diagnose")
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    from .diagnosis import run_diagnose
+    from .inference.diagnose import CATALOG
+    from .io import check_out_dir
+
+    check_out_dir(args.out, args.force)
+    cands = CATALOG
+    if args.candidates:
+        cands = tuple(c.strip() for c in args.candidates.split(",") if c.strip())
+        bad = [c for c in cands if c not in CATALOG]
+        if bad or not cands:
+            raise ValueError(f"--candidates: expected effects from {', '.join(CATALOG)}, got {args.candidates!r}")
+    if not (0 < args.alpha < 1):
+        raise ValueError(f"--alpha: expected a level in (0, 1), got {args.alpha}")
+    doc = run_diagnose(
+        args.dataset,
+        args.out,
+        candidates=cands,
+        use_shapes=not args.forces_only,
+        alpha=args.alpha,
+        min_heldout_gain=args.min_heldout_gain,
+        force=args.force,
+        log=lambda msg: print(f"  {msg}", flush=True),
+    )
+    b, a = doc["before"], doc["after"]
+    print(f"added effects: {', '.join(doc['added_effects']) or 'none'}")
+    for k in ("force_rmse_N", "shape_rmse_mm", "heldout_force_rmse_N"):
+        if b[k] is not None:
+            print(f"  {k:>22}: {b[k]:.4g} -> {a[k]:.4g}")
+    if doc["unexplained_structure"]:
+        print("  unexplained structure remains in the residuals (see report.html)")
+    print(f"wrote {args.out}/diagnose.json and report.html")
+    return 0
 
 
 @_command("demo")

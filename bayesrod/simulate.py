@@ -12,7 +12,7 @@ occluded around the sensor and missing at the thin tip.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +70,8 @@ class SimConfig:
     n_frames_after: int = 2
     n_points: int = 80
     force_range_N: tuple[float, float] = (0.05, 8.0)
+    # the robot stops after this contact displacement if the stem has not slipped (None: push until the slip)
+    max_contact_displacement_m: float | None = None
 
     @classmethod
     def from_preset(
@@ -148,6 +150,9 @@ def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> Simulat
         first = int(np.argmax(slipped)) if slipped.any() else cand.size
         lo, hi = cand[max(first - 1, 0)], cand[min(first, cand.size - 1)]
     D_end = lo
+    cap = cfg.max_contact_displacement_m
+    if cap is not None and cap < D_end:
+        D_end = float(cap)  # the push stops before the slip; the robot then withdraws (force back to zero)
     # dense enough for linear interpolation of D(robot) at frame times: the wire deflection grows like
     # F^(1/3) near first contact, so D(robot) bends sharply there (120 points left 0.3 mm shape errors)
     D_dense = D_end * np.linspace(0.0, 1.0, 1500) ** 1.5
@@ -219,7 +224,14 @@ def simulate(cfg: SimConfig, progress: bool = False) -> list[SimulatedPush]:
 
     rng = np.random.default_rng(cfg.seed)
     heights = tqdm(cfg.heights_m, desc="simulating pushes", unit="push", disable=not progress, leave=False)
-    return [simulate_push(cfg, h, rng) for h in heights]
+    pushes, seen = [], {}
+    for h in heights:
+        sp = simulate_push(cfg, h, rng)
+        seen[sp.id] = seen.get(sp.id, 0) + 1
+        if seen[sp.id] > 1:  # the same height pushed again: a unique id (h450, h450-2, ...)
+            sp = replace(sp, id=f"{sp.id}-{seen[sp.id]}")
+        pushes.append(sp)
+    return pushes
 
 
 def write_simulated(

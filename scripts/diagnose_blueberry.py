@@ -1,0 +1,99 @@
+"""`bayesrod diagnose` on every imported blueberry cane: the before/after table of docs/validation.md.
+
+    bayesrod import blueberry ../shared/data/blueberry-canes --out blueberry --length-m 1.6
+    python scripts/diagnose_blueberry.py blueberry --out blueberry-diagnose [--workers 2]
+
+Runs the whole loop (every catalog effect; forces only: the canes have no
+centerlines) on each cane, writing ``OUT/<cane>/`` (diagnose.json, figures,
+report.html), blueberry_diagnose.csv (resumable) and blueberry_diagnose.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from bayesrod.diagnosis import run_diagnose
+from bayesrod.io import append_rows, read_rows
+
+FIELDS = ["cane", "heights", "added", "fitted", "force_before", "force_after", "heldout_before", "heldout_after"]
+FIELDS += ["unexplained", "structured_blocks_after", "top_round1"]
+
+
+def one(job) -> dict:
+    ds, out = job
+    doc = run_diagnose(ds, out, use_shapes=False, force=True, log=lambda *a: None)
+    b, a = doc["before"], doc["after"]
+    r1 = sorted((c for c in doc["candidates"] if c["round"] == 1), key=lambda c: -c["statistic"])[:3]
+    return {
+        "cane": Path(ds).name,
+        "heights": " ".join(f"{p['height_m']:g}" for p in b["per_push"]),
+        "added": ",".join(doc["added_effects"]),
+        "fitted": json.dumps({k: round(v, 4) for k, v in doc["fitted"].items()}),
+        "force_before": b["force_rmse_N"],
+        "force_after": a["force_rmse_N"],
+        "heldout_before": b["heldout_force_rmse_N"],
+        "heldout_after": a["heldout_force_rmse_N"],
+        "unexplained": int(doc["unexplained_structure"]),
+        "structured_blocks_after": sum(s["structured"] for s in doc["structure_after"]),
+        "top_round1": " ".join(f"{c['effect']}:{c['statistic']:.3g}" for c in r1),
+    }
+
+
+def table(rows) -> str:
+    out = [
+        "| cane | effects added | force RMSE before -> after [N] | held-out force RMSE before -> after [N] | "
+        "change | unexplained structure |",
+        "|---|---|---|---|---|---|",
+    ]
+    hb, ha, fb, fa = [], [], [], []
+    for r in sorted(rows, key=lambda r: r["cane"]):
+        b, a = float(r["heldout_before"]), float(r["heldout_after"])
+        hb.append(b)
+        ha.append(a)
+        fb.append(float(r["force_before"]))
+        fa.append(float(r["force_after"]))
+        out.append(
+            f"| {r['cane']} | {r['added'] or 'none'} | {float(r['force_before']):.3f} -> {float(r['force_after']):.3f} "
+            f"| {b:.3f} -> {a:.3f} | {100 * (a - b) / b:+.0f}% | {'yes' if int(r['unexplained']) else 'no'} |"
+        )
+    counts: dict[str, int] = {}
+    for r in rows:
+        for e in filter(None, r["added"].split(",")):
+            counts[e] = counts.get(e, 0) + 1
+    out += [
+        f"| **all {len(rows)} canes** | "
+        + (", ".join(f"{e} ({n})" for e, n in sorted(counts.items(), key=lambda x: -x[1])) or "none")
+        + f" | median {np.median(fb):.3f} -> {np.median(fa):.3f} | median {np.median(hb):.3f} -> {np.median(ha):.3f} "
+        f"| {100 * (np.median(ha) - np.median(hb)) / np.median(hb):+.0f}% (of medians) | "
+        f"{sum(int(r['unexplained']) for r in rows)}/{len(rows)} |",
+    ]
+    return "\n".join(out) + "\n"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("root", help="folder of imported cane datasets")
+    ap.add_argument("--out", default="blueberry-diagnose")
+    ap.add_argument("--workers", type=int, default=1)
+    args = ap.parse_args()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    csv = out / "blueberry_diagnose.csv"
+    done = {r["cane"] for r in read_rows(csv)}
+    canes = sorted(p for p in Path(args.root).iterdir() if (p / "specimen.json").is_file())
+    jobs = [(str(p), str(out / p.name)) for p in canes if p.name not in done]
+    with ProcessPoolExecutor(args.workers) as ex:
+        for r in append_rows(csv, FIELDS, ex.map(one, jobs), new_file=not done):
+            print(f"{r['cane']}: added [{r['added']}] held-out {r['heldout_before']:.3f} -> {r['heldout_after']:.3f}")
+    text = table(read_rows(csv))
+    (out / "blueberry_diagnose.md").write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()

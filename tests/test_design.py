@@ -1,0 +1,164 @@
+"""Experimental design (issue 7): EIG estimators against exact values, feasibility, the CLI."""
+
+import json
+
+import numpy as np
+import pytest
+
+from bayesrod.cli import main
+from bayesrod.inference.design import (
+    HeightPredictor,
+    PushPlan,
+    design_heights,
+    eig_gaussian,
+    eig_nested_mc,
+)
+
+from .conftest import make_dataset
+
+
+def _linear_case(rng, K=6000, n=5, sigma=0.5):
+    """A linear-Gaussian design: F = theta @ A^T, where the EIG is exact: 0.5 log det(I + Sigma A^T A / s^2)."""
+    Sigma = np.array([[0.04, 0.015], [0.015, 0.02]])
+    theta = rng.multivariate_normal([0.3, 0.5], Sigma, size=K)
+    A = rng.normal(size=(n, 2))
+    exact = 0.5 * np.linalg.slogdet(np.eye(2) + Sigma @ A.T @ A / sigma**2)[1]
+    return theta, A, sigma, exact
+
+
+def test_both_estimators_match_the_exact_eig_of_a_linear_gaussian_design():
+    rng = np.random.default_rng(0)
+    theta, A, s, exact = _linear_case(rng)
+    F = theta @ A.T
+    mask = np.ones_like(F, bool)
+    sig = np.full(theta.shape[0], s)
+    J = np.broadcast_to(A, (theta.shape[0],) + A.shape)
+    g = eig_gaussian(theta, J, mask, sig)
+    assert g == pytest.approx(exact, rel=0.03)
+    est, se = eig_nested_mc(F[:1000], mask[:1000], sig[:1000], F[1000:], sig[1000:], rng)
+    assert abs(est - exact) < 4 * se + 0.02 * exact, (est, se, exact)
+    # and the estimate moves with the truth: a 4x noisier sensor teaches less
+    est2, _ = eig_nested_mc(F[:1000], mask[:1000], 4 * sig[:1000], F[1000:], 4 * sig[1000:], rng)
+    assert est2 < 0.6 * est
+
+
+def test_derived_target_information_matches_exact_for_a_linear_functional():
+    rng = np.random.default_rng(1)
+    theta, A, s, _ = _linear_case(rng)
+    J = np.broadcast_to(A, (theta.shape[0],) + A.shape)
+    Sigma = np.cov(theta, rowvar=False)
+    post = np.linalg.inv(np.linalg.inv(Sigma) + A.T @ A / s**2)
+    s_nd = np.linspace(0, 0.9, 10)
+    g = np.column_stack([np.ones_like(s_nd), 4.0 * np.log1p(-s_nd)])  # gradients of log EI(s), eq. EI_taper
+    exact = np.mean(0.5 * np.log(np.einsum("gi,ij,gj->g", g, Sigma, g) / np.einsum("gi,ij,gj->g", g, post, g)))
+    got = eig_gaussian(theta, J, np.ones((theta.shape[0], A.shape[0]), bool), np.full(theta.shape[0], s), target="ei")
+    assert got == pytest.approx(exact, rel=1e-6)
+
+
+def _posterior(rng, n=3000, sd_log=0.08, sd_p=0.06, sigma=0.3):
+    return {
+        "EI0": 2.63 * np.exp(sd_log * rng.standard_normal(n)),
+        "p": 0.43 + sd_p * rng.standard_normal(n),
+        "sigma_force_N": np.full(n, sigma),
+    }
+
+
+def test_fast_estimator_agrees_with_nested_monte_carlo_on_the_rod():
+    """Small case on the real forward model: independent Gaussian posterior, noisy sensor (EIG ~ 1 nat)."""
+    samples = _posterior(np.random.default_rng(2))
+    plan = PushPlan(0.06, 20, None)
+    hs = [0.3, 0.5, 0.7]
+    fast = design_heights(samples, 0.8, hs, plan, method="gaussian", n_draws=800)
+    ref = design_heights(samples, 0.8, hs, plan, method="nmc", n_draws=600, n_inner=2400)
+    for a, b in zip(fast["candidates"], ref["candidates"], strict=True):
+        g, n = a["expected_information_gain_nats"], b["expected_information_gain_nats"]
+        se = b["eig_standard_error_nats"]
+        assert abs(g - n) < 4 * se + 0.12 * n, (a["height_m"], g, n, se)
+    assert fast["recommended_height_m"] == ref["recommended_height_m"]
+
+
+def test_predictor_forces_match_direct_forward_solves():
+    from bayesrod.physics import force_from_displacement
+
+    D = np.linspace(0.005, 0.08, 12)
+    pred = HeightPredictor(0.5, 0.8, D, (0.3, 0.6))
+    p = np.array([0.33, 0.47, 0.58])
+    F = pred.forces(np.log([2.0, 2.63, 3.1]), p)
+    for k, (e, pp) in enumerate(zip([2.0, 2.63, 3.1], p, strict=True)):
+        ref = force_from_displacement(D, 0.5, e, pp, 0.8).force_N
+        np.testing.assert_allclose(F[k], ref, rtol=2e-4)
+
+
+def test_feasibility_follows_the_sensor_range_and_says_why():
+    samples = _posterior(np.random.default_rng(3), sigma=0.03)
+    plan = PushPlan(0.10, 40, (0.05, 8.0))
+    hs = np.array([0.1, 0.3, 0.5, 0.6, 0.7, 0.79, 0.8, 0.9])
+    res = design_heights(samples, 0.8, hs, plan, method="gaussian", n_draws=400)
+    rows = {round(r["height_m"], 3): r for r in res["candidates"]}
+    assert not rows[0.1]["feasible"] and "above the sensor maximum 8 N" in rows[0.1]["reason"]
+    assert rows[0.1]["predicted_peak_force_N"] > 8
+    assert not rows[0.8]["feasible"] and "outside the stem" in rows[0.8]["reason"]
+    assert not rows[0.9]["feasible"]
+    ok = [r for r in res["candidates"] if r["feasible"]]
+    assert ok, "some height must be feasible"
+    for r in ok:
+        assert 0.05 <= r["peak_force_N"]["median"] <= 8.0 and r["reason"] is None
+    rec = rows[round(res["recommended_height_m"], 3)]
+    assert rec["feasible"]
+    assert rec["expected_information_gain_nats"] == max(r["expected_information_gain_nats"] for r in ok)
+    # a sensor that cannot read below 2 N rules the high, soft end out with the other reason
+    low = design_heights(samples, 0.8, [0.75], PushPlan(0.10, 40, (2.0, 8.0)), method="gaussian", n_draws=400)
+    assert "below the sensor minimum 2 N" in low["candidates"][0]["reason"]
+    assert low["recommended_height_m"] is None
+
+
+def test_a_push_that_slips_at_once_is_infeasible():
+    samples = _posterior(np.random.default_rng(4), sigma=0.01)
+    res = design_heights(samples, 0.8, [0.795], PushPlan(0.5, 40, None), method="gaussian", n_draws=300)
+    assert not res["candidates"][0]["feasible"]
+    assert "slips almost at once" in res["candidates"][0]["reason"]
+
+
+@pytest.fixture(scope="module")
+def fake_run(tmp_path_factory):
+    """A run directory whose posterior is a synthetic cloud, pointing at a real one-push dataset."""
+    root = tmp_path_factory.mktemp("design")
+    ds = make_dataset(root / "ds", "twig", seed=3, heights_m=(0.5,), n_frames_engaged=2, max_contact_displacement_m=0.1)
+    run = root / "run"
+    run.mkdir()
+    s = _posterior(np.random.default_rng(5), sigma=0.03)
+    np.savez(run / "samples.npz", length_m=0.8, **s)
+    (run / "config.json").write_text(json.dumps({"dataset": str(ds)}))
+    return run
+
+
+def test_design_cli_writes_the_contract_json(fake_run, tmp_path, capsys):
+    out = tmp_path / "d"
+    assert main(["design", str(fake_run), "--out", str(out), "--candidates", "0.3:0.75:6", "--quiet"]) == 0
+    doc = json.loads((out / "design.json").read_text())
+    assert set(doc) >= {"recommended_height_m", "candidates"}
+    for c in doc["candidates"]:
+        assert set(c) >= {"height_m", "expected_information_gain_nats", "feasible", "predicted_peak_force_N"}
+    assert doc["plan"]["force_range_N"] == [0.05, 8.0]  # from the dataset's sensor
+    assert doc["plan"]["displacement_m"] == pytest.approx(0.1, rel=0.02)  # from its push
+    assert doc["pushed_heights_m"] == [0.5]
+    assert (out / "figures" / "design.png").stat().st_size > 10_000
+    rec = [c for c in doc["candidates"] if c["height_m"] == doc["recommended_height_m"]]
+    assert rec and rec[0]["feasible"]
+    assert "recommended next height" in capsys.readouterr().out
+
+
+def test_design_cli_rejects_bad_candidates_in_one_line(fake_run, tmp_path, capsys):
+    assert main(["design", str(fake_run), "--out", str(tmp_path / "x"), "--candidates", "0.2:0.7"]) == 2
+    err = capsys.readouterr().err
+    assert "--candidates: expected start:stop:num" in err and "Traceback" not in err
+    assert main(["design", str(tmp_path), "--out", str(tmp_path / "y")]) == 2
+    assert "expected a fit run (samples.npz) or a dataset" in capsys.readouterr().err
+
+
+def test_design_cli_exits_1_when_nothing_is_feasible(fake_run, tmp_path, capsys):
+    code = main(["design", str(fake_run), "--out", str(tmp_path / "z"), "--candidates", "0.05:0.2:4", "--quiet"])
+    assert code == 1
+    doc = json.loads((tmp_path / "z" / "design.json").read_text())
+    assert doc["recommended_height_m"] is None
+    assert all(not c["feasible"] and c["reason"] for c in doc["candidates"])

@@ -1,0 +1,121 @@
+"""Diagnosis (issue 9): undeclared effects are found, clean data are left alone, structure is flagged."""
+
+import json
+
+import numpy as np
+import pytest
+
+from bayesrod.cli import main
+from bayesrod.dataset import read_dataset
+from bayesrod.inference.diagnose import Diagnoser, ForwardModel, diagnose
+from bayesrod.inference.likelihood import prepare_data
+from bayesrod.physics import Effects, force_from_displacement
+
+from .conftest import make_dataset
+
+FAST = ("force_offset", "base_compliance", "yield")  # effects whose forward solves are quick
+# the whole catalog on forces and shapes: scripts/diagnose_study.py (table in docs/validation.md)
+
+
+def _model(path, shapes=False):
+    spec = read_dataset(path)
+    return ForwardModel(prepare_data(spec, use_shapes=shapes), spec.length_m)
+
+
+SPECS = {
+    "clean": (21, Effects()),
+    "offset": (22, Effects(force_offset=0.1)),
+    "compliance": (23, Effects(base_compliance=8.0)),
+    "yield": (24, Effects(yield_moment=3.0)),
+}
+
+
+class _Lazy(dict):
+    """Simulated twig datasets, made on first use (forces only, 30 samples per push: quick fits)."""
+
+    def __init__(self, root):
+        super().__init__()
+        self.root = root
+
+    def __missing__(self, name):
+        seed, eff = SPECS[name]
+        kw = dict(seed=seed, effects=eff, n_frames_engaged=2, n_force_engaged=30)
+        self[name] = make_dataset(self.root / name, "twig", **kw)
+        return self[name]
+
+
+@pytest.fixture(scope="module")
+def datasets(tmp_path_factory):
+    return _Lazy(tmp_path_factory.mktemp("diag"))
+
+
+def test_forward_model_matches_the_physics_and_holds_past_the_slip(datasets):
+    m = _model(datasets["clean"])
+    F, _, _ = m.predict(np.log(2.63), 0.43, {})
+    d = m.data[0]
+    ref = force_from_displacement(d.D_m, d.height_m, 2.63, 0.43, m.length_m).force_N
+    np.testing.assert_allclose(F[: d.D_m.size], ref, rtol=1e-12)
+
+
+def test_score_statistic_is_chi2_sized_on_clean_data_and_large_for_the_missing_effect(datasets):
+    dg = Diagnoser(_model(datasets["clean"]))
+    fit = dg.fit((), dg.start())
+    clean = dg.score(fit, "force_offset")["statistic"]
+    assert clean < 10.8  # chi^2_1 at p = 0.001
+    dg2 = Diagnoser(_model(datasets["offset"]))
+    fit2 = dg2.fit((), dg2.start())
+    assert dg2.score(fit2, "force_offset")["statistic"] > 50
+
+
+@pytest.mark.parametrize(
+    "case, effect, value",
+    [("offset", "force_offset", 0.1), pytest.param("compliance", "base_compliance", 8.0, marks=pytest.mark.slow)],
+)
+def test_undeclared_effect_is_attributed_and_held_out_error_drops(datasets, case, effect, value):
+    r = diagnose(_model(datasets[case]), candidates=FAST)
+    assert r["added_effects"] == [effect]
+    assert r["fitted"][effect] == pytest.approx(value, rel=0.15)
+    b, a = r["before"]["heldout_force_rmse_N"], r["after"]["heldout_force_rmse_N"]
+    assert a < 0.7 * b, (b, a)
+    assert not r["unexplained_structure"]
+
+
+def test_clean_data_get_no_effect(datasets):
+    r = diagnose(_model(datasets["clean"]), candidates=FAST)
+    assert r["added_effects"] == []
+    assert r["after"] == r["before"]
+    assert not r["unexplained_structure"]
+
+
+def test_structure_no_candidate_explains_is_flagged_not_forced(datasets):
+    """Yield present, but only the offset may be tested: nothing fits, and the diagnosis says so."""
+    r = diagnose(_model(datasets["yield"]), candidates=("force_offset",))
+    assert r["unexplained_structure"]
+    assert any(b["structured"] and b["kind"] == "force" for b in r["structure_after"])
+
+
+def test_diagnose_cli_writes_contract_json_and_report(datasets, tmp_path, capsys):
+    out = tmp_path / "dg"
+    args = ["diagnose", str(datasets["yield"]), "--out", str(out), "--forces-only"]
+    args += ["--candidates", "yield,force_offset"]
+    code = main(args)
+    assert code == 0
+    doc = json.loads((out / "diagnose.json").read_text())
+    assert set(doc) >= {"added_effects", "candidates", "before", "after", "unexplained_structure"}
+    for c in doc["candidates"]:
+        assert set(c) >= {"effect", "statistic", "selected"}
+    for k in ("shape_rmse_mm", "force_rmse_N", "heldout_force_rmse_N"):
+        assert k in doc["before"] and k in doc["after"]
+    assert doc["added_effects"][0] == "yield"
+    assert doc["fitted"]["yield"] == pytest.approx(3.0, rel=0.05)
+    assert doc["after"]["heldout_force_rmse_N"] < 0.3 * doc["before"]["heldout_force_rmse_N"]
+    assert (out / "figures" / "residuals.png").is_file() and (out / "figures" / "statistics.png").is_file()
+    assert "data:image/png;base64" in (out / "report.html").read_text()
+    assert "added effects: yield" in capsys.readouterr().out
+
+
+def test_diagnose_cli_bad_candidates_in_one_line(datasets, tmp_path, capsys):
+    assert main(["diagnose", str(datasets["clean"]), "--out", str(tmp_path / "x"), "--candidates", "gravity"]) == 2
+    err = capsys.readouterr().err
+    assert "--candidates: expected effects from" in err and "Traceback" not in err
+    assert not (tmp_path / "x").exists()
