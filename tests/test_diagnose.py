@@ -31,7 +31,7 @@ SPECS = {
 
 
 class _Lazy(dict):
-    """Simulated twig datasets, made on first use (forces only, 30 samples per push: quick fits)."""
+    """Simulated twig datasets, made on first use (two pushes, forces only, 30 samples each: quick fits)."""
 
     def __init__(self, root):
         super().__init__()
@@ -39,7 +39,7 @@ class _Lazy(dict):
 
     def __missing__(self, name):
         seed, eff = SPECS[name]
-        kw = dict(seed=seed, effects=eff, n_frames_engaged=2, n_force_engaged=30)
+        kw = dict(seed=seed, effects=eff, n_frames_engaged=2, n_force_engaged=30, heights_m=(0.45, 0.6))
         self[name] = make_dataset(self.root / name, "twig", **kw)
         return self[name]
 
