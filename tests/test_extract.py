@@ -120,3 +120,15 @@ def test_extract_cli_writes_valid_copy_and_reports_skipped_frames(twig_frames, t
     assert (out / "figures" / "extract_h450.png").is_file()
     assert main(["extract", str(src), "--out", str(out)]) == 2  # non-empty --out refused
     assert "not empty" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_demo_on_a_dataset_with_frames_extracts_then_fits(twig_frames, tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "--dataset", str(twig_frames), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "extracting centerlines" in text and "report:" in text
+    assert (out / "extracted" / "extract_report.json").is_file()
+    summary = json.loads((out / "fit" / "summary.json").read_text())
+    assert summary["data"]["n_shape_points"] > 0  # the fit used the extracted centerlines
+    assert abs(summary["parameters"]["EI0"]["median"] / 2.63 - 1) < 0.05
