@@ -129,6 +129,31 @@ class ForwardModel:
         sds = [d.sd_m for d in self.data if d.x_m.size]
         self.sd_obs = np.concatenate(sds) if sds and all(s is not None for s in sds) else None
 
+    def thinned(self, max_per_push: int) -> ForwardModel:
+        """The same pushes with at most ``max_per_push`` force samples and frames each (evenly spread)."""
+        from dataclasses import replace
+
+        out = []
+        for d in self.data:
+            kf = max(1, int(np.ceil(d.D_m.size / max_per_push)))
+            keep_frames = np.arange(0, d.frame_D_m.size, max(1, int(np.ceil(d.frame_D_m.size / max_per_push))))
+            sel = np.isin(d.frame_index, keep_frames)
+            remap = np.full(max(d.frame_D_m.size, 1), -1)
+            remap[keep_frames] = np.arange(keep_frames.size)
+            out.append(
+                replace(
+                    d,
+                    D_m=d.D_m[::kf],
+                    F_N=d.F_N[::kf],
+                    frame_D_m=d.frame_D_m[keep_frames],
+                    frame_index=remap[d.frame_index[sel]] if sel.any() else d.frame_index[:0],
+                    x_m=d.x_m[sel],
+                    z_m=d.z_m[sel],
+                    sd_m=None if d.sd_m is None else d.sd_m[sel],
+                )
+            )
+        return ForwardModel(out, self.length_m)
+
     def predict(
         self, log_EI0: float, p: float, coords: dict[str, float], shapes: bool = True
     ) -> tuple[NDArray, NDArray, NDArray]:
@@ -242,8 +267,16 @@ class Diagnoser:
 
     # --------------------------------------------------------------------- fits
     def fit(self, effects=(), x0: NDArray | None = None, max_nfev: int = 40) -> MapFit:
-        """Maximum-likelihood fit with ``effects`` (noise profiled: two rounds of least squares)."""
+        """Maximum-likelihood fit with ``effects`` (noise profiled: two rounds of least squares).
+
+        With a slow effect (friction, self-weight) the iterations run on at most 20 force samples
+        and frames per push, and the full data only polish the result (two evaluations and one
+        Jacobian): the solves cost in proportion to the samples.
+        """
         effects = tuple(effects)
+        if any(e in SLOW for e in effects) and max(d.D_m.size for d in self.m.data) > 20:
+            x0 = Diagnoser(self.m.thinned(20)).fit(effects, x0, max_nfev=max_nfev).x
+            max_nfev = 2
         lo = [-np.inf, 0.0] + [self._bound(e, 2) for e in effects]
         hi = [np.inf, 4.0] + [self._bound(e, 3) for e in effects]
         x = np.array(x0, float)
