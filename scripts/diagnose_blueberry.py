@@ -80,17 +80,20 @@ def main() -> None:
     ap.add_argument("root", help="folder of imported cane datasets")
     ap.add_argument("--out", default="blueberry-diagnose")
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--shard", default="0/1", help="I/N: only every N-th cane from the I-th (parallel runs, one CSV each)")
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    csv = out / "blueberry_diagnose.csv"
+    i, n = (int(v) for v in args.shard.split("/"))
+    csv = out / ("blueberry_diagnose.csv" if n == 1 else f"blueberry_diagnose.{i}.csv")
     done = {r["cane"] for r in read_rows(csv)}
-    canes = sorted(p for p in Path(args.root).iterdir() if (p / "specimen.json").is_file())
+    canes = sorted(p for p in Path(args.root).iterdir() if (p / "specimen.json").is_file())[i::n]
     jobs = [(str(p), str(out / p.name)) for p in canes if p.name not in done]
     with ProcessPoolExecutor(args.workers) as ex:
         for r in append_rows(csv, FIELDS, ex.map(one, jobs), new_file=not done):
             print(f"{r['cane']}: added [{r['added']}] held-out {r['heldout_before']:.3f} -> {r['heldout_after']:.3f}")
-    text = table(read_rows(csv))
+    rows = [r for f in sorted(out.glob("blueberry_diagnose*.csv")) for r in read_rows(f)]
+    text = table(rows)
     (out / "blueberry_diagnose.md").write_text(text)
     print(text)
 
