@@ -80,7 +80,7 @@ def main() -> None:
     ap.add_argument("root", help="folder of imported cane datasets")
     ap.add_argument("--out", default="blueberry-diagnose")
     ap.add_argument("--workers", type=int, default=1)
-    ap.add_argument("--shard", default="0/1", help="I/N: only every N-th cane from the I-th (parallel runs, one CSV each)")
+    ap.add_argument("--shard", default="0/1", help="I/N: every N-th cane from the I-th (parallel runs, a CSV each)")
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
