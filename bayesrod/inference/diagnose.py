@@ -162,7 +162,7 @@ class ForwardModel:
         ``shapes=False`` skips the centerlines (empty arrays).
         """
         L = self.length_m
-        EI0 = float(np.exp(log_EI0))
+        EI0 = float(np.exp(np.clip(log_EI0, -60.0, 60.0)))  # a wild trial step must not overflow
         eff = effects_from_coords(coords, EI0, L)
         Fs, xs, cs = [], [], []
         for d in self.data:
