@@ -519,17 +519,18 @@ def diagnose(
             x0 = np.concatenate([cur.x, [_start_coord(e, t, cur, L)]])
             new = dg.fit(cur.effects + (e,), x0, max_nfev=12 if e in SLOW else 40)
             lr = 2.0 * (new.loglik - cur.loglik)
-            err = dg.errors(new)
             t["lr_statistic"] = float(lr)
             t["fitted"] = new.natural(L)
+            if lr <= stats.chi2.isf(level, 1):
+                t["rejected_because"] = "likelihood ratio below the threshold"
+                continue  # no held-out refits for a candidate that fails already
+            err = dg.errors(new)
             t["heldout_force_rmse_N"] = err["heldout_force_rmse_N"]
             gain_ok = (
                 before["heldout_force_rmse_N"] is None
                 or err["heldout_force_rmse_N"] <= (1 - min_heldout_gain) * history[-1]["errors"]["heldout_force_rmse_N"]
             )
-            if lr <= stats.chi2.isf(level, 1):
-                t["rejected_because"] = "likelihood ratio below the threshold"
-            elif not gain_ok:
+            if not gain_ok:
                 t["rejected_because"] = "held-out error not reduced"
             elif accepted is None or lr > accepted[3]:
                 accepted = (e, new, err, lr, t)
