@@ -57,6 +57,7 @@ def test_forward_model_matches_the_physics_and_holds_past_the_slip(datasets):
     np.testing.assert_allclose(F[: d.D_m.size], ref, rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_score_statistic_is_chi2_sized_on_clean_data_and_large_for_the_missing_effect(datasets):
     dg = Diagnoser(_model(datasets["clean"]))
     fit = dg.fit((), dg.start())
@@ -87,6 +88,7 @@ def test_clean_data_get_no_effect(datasets):
     assert not r["unexplained_structure"]
 
 
+@pytest.mark.slow
 def test_structure_no_candidate_explains_is_flagged_not_forced(datasets):
     """Yield present, but only the offset may be tested: nothing fits, and the diagnosis says so."""
     r = diagnose(_model(datasets["yield"]), candidates=("force_offset",))
