@@ -44,18 +44,11 @@ from scipy import stats
 from scipy.optimize import least_squares
 
 from ..physics import Effects, force_from_displacement
+from ..physics.effects import EFFECT_NAMES
 from ..physics.elastica import centerline_at, force_from_displacement_nd
 from .likelihood import PushData
 
-CATALOG = (
-    "base_compliance",
-    "rest_curvature",
-    "base_tilt",
-    "contact_friction",
-    "force_offset",
-    "self_weight",
-    "yield",
-)
+CATALOG = EFFECT_NAMES  # every effect of the contract's catalog is a candidate
 
 # fitted coordinate of each effect: (neutral value, score step, lower bound, upper bound)
 # base_compliance is fitted as c = EI0 / (k_b L) (0 = clamped); self_weight as w0 L^3 / EI0;
