@@ -214,11 +214,10 @@ class MapFit:
 class Diagnoser:
     """Fits, statistics and held-out errors for one specimen (see the module docstring)."""
 
-    def __init__(self, model: ForwardModel, *, progress=None):
+    def __init__(self, model: ForwardModel):
         if model.n_force == 0:
             raise ValueError("diagnose: expected engaged force samples (the forces fix EI0), got none")
         self.m = model
-        self.progress = progress or (lambda msg: None)
 
     # ---------------------------------------------------------------- residuals
     def _weights(self, sigma_force: float, shape_scale: float) -> NDArray:
@@ -332,9 +331,9 @@ class Diagnoser:
 
     def score(self, fit: MapFit, effect: str) -> dict:
         """Score statistic (chi^2_1 under absence) of ``effect`` at ``fit``."""
-        r, w = self._weighted(fit)
         if effect == "yield":
             return self._yield_lr(fit)
+        r, w = self._weighted(fit)
         neutral, step = _COORD[effect][0], _COORD[effect][1]
         if effect == "force_offset":
             step = 0.1 * fit.sigma_force
