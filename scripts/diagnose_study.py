@@ -1,6 +1,7 @@
 """Does `bayesrod diagnose` find the effect nobody declared, and leave clean data alone? (issue 9)
 
     python scripts/diagnose_study.py --out diagnose-study [--clean 10] [--workers 1] [--forces-only]
+    python scripts/diagnose_study.py --out sw7 --clean 0 --effects "" --size self_weight=7
 
 Simulated twig datasets (three heights, forces and centerlines, default noise):
 one per catalog effect at a material size (EFFECTS below), never declared to
@@ -41,8 +42,8 @@ FIELDS += ["heldout_before", "heldout_after", "shape_before", "shape_after", "un
 
 
 def one(job) -> dict:
-    case, effect, seed, forces_only = job
-    eff = Effects.from_mapping({effect: EFFECTS[effect]} if effect else {})
+    case, effect, value, seed, forces_only = job
+    eff = Effects.from_mapping({effect: value} if effect else {})
     # 8 frames per push (about 1900 centerline points): the shape signatures, at a third of the cost
     cfg = SimConfig.from_preset("twig", seed=seed, effects=eff, specimen=f"diag-{case}", n_frames_engaged=8)
     with tempfile.TemporaryDirectory() as tmp:
@@ -55,7 +56,7 @@ def one(job) -> dict:
     return {
         "case": case,
         "effect": effect or "none",
-        "value": EFFECTS.get(effect, 0.0) if effect else 0.0,
+        "value": value,
         "seed": seed,
         "added": ",".join(r["added_effects"]),
         "fitted": json.dumps({k: round(v, 5) for k, v in r["fitted"].items()}),
@@ -108,14 +109,21 @@ def main() -> None:
     ap.add_argument("--forces-only", action="store_true")
     ap.add_argument("--effects", help='comma list (default: the whole catalog; "" for clean replicates only)')
     ap.add_argument("--effects-first", action="store_true", help="run the effect cases before the clean ones")
+    ap.add_argument("--size", action="append", default=[], help="EFFECT=VALUE: another size (case EFFECT@VALUE)")
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     csv = out / "diagnose_study.csv"
     done = {r["case"] for r in read_rows(csv)}
     names = list(EFFECTS) if args.effects is None else [e for e in args.effects.split(",") if e]
-    jobs = [(f"{e}", e, 11, args.forces_only) for e in names]
-    clean = [(f"clean-{s}", None, 100 + s, args.forces_only) for s in range(args.clean)]
+    sizes = {e: EFFECTS[e] for e in names}
+    for item in args.size:
+        name, _, value = item.partition("=")
+        if name not in EFFECTS:
+            ap.error(f"--size {item}: unknown effect {name!r}; expected one of {sorted(EFFECTS)}")
+        sizes[name] = float(value)
+    jobs = [(e if v == EFFECTS[e] else f"{e}@{v:g}", e, v, 11, args.forces_only) for e, v in sizes.items()]
+    clean = [(f"clean-{s}", None, 0.0, 100 + s, args.forces_only) for s in range(args.clean)]
     jobs = jobs if args.effects_first else clean + jobs
     todo = [j for j in jobs if j[0] not in done]
     with ProcessPoolExecutor(args.workers) as ex:

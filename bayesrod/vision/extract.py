@@ -20,7 +20,14 @@ Per frame:
    path; the path is traced back.
 5. **Metric.** u, v to x, z with the plane depth and the pinhole intrinsics:
    x = direction (u - u_base) Z / fx, z = (v_base - v) Z / fy.
-6. **B-spline.** A cubic smoothing spline (scipy ``make_splprep``) through the
+6. **Tip tracking.** Where the stem tapers below a pixel its depth reads the background and
+   the depth band loses it; :func:`track_tip` follows it on in colour (:func:`stem_likeness`,
+   a line matched filter along a narrow fan of headings). Objects the depth map shows off the
+   plane are masked (:func:`off_plane_objects`): clutter behind the stem is crossed straight,
+   and behind an occluder in front of it (probe, arm) the stem is searched for where it comes
+   out again. A re-acquisition stands only once 8 seen steps confirm it; coasted and hidden
+   steps are never output.
+7. **B-spline.** A cubic smoothing spline (scipy ``make_splprep``) through the
    path with smoothing set by the pixel noise, resampled at equal arc length;
    points inside a bridged gap are dropped (the contract allows missing
    points). ``sd_m`` is the robust scatter of the path pixels about the spline
@@ -81,7 +88,7 @@ def segment(rgb: NDArray, depth_mm: NDArray, Z: float, base_px, band_m: float = 
 
     H, W = depth_mm.shape
     d = depth_mm.astype(float) / 1000.0
-    tol = band_m + 3 * 0.002 * Z**2
+    tol = _band_tol(Z, band_m)
     valid = depth_mm > 0
     band = valid & (np.abs(d - Z) < tol)
     v_base = int(round(base_px[1]))
@@ -98,6 +105,13 @@ def segment(rgb: NDArray, depth_mm: NDArray, Z: float, base_px, band_m: float = 
     mask = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8)) > 0
     mask[v_base + 2 :, :] = False
     return remove_small_objects(mask, max_size=15)
+
+
+def _close(m: NDArray, size: int = 5) -> NDArray:
+    """Morphological closing of a boolean mask (fills depth dropouts inside an occluder)."""
+    import cv2
+
+    return cv2.morphologyEx(m.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((size, size), np.uint8)) > 0
 
 
 def _skeleton_graph(skel: NDArray, max_gap_px: float):
@@ -165,88 +179,289 @@ def centerline_pixels(mask: NDArray, base_px, max_gap_px: float = 60.0):
     return skel, np.column_stack([uu[path], vv[path]]).astype(float)
 
 
-def stem_likeness(rgb: NDArray, mask: NDArray) -> NDArray:
+def stem_likeness(
+    rgb: NDArray, mask: NDArray, depth_mm: NDArray | None = None, Z: float | None = None, *, return_blocked=False
+):
     """Per-pixel fraction of stem colour over the local background, alpha in ~[0, 1] (H, W).
 
     The local background is a 15x15 median of the image (a thin stem vanishes from it);
     alpha is the projection of (pixel - background) onto (stem colour - background), with
     the stem colour taken from the segmented pixels. A sub-pixel tip, whose depth reads the
     background behind it, still shows as alpha ~ its width in pixels.
+
+    With ``depth_mm`` and the plane depth ``Z`` [m], pixels of any object the depth map shows
+    off the plane (a branch or leaf behind the stem, the probe in front of it;
+    :func:`off_plane_objects`) get alpha 0, since a stem that wide would read the plane's depth
+    while a sub-pixel stem leaves no trace in depth at all. Those objects are inpainted before
+    the background median, so that a dark probe leaves no bright halo around it.
     """
     import cv2
 
     img = rgb.astype(float)
-    bg = cv2.medianBlur(rgb, 15).astype(float)
+    objects = None
+    if depth_mm is not None and Z is not None:
+        objects = off_plane_objects(depth_mm, Z)
+        src = cv2.inpaint(rgb, objects.astype(np.uint8), 3, cv2.INPAINT_TELEA)
+    else:
+        src = rgb
+    bg = cv2.medianBlur(src, 15).astype(float)
     stem = np.median(img[mask], axis=0) if mask.any() else img.reshape(-1, 3).mean(0)
     dirv = stem[None, None, :] - bg
     den = np.maximum(np.sum(dirv * dirv, axis=-1), 400.0)  # a contrast below ~20 levels is not trusted
-    return np.sum((img - bg) * dirv, axis=-1) / den
+    alpha = np.sum((img - bg) * dirv, axis=-1) / den
+    blocked = np.zeros(alpha.shape, bool)
+    if objects is not None:
+        # and anything that looks mostly like stem but reads a valid depth off the plane (the inside
+        # of a large branch or leaf, whose depth does not stand out of its own surroundings), with a
+        # 2-px margin where the background median mixes it with the sky
+        off = (depth_mm > 0) & (np.abs(depth_mm / 1000.0 - Z) > _band_tol(Z))
+        blocked = objects | (off & (alpha > 0.5))
+        blocked = cv2.dilate(blocked.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+        blocked &= ~mask
+        alpha[blocked] = 0.0
+    return (alpha, blocked) if return_blocked else alpha
+
+
+def off_plane_objects(depth_mm: NDArray, Z: float) -> NDArray:
+    """Pixels (H, W) of objects the depth map shows off the stem's plane, dilated by a pixel.
+
+    An object is nearer than the median depth within 5 px by more than the band tolerance and
+    4 depth-noise sd (a thin branch in front of the sky), or nearer than the plane (the probe,
+    the arm). The depth noise is measured from the frame itself, as sd = c d^2 (structured-light
+    and stereo sensors). Missing depth (0) never counts as an object.
+    """
+    import cv2
+
+    valid = depth_mm > 0
+    d = depth_mm / 1000.0
+    step = 0.02  # median filter on depth behind the plane in 2-cm steps (uint8: up to 5 m)
+    q = np.where(valid, np.clip(np.round((d - Z) / step), 0, 254), 255).astype(np.uint8)
+    med = Z + step * cv2.medianBlur(q, 11).astype(float)
+    off = valid & (np.abs(d - Z) > _band_tol(Z)) & (d > Z)
+    if off.sum() > 100:
+        rel = (d[off] - med[off]) / d[off] ** 2
+        c = 1.4826 * float(np.median(np.abs(rel - np.median(rel))))
+    else:
+        c = 0.0
+    thr = np.maximum(_band_tol(Z), 4 * c * d**2 + step)
+    obj = valid & (np.abs(d - Z) > _band_tol(Z)) & ((med - d > thr) | (d < Z))
+    return cv2.dilate(obj.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+
+
+def _band_tol(Z: float, band_m: float = 0.02) -> float:
+    """Half-width [m] of the depth band around the plane at depth ``Z`` (band plus 3 depth-noise sd)."""
+    return band_m + 3 * 0.002 * Z**2
+
+
+def _noise_sd(alpha: NDArray, mask: NDArray) -> float:
+    """Robust per-pixel scatter of alpha away from the stem (MAD), for the tracker's threshold."""
+    import cv2
+
+    far = cv2.dilate(mask.astype(np.uint8), np.ones((9, 9), np.uint8)) == 0
+    vals = alpha[far]
+    return float(1.4826 * np.median(np.abs(vals - np.median(vals)))) if vals.size > 100 else 0.06
 
 
 def track_tip(
-    alpha: NDArray, uv: NDArray, *, threshold: float = 0.2, max_steps: int = 2000, coast_steps: int = 45
-) -> NDArray:
-    # max_steps bounds the tracked length (1.5 px per step): extract_frame passes the stem's remaining length
-    """Follow the stem beyond the depth-band path along the ridge of ``alpha``; returns added (k, 2) pixels.
+    alpha: NDArray,
+    uv: NDArray,
+    *,
+    occluder: NDArray | None = None,
+    clutter: NDArray | None = None,
+    threshold: float | None = None,
+    noise_sd: float = 0.06,
+    max_steps: int = 2000,
+    coast_steps: int = 45,
+) -> tuple[NDArray, NDArray]:
+    """Follow the stem beyond the depth-band path along the ridge of ``alpha``.
 
-    Steps of 1.5 px; each step picks the highest alpha among directions within 35 degrees of the
-    current heading (sampled bilinearly), and the heading turns by at most that much per step.
-    Where alpha stays below ``threshold`` it coasts straight for up to ``coast_steps`` steps (kept only if
-    the stem reappears), then stops; also at the image edge.
+    Parameters
+    ----------
+    alpha : (H, W) array
+        Stem likeness (:func:`stem_likeness`).
+    uv : (k, 2) array
+        Pixel path (u, v) so far, base to the current end.
+    occluder : (H, W) bool array, optional
+        Pixels in front of the plane (the probe, the robot): the stem may pass behind them.
+    clutter : (H, W) bool array, optional
+        Pixels of background objects of the stem's colour: the stem may cross in front of them,
+        unseen. Coasting across them does not count towards ``coast_steps``.
+    threshold : float, optional
+        Minimum mean alpha along a 6-px ray to follow it; default 4 noise sd of that mean.
+    noise_sd : float
+        Per-pixel scatter of alpha away from the stem.
+    max_steps : int
+        Bound on the steps of 1.5 px (``extract_frame`` passes the stem's remaining length).
+    coast_steps : int
+        Steps coasted straight across a faint stretch before giving up.
+
+    Returns
+    -------
+    pts : (m, 2) array
+        Added pixels.
+    unseen : (m,) bool array
+        True where the pixel was coasted or jumped (not seen): the caller drops those points.
+
+    Notes
+    -----
+    Each step scores directions within 20 degrees of the heading by the mean alpha along a
+    6-px ray (a line matched filter: a faint sub-pixel tip stands 2x further above the noise
+    than in single pixels) and moves 1.5 px along the best, then re-centres across the ridge.
+    The stem has bounded curvature (and none above the contact), so the narrow fan keeps it
+    from turning onto crossing branches. Where nothing passes the threshold it coasts straight
+    and re-acquires within 5 px to either side. Where it runs into an occluder it searches the
+    occluder's outline for the stem's re-emergence: the 12-px ray from an outline pixel, pointing
+    away from where the stem entered, with the highest mean alpha within 60 degrees of the heading.
     """
     from scipy.ndimage import map_coordinates
 
     H, W = alpha.shape
+    thr = 4.0 * noise_sd / 2.0 if threshold is None else threshold  # a 4-sample mean: noise sd / 2
+    thr = max(thr, 0.08)
     k = min(12, uv.shape[0] - 1)
     if k < 2:
         return np.zeros((0, 2)), np.zeros(0, bool)
     head = uv[-1] - uv[-1 - k]
     head = head / (np.linalg.norm(head) or 1.0)
     pos = uv[-1].astype(float)
-    angles = np.deg2rad(np.linspace(-35, 35, 15))
-    out, weak, coasted = [], [], []
-    for _ in range(max_steps):
-        ca, sa = np.cos(angles), np.sin(angles)
-        dirs = np.stack([head[0] * ca - head[1] * sa, head[0] * sa + head[1] * ca], axis=1)
-        cand = pos[None, :] + 1.5 * dirs
-        inside = (cand[:, 0] >= 1) & (cand[:, 0] < W - 2) & (cand[:, 1] >= 1) & (cand[:, 1] < H - 2)
-        if not inside.any():
+
+    def inside(q):
+        return (q[..., 0] >= 1) & (q[..., 0] < W - 2) & (q[..., 1] >= 1) & (q[..., 1] < H - 2)
+
+    def sample(q):
+        ok = inside(q)
+        out = np.full(q.shape[:-1], -1.0)
+        out[ok] = map_coordinates(alpha, [q[ok][:, 1], q[ok][:, 0]], order=1)
+        return out
+
+    def rotate(h, ang):
+        ca, sa = np.cos(ang), np.sin(ang)
+        return np.stack([h[0] * ca - h[1] * sa, h[0] * sa + h[1] * ca], axis=-1)
+
+    def occluded(q, where=occluder):
+        if where is None or not inside(q):
+            return False
+        return bool(where[int(round(q[1])), int(round(q[0]))])
+
+    angles = np.deg2rad(np.linspace(-20, 20, 9))
+    ray = 1.5 * np.arange(1, 5)
+    out, unseen, weak = [], [], []
+    n_faint = 0  # coasted steps outside clutter since the stem was last seen
+    # the stem tapers: beyond the depth-band path it is never much more opaque than where that path
+    # ended, so a ridge far stronger than the recent level is something else (a branch it crosses)
+    recent = list(sample(uv[-min(10, uv.shape[0]) :].astype(float)))
+
+    def cap():
+        return 2.0 * max(float(np.median(recent[-10:])), thr) + 0.1
+
+    # a re-acquisition (after coasting, or behind an occluder) stands only once 8 seen steps follow it
+    pending = [None]  # len(out) before the last unconfirmed re-acquisition
+    seen_since = [0]
+
+    def accept(q, hidden_run, reacquired=False):
+        if reacquired and pending[0] is None:
+            pending[0] = len(out)
+            seen_since[0] = 0
+        elif not reacquired and pending[0] is not None:
+            seen_since[0] += 1
+            if seen_since[0] >= 8:
+                pending[0] = None
+        out.extend(hidden_run)
+        unseen.extend([True] * len(hidden_run))
+        out.append(q)
+        unseen.append(False)
+        recent.append(float(sample(q[None, :])[0]))
+
+    steps = 0
+    while steps < max_steps:
+        steps += 1
+        dirs = rotate(head, angles)  # (9, 2)
+        pts = pos[None, None, :] + ray[None, :, None] * dirs[:, None, :]  # (9, 4, 2)
+        score = sample(pts).mean(axis=1)
+        score = np.where(score > cap(), -1.0, score) - 0.002 * np.abs(np.rad2deg(angles))
+        j = int(np.argmax(score))
+        if not inside(pts[j, 0]):
             break
-        a = map_coordinates(alpha, [cand[:, 1], cand[:, 0]], order=1)
-        a = np.where(inside, a - 0.002 * np.abs(np.rad2deg(angles)), -np.inf)  # prefer going straight
-        j = int(np.argmax(a))
-        if a[j] < threshold:
-            # no stem here (faint, or crossing the arm or clutter): coast straight on -- above the contact the
-            # stem carries no moment and is straight -- and keep these steps only if the stem reappears
-            pos = pos + 1.5 * head
-            # re-acquire: the stem may lie a few pixels beside the straight coast
-            normal = np.array([-head[1], head[0]])
-            offs = np.arange(-5.0, 5.5, 1.0)
-            side = pos[None, :] + offs[:, None] * normal[None, :]
-            ok_side = (side[:, 0] >= 1) & (side[:, 0] < W - 2) & (side[:, 1] >= 1) & (side[:, 1] < H - 2)
-            a_side = np.where(ok_side, map_coordinates(alpha, [side[:, 1], side[:, 0]], order=1), -np.inf)
-            i_best = int(np.argmax(a_side - 0.01 * np.abs(offs)))
-            if a_side[i_best] >= threshold and len(weak) >= 2:
-                pos = side[i_best]
-                out.extend(weak)
-                coasted.extend([True] * len(weak))
-                weak = []
-                out.append(pos)
-                coasted.append(False)
-                continue
-            weak.append(pos)
-            if len(weak) >= coast_steps:
-                break
-        else:
-            pos = cand[j]
-            head = 0.6 * head + 0.4 * dirs[j]
+        if score[j] >= thr:
+            nxt = pts[j, 0]
+            normal = np.array([-dirs[j][1], dirs[j][0]])
+            a = sample(nxt[None, :] + np.array([-1.0, 0.0, 1.0])[:, None] * normal[None, :])
+            den = a[0] - 2 * a[1] + a[2]
+            if den < 0:  # a peak across the ridge: move onto it (parabolic, at most half a pixel)
+                nxt = nxt + np.clip(0.5 * (a[0] - a[2]) / den, -0.5, 0.5) * normal
+            head = 0.7 * head + 0.3 * dirs[j]
             head /= np.linalg.norm(head)
-            out.extend(weak)
-            coasted.extend([True] * len(weak))
-            weak = []
-            out.append(pos)
-            coasted.append(False)
-    return np.array(out).reshape(-1, 2), np.array(coasted, bool)
+            pos = nxt
+            accept(pos, weak, reacquired=bool(weak))
+            weak, n_faint = [], 0
+            continue
+        ahead = pos + 1.5 * head
+        if occluded(ahead) or occluded(pos + 4.5 * head):
+            found = _reemerge(sample, occluder, pos, head, thr, cap())
+            if found is None:
+                break
+            q, d = found
+            # the hidden stretch: straight from here to the re-emergence (dropped by the caller)
+            n_hid = max(int(np.linalg.norm(q - pos) / 1.5), 1)
+            hidden = weak + [pos + f * (q - pos) for f in np.arange(1, n_hid) / n_hid]
+            weak, n_faint = [], 0
+            steps += n_hid
+            pos, head = q, d
+            accept(pos, hidden, reacquired=True)
+            continue
+        # faint here: coast straight on and re-acquire within 5 px to either side
+        pos = ahead
+        normal = np.array([-head[1], head[0]])
+        offs = np.arange(-5.0, 5.5, 1.0)
+        side = pos[None, :] + offs[:, None] * normal[None, :]
+        rays = side[:, None, :] + ray[None, :, None] * head[None, None, :]
+        a_side = sample(rays).mean(axis=1)
+        a_side = np.where(a_side > cap(), -1.0, a_side) - 0.01 * np.abs(offs)
+        i_best = int(np.argmax(a_side))
+        if a_side[i_best] >= thr and len(weak) >= 2:
+            pos = side[i_best]
+            accept(pos, weak, reacquired=True)
+            weak, n_faint = [], 0
+            continue
+        weak.append(pos)
+        n_faint += not occluded(pos, clutter)
+        if n_faint >= coast_steps or len(weak) >= 4 * coast_steps:
+            break
+    if pending[0] is not None:  # an unconfirmed re-acquisition: noise, not the stem
+        del out[pending[0] :], unseen[pending[0] :]
+    return np.array(out).reshape(-1, 2), np.array(unseen, bool)
+
+
+def _reemerge(sample, occluder: NDArray, pos: NDArray, head: NDArray, thr: float, cap: float):
+    """Where the stem comes out from behind the occluder ahead of ``pos``: (pixel, heading) or None."""
+    import cv2
+    from skimage.measure import label
+
+    H, W = occluder.shape
+    lab = label(occluder, connectivity=2)
+    probe = pos + head * np.arange(1.5, 12.0, 1.5)[:, None]
+    ids = {int(lab[int(round(v)), int(round(u))]) for u, v in probe if 0 <= u < W and 0 <= v < H}
+    ids.discard(0)
+    if not ids:
+        return None
+    comp = np.isin(lab, list(ids)).astype(np.uint8)
+    ring = (cv2.dilate(comp, np.ones((7, 7), np.uint8)) > 0) & ~(cv2.dilate(comp, np.ones((3, 3), np.uint8)) > 0)
+    vv, uu = np.nonzero(ring)
+    q = np.column_stack([uu, vv]).astype(float)
+    d = q - pos[None, :]
+    dist = np.linalg.norm(d, axis=1)
+    ok = dist > 3.0
+    q, d, dist = q[ok], d[ok] / dist[ok, None], dist[ok]
+    cosang = d @ head
+    ok = cosang > np.cos(np.deg2rad(60))
+    if not ok.any():
+        return None
+    q, d, cosang = q[ok], d[ok], cosang[ok]
+    steps = 1.5 * np.arange(0, 16)
+    score = sample(q[:, None, :] + steps[None, :, None] * d[:, None, :]).mean(axis=1)
+    score = np.where(score > cap, -1.0, score) - 0.05 * (1 - cosang)
+    i = int(np.argmax(score))
+    return (q[i], d[i]) if score[i] >= thr else None
 
 
 def extract_frame(
@@ -278,7 +493,17 @@ def extract_frame(
             so_far = float(np.sum(np.hypot(*np.diff(uv, axis=0).T))) * Z / camera["fx"]
             steps = max(int((max_length_m - so_far) * camera["fx"] / Z / 1.5), 0)
         if steps:
-            pts, coasted = track_tip(stem_likeness(rgb, mask), uv, max_steps=steps)
+            alpha, blocked = stem_likeness(rgb, mask, depth_mm, Z, return_blocked=True)
+            front = (depth_mm > 0) & (depth_mm / 1000.0 < Z - _band_tol(Z, band_m))
+            front = _close(front) & blocked
+            pts, coasted = track_tip(
+                alpha,
+                uv,
+                occluder=front,
+                clutter=blocked & ~front,
+                noise_sd=_noise_sd(alpha, mask),
+                max_steps=steps,
+            )
             uv = np.vstack([uv, pts])
             unseen = np.concatenate([np.zeros(uv.shape[0] - pts.shape[0], bool), coasted])
     else:
