@@ -121,6 +121,13 @@ def build_parser() -> argparse.ArgumentParser:
     ft.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     ft.add_argument("--forces-only", action="store_true", help="ignore centerlines")
     ft.add_argument("--shapes-only", action="store_true", help="ignore forces")
+    ft.add_argument(
+        "--shape-weight",
+        default="auto",
+        metavar="auto|W",
+        help="power on the centerline likelihood: auto (default) = n_eff/n measured from the residuals' "
+        "correlation along the stem and between frames; 1 treats every point as independent",
+    )
     ft.add_argument("--resume", action="store_true", help="continue an interrupted run in --out")
     ft.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
     ft.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -515,9 +522,22 @@ def cmd_fit(args: argparse.Namespace) -> int:
         use_shapes=not args.forces_only,
         resume=args.resume,
         progress=not args.quiet,
+        shape_weight=_shape_weight(args.shape_weight),
     )
     _print_fit(summary, args.out)
     return 0
+
+
+def _shape_weight(text: str) -> str | float:
+    if text == "auto":
+        return "auto"
+    try:
+        w = float(text)
+    except ValueError:
+        w = float("nan")
+    if not 0 < w <= 1:
+        raise ValueError(f"--shape-weight: expected auto or a number in (0, 1], got {text!r}")
+    return w
 
 
 def _print_fit(summary: dict, out) -> None:

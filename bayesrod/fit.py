@@ -19,7 +19,7 @@ import numpy as np
 
 from . import __version__
 from .dataset import read_dataset
-from .inference.likelihood import LogPosterior, build_likelihood
+from .inference.likelihood import LogPosterior, build_likelihood, effective_shape_weight
 from .inference.priors import load_prior
 from .inference.sampler import find_start, run_ensembles
 from .inference.summary import build_summary, to_inference_data
@@ -39,9 +39,14 @@ def fit_dataset(
     progress=True,
     max_steps=8000,
     target_ess=1000.0,
+    shape_weight="auto",
     log=print,
 ) -> dict:
-    """Fit one dataset and write the run directory ``out``; returns the summary."""
+    """Fit one dataset and write the run directory ``out``; returns the summary.
+
+    ``shape_weight``: power on the centerline likelihood, ``"auto"`` (n_eff / n measured at the
+    posterior mode, :func:`~bayesrod.inference.likelihood.effective_shape_weight`) or a number in (0, 1].
+    """
     t0 = time.perf_counter()
     out = Path(out)
     spec = read_dataset(dataset)
@@ -53,13 +58,16 @@ def fit_dataset(
         "seed": seed,
         "use_forces": use_forces,
         "use_shapes": use_shapes,
+        "shape_weight": shape_weight,
         "bayesrod": __version__,
     }
     cfg_path = out / "config.json"
     if resume and cfg_path.is_file():
         old = json.loads(cfg_path.read_text())
         diff = [
-            k for k in ("dataset", "prior", "effects", "seed", "use_forces", "use_shapes") if old.get(k) != config[k]
+            k
+            for k in ("dataset", "prior", "effects", "seed", "use_forces", "use_shapes", "shape_weight")
+            if old.get(k, "auto" if k == "shape_weight" else None) != config[k]
         ]
         if diff:
             raise ValueError(
@@ -78,6 +86,21 @@ def fit_dataset(
     two_stage, direct = _two_stage(spec, use_shapes, log)
     rng = np.random.default_rng(seed)
     theta0 = find_start(post, rng, init=two_stage)
+    weight_info = None
+    if lik.n_points:
+        if shape_weight == "auto":
+            mode = {k: float(v[0]) for k, v in post.to_natural(theta0[None]).items()}
+            weight_info = effective_shape_weight(lik, mode)
+            lik.shape_weight = weight_info["weight"]
+            log(
+                f"centerline errors correlated: {weight_info['tau_along']:.3g} points along the stem x "
+                f"{weight_info['tau_frames']:.3g} frames per independent residual; shape likelihood weighted "
+                f"{lik.shape_weight:.3g} (n_eff {weight_info['n_eff']:.0f} of {lik.n_points})"
+            )
+            if lik.shape_weight < 1:
+                theta0 = find_start(post, rng, init=two_stage)
+        else:
+            lik.shape_weight = float(shape_weight)
     res = run_ensembles(
         post,
         theta0,
@@ -95,7 +118,13 @@ def fit_dataset(
     truth = spec.extra.get("truth")
     extra = {
         "prior": pr.name,
-        "data": {"n_force": lik.n_force, "n_shape_points": lik.n_points, "heights_m": list(spec.heights_m)},
+        "data": {
+            "n_force": lik.n_force,
+            "n_shape_points": lik.n_points,
+            "heights_m": list(spec.heights_m),
+            **({"shape_weight": lik.shape_weight} if lik.n_points else {}),
+            **({"shape_correlation": weight_info} if weight_info else {}),
+        },
         "sampler": {
             "ensembles": res.n_ensembles,
             "walkers_per_ensemble": res.chain.shape[0] // res.n_ensembles,
