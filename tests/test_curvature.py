@@ -63,7 +63,8 @@ def test_posterior_band_is_conservative_on_smooth_truth():
     "f",
     [
         0.3,
-        # Measured: 66% at f = 1.2 (theta noise ~0.27 rad per 8 mm segment). The fitted length scale
+        # Measured: 73% at f = 1.2 (66% before the arc-length correction; theta noise ~0.2 rad per 1-cm segment).
+        # The fitted length scale
         # (~2.3 m) smooths the drop of kappa toward the contact; the sampling band leaves that bias out.
         pytest.param(1.2, marks=pytest.mark.xfail(strict=True, reason="smoothing bias at low SNR, docs/model.md")),
     ],

@@ -120,13 +120,13 @@ def _frame_curvature(fs: FrameSample, s_query: NDArray):
     seg = np.hypot(np.diff(x), np.diff(z))
     ok = np.concatenate([[True], seg > 0])
     x, z = x[ok], z[ok]
-    s_nodes = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(z)))])
     if fs.sd_m is not None:
         ta = tangent_angles(x, z, fs.sd_m[below][ok])
         gp = fit_curvature_gp(ta["s"], ta["theta"], noise_cov=ta["cov"])
-    else:
-        ta = tangent_angles(x, z, np.ones_like(x))
+    else:  # noise unknown: no arc-length correction, a white-noise level fitted
+        ta = tangent_angles(x, z, np.zeros_like(x))
         gp = fit_curvature_gp(ta["s"], ta["theta"])
+    s_nodes = ta["s_nodes"]
     inside = (s_query >= ta["s"][0]) & (s_query <= ta["s"][-1])
     kap, sd, zq = nan.copy(), nan.copy(), nan.copy()
     if inside.any():
