@@ -134,6 +134,9 @@ def test_fit_recovers_truth(tmp_path, preset, seed):
     truth = json.loads((ds / "specimen.json").read_text())["truth"]
     summary = _check_fit(run, truth)
     assert summary["fit_error"]["shape_rmse_mm"] < 3 and summary["fit_error"]["force_rmse_N"] < 0.1
+    # simulated centerline noise is independent: the measured weight keeps (nearly) every point
+    assert summary["data"]["shape_weight"] > 0.8, summary["data"]
+    assert "Centerline errors are correlated" in (run / "report.html").read_text()
     # posterior-predictive force at a height never pushed brackets the truth
     h = 0.5 if preset == "twig" else 0.12
     assert main(["predict", "--posterior", str(run), "--height", str(h), "--displacement", "0.02", "--json"]) == 0
