@@ -259,11 +259,13 @@ def _band_tol(Z: float, band_m: float = 0.02) -> float:
     return band_m + 3 * 0.002 * Z**2
 
 
-def _noise_sd(alpha: NDArray, mask: NDArray) -> float:
-    """Robust per-pixel scatter of alpha away from the stem (MAD), for the tracker's threshold."""
+def _noise_sd(alpha: NDArray, mask: NDArray, blocked: NDArray | None = None) -> float:
+    """Robust per-pixel scatter of alpha away from the stem and masked objects (MAD), for the tracker."""
     import cv2
 
     far = cv2.dilate(mask.astype(np.uint8), np.ones((9, 9), np.uint8)) == 0
+    if blocked is not None:
+        far &= ~blocked
     vals = alpha[far]
     return float(1.4826 * np.median(np.abs(vals - np.median(vals)))) if vals.size > 100 else 0.06
 
@@ -508,7 +510,7 @@ def extract_frame(
                 uv,
                 occluder=front,
                 clutter=blocked & ~front,
-                noise_sd=_noise_sd(alpha, mask),
+                noise_sd=_noise_sd(alpha, mask, blocked),
                 max_steps=steps,
             )
             uv = np.vstack([uv, pts])
