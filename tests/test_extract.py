@@ -57,7 +57,8 @@ def _accuracy(root):
     """Medians over frames: point-to-curve error [m], coverage of the stem, of its visible part; pixel [m];
     and the largest fraction of extracted points farther than 3 px from the true curve in any frame."""
     spec, frames = _frames_truth(root)
-    errs, cover, cover_visible, false = [], [], [], []
+    errs, cover, cover_visible, false, signed = [], [], [], [], []
+    bins = np.arange(0.0, spec["length_m"], 0.02)
     for rgb, dep, tr in frames:
         line = extract_frame(rgb, dep, spec["camera"], max_length_m=spec["length_m"])
         px = line.plane_depth_m / spec["camera"]["fx"]
@@ -74,7 +75,17 @@ def _accuracy(root):
         u0, v0 = spec["camera"]["base_px"]
         hidden = _hidden(dep, line.plane_depth_m, u0 + tx / px, v0 - tz / px)
         cover_visible.append(np.mean(near[~hidden]))
+        # signed normal error [px] every 2 cm of arc length: its mean over frames is the error they share
+        k = np.argmin(np.hypot(line.x_m[:, None] - tx[None], line.z_m[:, None] - tz[None]), axis=1)
+        tdx, tdz = np.gradient(tx, sd), np.gradient(tz, sd)
+        e = ((line.x_m - tx[k]) * tdz[k] - (line.z_m - tz[k]) * tdx[k]) / px
+        j = np.argmin(np.abs(line.s_m[None, :] - bins[:, None]), axis=1)
+        ok = np.abs(line.s_m[j] - bins) < 0.006
+        signed.append(np.where(ok, e[j], np.nan))
+    with np.errstate(all="ignore"):
+        shared = np.nanmean(np.array(signed), axis=0)
     return {
+        "systematic_px": float(np.nanmax(np.abs(shared))),
         "err": float(np.median(errs)),
         "cover": float(np.median(cover)),
         "cover_visible": float(np.median(cover_visible)),
@@ -98,6 +109,9 @@ def test_twig_centerline_within_a_pixel_and_covers_the_stem(twig_frames):
     assert acc["err"] <= acc["px"], acc
     assert acc["cover"] >= 0.85, acc
     assert acc["false"] <= 0.02, acc  # nothing invented: no frame with >2% of its points off the stem
+    # an error shared by every frame does not average out in a fit (measured 0.1 px; 0.5 px before the
+    # spline took its smoothing from the measured noise and the plane depth from the median reading)
+    assert acc["systematic_px"] <= 0.25, acc
 
 
 def test_grass_centerline_within_a_pixel_and_covers_the_visible_stem(grass_frames):
@@ -109,6 +123,7 @@ def test_grass_centerline_within_a_pixel_and_covers_the_visible_stem(grass_frame
     assert acc["cover_visible"] >= 0.90, acc
     assert acc["cover"] >= 0.80, acc
     assert acc["false"] <= 0.03, acc  # the tracker does not wander onto clutter or the arm's edge
+    assert acc["systematic_px"] <= 0.25, acc
 
 
 def _tree_hash(root):

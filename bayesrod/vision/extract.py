@@ -3,8 +3,7 @@
 Per frame:
 
 1. **Plane depth.** The stem lies in the bending plane, at a depth read from
-   the valid depth pixels just above the base pixel (median); the plane depth
-   of a push is the median over its frames.
+   the valid depth pixels just above the base pixel (:func:`plane_depth`).
 2. **Segmentation.** Pixels within a thin depth band around the plane
    (``band_m``, widened by the depth noise) and above the base row; missing
    depth (0) inside the stem is filled by a morphological closing restricted
@@ -28,7 +27,8 @@ Per frame:
    out again. A re-acquisition stands only once 8 seen steps confirm it; coasted and hidden
    steps are never output.
 7. **B-spline.** A cubic smoothing spline (scipy ``make_splprep``) through the
-   path with smoothing set by the pixel noise, resampled at equal arc length;
+   path (re-centred across the mask, :func:`recentre`) with smoothing set by the
+   path's measured noise, resampled at equal arc length;
    points inside a bridged gap are dropped (the contract allows missing
    points). ``sd_m`` is the robust scatter of the path pixels about the spline
    (at least the quantisation 1/sqrt(12) px), in metres.
