@@ -53,44 +53,57 @@ def _hidden(dep, Z, u, v):
     return map_coordinates(front, [v, u], order=0) > 0
 
 
-def _accuracy(root):
-    """Medians over frames: point-to-curve error [m], coverage of the stem, of its visible part; pixel [m];
-    and the largest fraction of extracted points farther than 3 px from the true curve in any frame."""
+def frame_metrics(root):
+    """Per frame of a simulated dataset with frames: extraction against the true centerline.
+
+    Yields dicts: ``err`` median point-to-curve error [m], ``false`` fraction of extracted points
+    farther than 3 px from it, ``cover`` fraction of the true arc length within 3 px of the extracted
+    curve (its 1-cm points joined, not across gaps), ``cover_visible`` the same over true points not
+    behind an object in front of the plane, ``extent`` s_max / L, ``signed`` (B,) signed normal error
+    [px] every 2 cm of arc length (NaN where no point), ``px`` pixel size [m].
+    """
     spec, frames = _frames_truth(root)
-    errs, cover, cover_visible, false, signed = [], [], [], [], []
     bins = np.arange(0.0, spec["length_m"], 0.02)
+    u0, v0 = spec["camera"]["base_px"]
     for rgb, dep, tr in frames:
         line = extract_frame(rgb, dep, spec["camera"], max_length_m=spec["length_m"])
         px = line.plane_depth_m / spec["camera"]["fx"]
         st = np.concatenate([[0], np.cumsum(np.hypot(*np.diff(tr, axis=1)))])
         sd = np.linspace(0, st[-1], 4000)
         tx, tz = np.interp(sd, st, tr[0]), np.interp(sd, st, tr[1])
-        d = np.hypot(line.x_m[:, None] - tx[None], line.z_m[:, None] - tz[None]).min(axis=1)
-        errs.append(np.median(d))
-        false.append(np.mean(d > 3 * px))
-        # covered: true arc length within 3 px of the extracted curve (its 1-cm points joined, not across gaps)
+        dist = np.hypot(line.x_m[:, None] - tx[None], line.z_m[:, None] - tz[None])
+        d = dist.min(axis=1)
         ex, ez = _densify(line)
         near = np.hypot(tx[:, None] - ex[None], tz[:, None] - ez[None]).min(axis=1) < 3 * px
-        cover.append(np.mean(near))
-        u0, v0 = spec["camera"]["base_px"]
         hidden = _hidden(dep, line.plane_depth_m, u0 + tx / px, v0 - tz / px)
-        cover_visible.append(np.mean(near[~hidden]))
-        # signed normal error [px] every 2 cm of arc length: its mean over frames is the error they share
-        k = np.argmin(np.hypot(line.x_m[:, None] - tx[None], line.z_m[:, None] - tz[None]), axis=1)
+        k = np.argmin(dist, axis=1)
         tdx, tdz = np.gradient(tx, sd), np.gradient(tz, sd)
         e = ((line.x_m - tx[k]) * tdz[k] - (line.z_m - tz[k]) * tdx[k]) / px
         j = np.argmin(np.abs(line.s_m[None, :] - bins[:, None]), axis=1)
-        ok = np.abs(line.s_m[j] - bins) < 0.006
-        signed.append(np.where(ok, e[j], np.nan))
+        yield {
+            "err": float(np.median(d)),
+            "false": float(np.mean(d > 3 * px)),
+            "cover": float(np.mean(near)),
+            "cover_visible": float(np.mean(near[~hidden])),
+            "extent": min(float(line.s_m.max()) / spec["length_m"], 1.0),
+            "signed": np.where(np.abs(line.s_m[j] - bins) < 0.006, e[j], np.nan),
+            "px": px,
+        }
+
+
+def _accuracy(root):
+    """Medians over frames of error [m] and coverages; the worst frame's off-stem fraction; and the error
+    every frame shares (largest |mean over frames| of the signed error per 2-cm bin) [px]."""
+    rows = list(frame_metrics(root))
     with np.errstate(all="ignore"):
-        shared = np.nanmean(np.array(signed), axis=0)
+        shared = np.nanmean(np.array([r["signed"] for r in rows]), axis=0)
     return {
         "systematic_px": float(np.nanmax(np.abs(shared))),
-        "err": float(np.median(errs)),
-        "cover": float(np.median(cover)),
-        "cover_visible": float(np.median(cover_visible)),
-        "px": px,
-        "false": float(np.max(false)),
+        "err": float(np.median([r["err"] for r in rows])),
+        "cover": float(np.median([r["cover"] for r in rows])),
+        "cover_visible": float(np.median([r["cover_visible"] for r in rows])),
+        "px": rows[-1]["px"],
+        "false": float(max(r["false"] for r in rows)),
     }
 
 
