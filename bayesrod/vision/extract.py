@@ -184,6 +184,22 @@ def centerline_pixels(mask: NDArray, base_px, max_gap_px: float = 60.0):
     return skel, np.column_stack([uu[path], vv[path]]).astype(float)
 
 
+def _smoothing_spline(x: NDArray, z: NDArray, t: NDArray, s: float):
+    """Cubic smoothing spline of the path; where FITPACK cannot meet ``s`` (it warns), twice the slack."""
+    import warnings
+
+    from scipy.interpolate import make_splprep
+
+    for _ in range(6):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", RuntimeWarning)
+            try:
+                return make_splprep([x, z], u=t, s=s, k=3)[0]
+            except RuntimeWarning:
+                s *= 2.0
+    return make_splprep([x, z], u=t, s=s, k=3)[0]
+
+
 def _path_noise(x: NDArray, z: NDArray) -> float:
     """Per-coordinate noise sd of a densely sampled smooth path (robust second differences / sqrt 6)."""
     d = np.concatenate([x[:-2] - 2 * x[1:-1] + x[2:], z[:-2] - 2 * z[1:-1] + z[2:]])
@@ -535,7 +551,6 @@ def extract_frame(
     max_length_m: float | None = None,
 ) -> Centerline:
     """Centerline of one RGB-D frame; raises :class:`ExtractionError` when the stem is not found."""
-    from scipy.interpolate import make_splprep
 
     base = camera["base_px"]
     Z = plane_depth(depth_mm, base) if plane_depth_m is None else plane_depth_m
@@ -582,7 +597,7 @@ def extract_frame(
     # smoothing from the path's own noise (second differences, robust: Rice 1984), not a fixed guess: a
     # spline allowed more slack than the noise flattens the stem's real curvature, the same way in every frame
     noise = max(_path_noise(x, z), 0.15 * px_m)  # coasted stretches are exactly straight: keep some slack
-    spl, _ = make_splprep([x, z], u=t, s=uv.shape[0] * 2 * noise**2, k=3)
+    spl = _smoothing_spline(x, z, t, uv.shape[0] * 2 * noise**2)
     fine = np.linspace(0, t[-1], max(400, 4 * uv.shape[0]))
     xf, zf = spl(fine)
     sf = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(xf), np.diff(zf)))])
