@@ -574,7 +574,7 @@ def _integrated_autocorr(rho: NDArray) -> float:
         if not np.isfinite(r) or r < 0.05:
             break
         tau += 2.0 * r
-    return tau
+    return float(tau)
 
 
 def effective_shape_weight(lik: RodLikelihood, params: dict, max_lag: int = 60) -> dict:
@@ -582,7 +582,7 @@ def effective_shape_weight(lik: RodLikelihood, params: dict, max_lag: int = 60) 
 
     Separable estimate: the integrated autocorrelation time along the stem (lag = consecutive
     points of a frame) times that between frames (lag = frames of a push, at the same height,
-    1-cm bins of z), both averaged over pushes; n_eff = n / (tau_s tau_f).
+    1-cm bins of z), both pooled over pushes; n_eff = n / (tau_s tau_f).
 
     Parameters
     ----------
@@ -637,4 +637,4 @@ def effective_shape_weight(lik: RodLikelihood, params: dict, max_lag: int = 60) 
     tau_f = _integrated_autocorr(rho_across)
     n = lik.n_points
     w = float(np.clip(1.0 / (tau_s * tau_f), 1.0 / n, 1.0))
-    return {"weight": w, "tau_along": tau_s, "tau_frames": tau_f, "n_points": n, "n_eff": w * n}
+    return {"weight": w, "tau_along": tau_s, "tau_frames": tau_f, "n_points": int(n), "n_eff": w * n}

@@ -250,8 +250,7 @@ def stem_likeness(
     """Per-pixel fraction of stem colour over the local background, alpha in ~[0, 1] (H, W).
 
     The local background is a 7x7 median of the image at half resolution (~15x15 px; a thin stem
-    vanishes from it);
-    alpha is the projection of (pixel - background) onto (stem colour - background), with
+    vanishes from it); alpha is the projection of (pixel - background) onto (stem colour - background), with
     the stem colour taken from the segmented pixels. A sub-pixel tip, whose depth reads the
     background behind it, still shows as alpha ~ its width in pixels.
 
@@ -282,8 +281,7 @@ def stem_likeness(
         # and anything that looks mostly like stem but reads a valid depth off the plane (the inside
         # of a large branch or leaf, whose depth does not stand out of its own surroundings), with a
         # 2-px margin where the background median mixes it with the sky
-        off = (depth_mm > 0) & (np.abs(depth_mm / 1000.0 - Z) > _band_tol(Z))
-        blocked = objects | (off & (alpha > 0.5))
+        blocked = objects | (_off_band(depth_mm, Z) & (alpha > 0.5))
         blocked = cv2.dilate(blocked.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
         blocked &= ~mask
         alpha[blocked] = 0.0
@@ -308,20 +306,26 @@ def off_plane_objects(depth_mm: NDArray, Z: float) -> NDArray:
     q_small = cv2.resize(q, (W // 2, H // 2), interpolation=cv2.INTER_NEAREST)
     med_small = cv2.medianBlur(q_small, 5)
     med = Z + step * cv2.resize(med_small, (W, H), interpolation=cv2.INTER_NEAREST).astype(float)
-    off = valid & (np.abs(d - Z) > _band_tol(Z)) & (d > Z)
-    if off.sum() > 100:
-        rel = (d[off] - med[off]) / d[off] ** 2
+    off_band = _off_band(depth_mm, Z)
+    behind = off_band & (d > Z)
+    if behind.sum() > 100:
+        rel = (d[behind] - med[behind]) / d[behind] ** 2
         c = 1.4826 * float(np.median(np.abs(rel - np.median(rel))))
     else:
         c = 0.0
     thr = np.maximum(_band_tol(Z), 4 * c * d**2 + step)
-    obj = valid & (np.abs(d - Z) > _band_tol(Z)) & ((med - d > thr) | (d < Z))
+    obj = off_band & ((med - d > thr) | (d < Z))
     return cv2.dilate(obj.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
 
 
 def _band_tol(Z: float, band_m: float = 0.02) -> float:
     """Half-width [m] of the depth band around the plane at depth ``Z`` (band plus 3 depth-noise sd)."""
     return band_m + 3 * 0.002 * Z**2
+
+
+def _off_band(depth_mm: NDArray, Z: float) -> NDArray:
+    """Valid depth readings (H, W) outside the plane's band, in front of it or behind."""
+    return (depth_mm > 0) & (np.abs(depth_mm / 1000.0 - Z) > _band_tol(Z))
 
 
 def _noise_sd(alpha: NDArray, mask: NDArray, blocked: NDArray | None = None) -> float:
@@ -383,7 +387,7 @@ def track_tip(
     The stem has bounded curvature (and none above the contact), so the narrow fan keeps it
     from turning onto crossing branches. Where nothing passes the threshold it coasts straight
     and re-acquires within 5 px to either side. Where it runs into an occluder it searches the
-    occluder's outline for the stem's re-emergence: the 12-px ray from an outline pixel, pointing
+    occluder's outline for the stem's re-emergence: the 24-px ray from an outline pixel, pointing
     away from where the stem entered, with the highest mean alpha within 60 degrees of the heading.
     """
     from scipy.ndimage import map_coordinates
