@@ -74,6 +74,13 @@ def build_parser() -> argparse.ArgumentParser:
     sm.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     sm.add_argument("--noise", default="default", choices=["default", "none"], help="measurement noise")
     sm.add_argument("--frames", action="store_true", help="also render RGB-D video frames")
+    sm.add_argument(
+        "--arm",
+        default="trailing",
+        choices=["trailing", "leading"],
+        help="with --frames: the probe's holder trails the push (as on the seed's rig, default) or "
+        "leads it, hiding the stem the push bends forward",
+    )
     sm.add_argument("--effect", action="append", metavar="NAME=VALUE", help="add a model effect (repeatable)")
     sm.add_argument("--heights", help="override the preset's heights [m]: X,Y,Z or start:stop:num")
     sm.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
@@ -407,7 +414,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     pushes = simulate(cfg, progress=sys.stderr.isatty())
     with atomic_dir(args.out, args.force) as tmp:
         write_simulated(
-            cfg, pushes, tmp, frames=args.frames, camera=default_camera(cfg.length_m) if args.frames else None
+            cfg,
+            pushes,
+            tmp,
+            frames=args.frames,
+            camera=default_camera(cfg.length_m) if args.frames else None,
+            arm=args.arm,
         )
     eff = ", ".join(f"{k}={v:g}" for k, v in effects.to_mapping().items()) or "none"
     print(

@@ -2,8 +2,10 @@
 
 I/O lives here; the per-frame algorithm is :mod:`bayesrod.vision.extract`.
 The copy holds every input file unchanged; each push with ``frames`` gains
-``<push>/shapes_extracted.csv`` (time_s, x_m, z_m, sd_m) and ``shapes`` points
-to it (a pre-existing ``shapes`` entry is kept as ``shapes_original``).
+``<push>/shapes_extracted.csv`` (time_s, x_m, z_m, sd_m, observed) and ``shapes`` points
+to it; ``observed`` is 1 for points seen in the image and 0 for points of the spline's
+bridge across an occlusion (probe, arm), which readers keep apart from the data
+(a pre-existing ``shapes`` entry is kept as ``shapes_original``).
 ``extract_report.json`` lists every frame, its extracted length and the frames
 skipped with the reason; ``figures/extract_<push>.png`` overlays mask,
 skeleton and centerline on the RGB frame.
@@ -35,8 +37,12 @@ def _load(rec):
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), depth
 
 
-def plot_extraction(rgb, line, ax=None):
-    """RGB frame with the segmentation (orange), skeleton (blue) and fitted centerline path (cyan)."""
+def plot_extraction(rgb, line, ax=None, camera=None, direction=1):
+    """RGB frame with the segmentation (orange), skeleton (blue) and tracked pixel path (cyan).
+
+    With ``camera`` (the specimen's pinhole block) the written points are drawn too: seen points
+    yellow, points bridged across an occlusion hollow magenta. Returns the artists drawn.
+    """
     if ax is None:
         import matplotlib.pyplot as plt
 
@@ -46,12 +52,23 @@ def plot_extraction(rgb, line, ax=None):
     vv, uu = np.nonzero(line.skeleton)
     sk = ax.plot(uu, vv, ",", color="b")[0]
     (path,) = ax.plot(
-        line.path_uv[:, 0], line.path_uv[:, 1], "c-", lw=1.2, label="centerline (Dijkstra + tip tracking)"
+        line.path_uv[:, 0], line.path_uv[:, 1], "c-", lw=1.2, label="pixel path (Dijkstra + tip tracking)"
     )
+    out = {"image": img, "mask": mask, "skeleton": sk, "path": path}
+    if camera is not None:
+        u0, v0 = camera["base_px"]
+        u = u0 + direction * line.x_m * camera["fx"] / line.plane_depth_m
+        v = v0 - line.z_m * camera["fy"] / line.plane_depth_m
+        seen = line.observed if line.observed is not None else np.ones(u.size, bool)
+        out["seen"] = ax.plot(u[seen], v[seen], "o", ms=2.5, color="yellow", label="centerline points")[0]
+        if (~seen).any():
+            out["bridged"] = ax.plot(
+                u[~seen], v[~seen], "o", ms=4, mfc="none", color="magenta", label="bridged across an occlusion"
+            )[0]
     ax.set(title=f"extracted length {line.length_m:.3f} m, plane depth {line.plane_depth_m:.3f} m")
     ax.legend(loc="upper right", fontsize=8)
     ax.axis("off")
-    return {"image": img, "mask": mask, "skeleton": sk, "path": path}
+    return out
 
 
 def extract_dataset(dataset, out, *, force: bool = False, progress: bool = True, log=print) -> dict:
@@ -75,7 +92,7 @@ def extract_dataset(dataset, out, *, force: bool = False, progress: bool = True,
         total = sum(len(p.frames) for p in pushes)
         bar = tqdm(total=total, desc="extracting frames", unit="frame", disable=not progress, leave=False)
         for push in pushes:
-            cols = {"time_s": [], "x_m": [], "z_m": [], "sd_m": []}
+            cols = {"time_s": [], "x_m": [], "z_m": [], "sd_m": [], "observed": []}
             rows, skipped, plane, best = [], [], None, None
             for rec in push.frames:
                 rgb, depth = _load(rec)
@@ -93,7 +110,16 @@ def extract_dataset(dataset, out, *, force: bool = False, progress: bool = True,
                 cols["x_m"].append(line.x_m)
                 cols["z_m"].append(line.z_m)
                 cols["sd_m"].append(line.sd_m)
-                rows.append({"frame": rec.frame, "time_s": rec.time_s, "points": n, "length_m": line.length_m})
+                cols["observed"].append(line.observed.astype(int))
+                rows.append(
+                    {
+                        "frame": rec.frame,
+                        "time_s": rec.time_s,
+                        "points": n,
+                        "bridged": int(n - line.observed.sum()),
+                        "length_m": line.length_m,
+                    }
+                )
                 if best is None or rec.frame == push.frames[len(push.frames) // 2].frame:
                     best = (rgb, line, rec.frame)
                 bar.update()
@@ -113,7 +139,7 @@ def extract_dataset(dataset, out, *, force: bool = False, progress: bool = True,
                 import matplotlib.pyplot as plt
 
                 fig, ax = plt.subplots(figsize=(8, 6))
-                plot_extraction(best[0], best[1], ax=ax)
+                plot_extraction(best[0], best[1], ax=ax, camera=camera, direction=push.direction)
                 ax.set_title(f"{push.id}, frame {best[2]}: " + ax.get_title())
                 fig.tight_layout()
                 fig.savefig(figs / f"extract_{push.id}.png", dpi=90)

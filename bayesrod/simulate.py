@@ -235,9 +235,18 @@ def simulate(cfg: SimConfig, progress: bool = False) -> list[SimulatedPush]:
 
 
 def write_simulated(
-    cfg: SimConfig, pushes: list[SimulatedPush], out: Path, *, frames: bool = False, camera: dict | None = None
+    cfg: SimConfig,
+    pushes: list[SimulatedPush],
+    out: Path,
+    *,
+    frames: bool = False,
+    camera: dict | None = None,
+    arm: str = "trailing",
 ) -> None:
-    """Write a ``bayesrod.dataset/1`` directory (into ``out``, which must exist)."""
+    """Write a ``bayesrod.dataset/1`` directory (into ``out``, which must exist).
+
+    ``arm`` places the probe's holder in the rendered frames (``bayesrod.vision.render.render_frame``).
+    """
     doc = {
         "format": FORMAT,
         "specimen": cfg.specimen,
@@ -299,7 +308,7 @@ def write_simulated(
             from .vision.render import render_push_frames
 
             render_push_frames(
-                cfg, sp, d / "frames", camera, np.random.default_rng([cfg.seed, round(sp.height_m * 1e6)])
+                cfg, sp, d / "frames", camera, np.random.default_rng([cfg.seed, round(sp.height_m * 1e6)]), arm
             )
             entry["frames"] = f"{sp.id}/frames"
         doc["pushes"].append(entry)

@@ -11,6 +11,7 @@ BLUEBERRY = REPO.parent / "shared" / "data" / "blueberry-canes"
 
 def make_dataset(path: Path, preset="twig", **kw) -> Path:
     frames = kw.pop("frames", False)
+    arm = kw.pop("arm", "trailing")
     cfg = SimConfig.from_preset(preset, **kw)
     path.mkdir(parents=True, exist_ok=True)
     camera = None
@@ -18,7 +19,7 @@ def make_dataset(path: Path, preset="twig", **kw) -> Path:
         from bayesrod.vision.render import default_camera
 
         camera = default_camera(cfg.length_m)
-    write_simulated(cfg, simulate(cfg), path, frames=frames, camera=camera)
+    write_simulated(cfg, simulate(cfg), path, frames=frames, camera=camera, arm=arm)
     return path
 
 

@@ -96,6 +96,14 @@ CASES = [
         "sd_m",
         "> 0",
     ),
+    (
+        "observed not 0/1",
+        lambda ds: _edit_csv(
+            ds / "h450" / "shapes.csv", lambda L: [L[0] + ",observed"] + [x + ",1" for x in L[1:4]] + [L[4] + ",2"]
+        ),
+        "observed",
+        "1 (seen) or 0",
+    ),
 ]
 
 
@@ -195,3 +203,21 @@ def test_fuzz_specimen_json(twig_copy, key, value, push_key, push_value):
         assert str(exc)
     finally:
         path.write_text(original)
+
+
+def test_bridged_points_are_kept_apart_from_the_data(twig_copy):
+    """shapes.csv rows with observed = 0 (bridged across an occlusion) are not data points."""
+    path = twig_copy / "h450" / "shapes.csv"
+    lines = path.read_text().splitlines()
+    t0 = lines[1].split(",")[0]
+    first = [i for i, x in enumerate(lines) if i and x.split(",")[0] == t0]
+    flags = ["0" if i in first[2:5] else "1" for i in range(1, len(lines))]
+    path.write_text(
+        "\n".join([lines[0] + ",observed"] + [x + "," + f for x, f in zip(lines[1:], flags, strict=True)]) + "\n"
+    )
+    frame = read_dataset(twig_copy).pushes[0].shapes[0]
+    assert frame.bridge is not None and frame.bridge.shape == (3, 3)
+    assert frame.x_m.size == len(first) - 3
+    xs = np.array([float(lines[i].split(",")[1]) for i in first])
+    np.testing.assert_array_equal(frame.bridge[0], xs[2:5])
+    assert not np.isin(frame.x_m, xs[2:5]).any()

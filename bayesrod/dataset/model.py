@@ -66,15 +66,20 @@ class ForceSeries:
 
 @dataclass(frozen=True)
 class ShapeFrame:
-    """One observed centerline, base to tip: arrays of shape (k,) [m]."""
+    """One observed centerline, base to tip: arrays of shape (k,) [m].
+
+    ``bridge`` (3, b) holds x_m, z_m, sd_m of the points a ``shapes.csv`` marks ``observed = 0``
+    (bridged across an occlusion by ``bayesrod extract``): kept for plots, never used as data.
+    """
 
     time_s: float
     x_m: NDArray
     z_m: NDArray
     sd_m: NDArray | None = None
+    bridge: NDArray | None = None
 
     def __post_init__(self) -> None:
-        for name in ("x_m", "z_m", "sd_m"):
+        for name in ("x_m", "z_m", "sd_m", "bridge"):
             val = getattr(self, name)
             if val is not None:
                 object.__setattr__(self, name, _frozen(val))

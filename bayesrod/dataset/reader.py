@@ -25,7 +25,7 @@ MM_HINT = 20.0  # metres: a stem or height beyond this is almost surely in milli
 FORCE_REQUIRED = ("time_s", "force_N", "robot_x_m")
 FORCE_OPTIONAL = ("wire_elongation_m",)
 SHAPE_REQUIRED = ("time_s", "x_m", "z_m")
-SHAPE_OPTIONAL = ("sd_m",)
+SHAPE_OPTIONAL = ("sd_m", "observed")
 FRAME_COLUMNS = ("frame", "time_s", "rgb", "depth")
 
 
@@ -313,12 +313,24 @@ def _read_shapes(c: _Collector, path: Path, length: float | None) -> tuple[Shape
         bad = np.flatnonzero(~(sd > 0) & np.isfinite(sd))
         for k in bad[:MAX_PER_COLUMN]:
             c.add(name, "column sd_m", "a standard deviation > 0 m", f"{sd[k]:g}", row=int(k) + 1)
+    seen = cols.get("observed")
+    if seen is not None:
+        bad = np.flatnonzero((seen != 0) & (seen != 1) & np.isfinite(seen))
+        for k in bad[:MAX_PER_COLUMN]:
+            c.add(
+                name, "column observed", "1 (seen) or 0 (bridged across an occlusion)", f"{seen[k]:g}", row=int(k) + 1
+            )
     if not all(np.all(np.isfinite(v)) for v in cols.values()):
         return None
+    seen = np.ones(t.size, bool) if seen is None else seen == 1
     frames = []
     for tv in np.unique(t):
-        m = t == tv
-        frames.append(ShapeFrame(float(tv), cols["x_m"][m], cols["z_m"][m], None if sd is None else sd[m]))
+        m = (t == tv) & seen
+        b = (t == tv) & ~seen
+        bridge = None
+        if b.any():  # points bridged across an occlusion: kept for plots, never used as data
+            bridge = np.stack([cols["x_m"][b], cols["z_m"][b], sd[b] if sd is not None else np.full(b.sum(), np.nan)])
+        frames.append(ShapeFrame(float(tv), cols["x_m"][m], cols["z_m"][m], None if sd is None else sd[m], bridge))
     return tuple(frames)
 
 

@@ -77,8 +77,18 @@ def _background(rng: np.random.Generator, Z0: float):
     return rgb, depth
 
 
-def render_frame(bg_rgb, bg_depth, xz_m, s_m, length_m, p, d0, camera, Z0, probe_xz, rng):
-    """One RGB (uint8) and depth (uint16 mm) image of the stem centerline ``xz_m`` (2, n)."""
+ARMS = ("trailing", "leading")
+
+
+def render_frame(bg_rgb, bg_depth, xz_m, s_m, length_m, p, d0, camera, Z0, probe_xz, rng, arm="trailing"):
+    """One RGB (uint8) and depth (uint16 mm) image of the stem centerline ``xz_m`` (2, n).
+
+    ``arm`` places the bar that holds the probe, in front of the stem at the contact
+    height: ``"trailing"`` runs it from the probe back to the image edge behind the push
+    (-x), as on the seed's rig -- the wire sensor's anchors lead the contact by the wire's
+    deflection and the UR10 holds them from behind; ``"leading"`` runs it ahead (+x), over
+    the part of the stem that the push bends forward, a deliberately harder occlusion.
+    """
     rgb = bg_rgb.copy()
     depth = bg_depth.copy()
     u, v = project(xz_m[0], xz_m[1], camera, Z0)
@@ -109,8 +119,9 @@ def render_frame(bg_rgb, bg_depth, xz_m, s_m, length_m, p, d0, camera, Z0, probe
         rgb[max(y0, 0) : max(y1, 0), max(x0, 0) : max(x1, 0)] = [60, 62, 66]
         depth[max(y0, 0) : max(y1, 0), max(x0, 0) : max(x1, 0)] = Z0 - 0.06
         arm_y0, arm_y1 = int(pv - 0.006 * FOCAL / Z0), int(pv + 0.006 * FOCAL / Z0)
-        rgb[max(arm_y0, 0) : max(arm_y1, 0), max(x1, 0) :] = [70, 72, 78]  # robot arm to the right
-        depth[max(arm_y0, 0) : max(arm_y1, 0), max(x1, 0) :] = Z0 - 0.06
+        cols = slice(max(x1, 0), None) if arm == "leading" else slice(0, max(x0, 0))
+        rgb[max(arm_y0, 0) : max(arm_y1, 0), cols] = [70, 72, 78]
+        depth[max(arm_y0, 0) : max(arm_y1, 0), cols] = Z0 - 0.06
     # Sensor noise.
     rgb = np.clip(rgb + rng.normal(0, 3, rgb.shape), 0, 255).astype(np.uint8)
     rgb = cv2.GaussianBlur(rgb, (3, 3), 0.6)
@@ -123,8 +134,10 @@ def render_frame(bg_rgb, bg_depth, xz_m, s_m, length_m, p, d0, camera, Z0, probe
     return rgb, d_mm
 
 
-def render_push_frames(cfg, sp, folder: Path, camera: dict, rng: np.random.Generator) -> None:
-    """Write ``folder/index.csv`` and one RGB and one depth PNG per simulated frame."""
+def render_push_frames(cfg, sp, folder: Path, camera: dict, rng: np.random.Generator, arm: str = "trailing") -> None:
+    """Write ``folder/index.csv`` and one RGB and one depth PNG per simulated frame (``arm``: see render_frame)."""
+    if arm not in ARMS:
+        raise ValueError(f"arm: expected one of {ARMS}, got {arm!r}")
     folder.mkdir(parents=True, exist_ok=True)
     Z0 = plane_depth(cfg.length_m)
     bg_rgb, bg_depth = _background(rng, Z0)
@@ -151,6 +164,7 @@ def render_push_frames(cfg, sp, folder: Path, camera: dict, rng: np.random.Gener
             Z0,
             probe,
             rng,
+            arm,
         )
         cv2.imwrite(str(folder / f"rgb_{k:03d}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
         cv2.imwrite(str(folder / f"depth_{k:03d}.png"), dmm)
