@@ -58,6 +58,7 @@ class CurvatureGP:
     noise_cov: NDArray  # (n, n) noise covariance of theta [rad^2]
     centre: float  # trend coordinate u = (s - centre) / span
     span: float
+    degree: int = 1  # polynomial trend degree
 
     @property
     def noise_var(self) -> float:
@@ -69,10 +70,10 @@ class CurvatureGP:
         r = a[:, None] - b[None, :]
         c = np.sqrt(3.0) / self.length_scale
         e = np.exp(-c * np.abs(r))
-        ua = (a - self.centre) / self.span
-        ub = (b - self.centre) / self.span
-        k = self.signal_var * (1 + c * np.abs(r)) * e + TREND_SD**2 * (1 + ua[:, None] * ub[None, :])
-        ks = -self.signal_var * c**2 * r * e + TREND_SD**2 * np.broadcast_to(ub[None, :], r.shape) / self.span
+        pa, dpa = _trend_basis(a, self.centre, self.span, self.degree)
+        pb, _ = _trend_basis(b, self.centre, self.span, self.degree)
+        k = self.signal_var * (1 + c * np.abs(r)) * e + TREND_SD**2 * pa @ pb.T
+        ks = -self.signal_var * c**2 * r * e + TREND_SD**2 * dpa @ pb.T
         return k, ks
 
     def predict(self, s_query: ArrayLike) -> dict[str, NDArray]:
@@ -91,9 +92,9 @@ class CurvatureGP:
         kappa = ks @ self.alpha
         v = cho_solve((self.chol, True), k.T)
         W = cho_solve((self.chol, True), ks.T).T  # (m, n): kappa = W (theta - mean)
-        uq = (q - self.centre) / self.span
-        prior_theta = self.signal_var + TREND_SD**2 * (1 + uq**2)
-        prior_kappa = self.signal_var * 3.0 / self.length_scale**2 + TREND_SD**2 / self.span**2
+        pq, dpq = _trend_basis(q, self.centre, self.span, self.degree)
+        prior_theta = self.signal_var + TREND_SD**2 * np.sum(pq**2, axis=1)
+        prior_kappa = self.signal_var * 3.0 / self.length_scale**2 + TREND_SD**2 * np.sum(dpq**2, axis=1)
         var_theta = np.maximum(prior_theta - np.sum(k * v.T, axis=1), 0.0)
         var_kappa = np.maximum(prior_kappa - np.sum(ks * W, axis=1), 0.0)
         se2 = np.maximum(np.einsum("mi,ij,mj->m", W, self.noise_cov, W), 0.0)
@@ -107,7 +108,16 @@ class CurvatureGP:
         }
 
 
-def _fit_hyper(s, y, cov, span, centre, n_restarts, rng):
+def _trend_basis(s: NDArray, centre: float, span: float, degree: int):
+    """Polynomial trend basis u^j, j = 0..degree, u = (s - centre) / span, and its s-derivative: (m, degree+1) each."""
+    u = (np.asarray(s, float) - centre) / span
+    j = np.arange(degree + 1)
+    P = u[:, None] ** j[None, :]
+    dP = np.where(j[None, :] > 0, j[None, :] * u[:, None] ** np.maximum(j[None, :] - 1, 0), 0.0) / span
+    return P, dP
+
+
+def _fit_hyper(s, y, cov, span, centre, n_restarts, rng, degree=1):
     """Type-II maximum likelihood of (s2, l[, white noise]) with scikit-learn's Matern-3/2 kernel.
 
     ``cov`` is the known noise covariance, or None to fit a white-noise variance too.
@@ -116,8 +126,8 @@ def _fit_hyper(s, y, cov, span, centre, n_restarts, rng):
     from sklearn.gaussian_process.kernels import Matern
 
     X = s[:, None]
-    u = (s - centre) / span
-    trend = TREND_SD**2 * (1 + np.outer(u, u))
+    P, _ = _trend_basis(s, centre, span, degree)
+    trend = TREND_SD**2 * P @ P.T
     eye = np.eye(s.size)
 
     def nll(logp):
@@ -149,6 +159,7 @@ def fit_curvature_gp(
     noise_cov: ArrayLike | None = None,
     n_restarts: int = 2,
     seed: int = 0,
+    degree: int = 1,
 ) -> CurvatureGP:
     """Fit the GP (linear trend + Matern-3/2) to theta(s) by marginal likelihood.
 
@@ -161,6 +172,10 @@ def fit_curvature_gp(
     noise_cov : (n, n) array, optional
         Known noise covariance of theta [rad^2], e.g. from :func:`tangent_angles`.
         Without either, a white-noise level is fitted too.
+    degree : int
+        Degree of the broad polynomial trend (default 1: a constant curvature is not shrunk).
+        2 puts a linear curvature in the trend; measured and not adopted as the default
+        (docs/vision.md, ``scripts/curvature_bands_trend.py``).
     """
     s = np.asarray(s_m, float)
     y = np.asarray(theta_rad, float)
@@ -180,14 +195,14 @@ def fit_curvature_gp(
         cov = float(noise_sd_rad) ** 2 * np.eye(s.size)
     else:
         cov = None
-    hyper = _fit_hyper(s, y - mean, cov, span, centre, n_restarts, rng)
+    hyper = _fit_hyper(s, y - mean, cov, span, centre, n_restarts, rng, degree)
     s2, ell = float(hyper[0]), float(hyper[1])
     if cov is None:
         cov = float(hyper[2]) * np.eye(s.size)
-    gp = CurvatureGP(s, np.zeros(s.size), np.eye(s.size), mean, s2, ell, cov, centre, span)
+    gp = CurvatureGP(s, np.zeros(s.size), np.eye(s.size), mean, s2, ell, cov, centre, span, degree)
     K = gp._k(s, s)[0] + cov
     chol = np.linalg.cholesky(K)
-    return CurvatureGP(s, cho_solve((chol, True), y - mean), chol, mean, s2, ell, cov, centre, span)
+    return CurvatureGP(s, cho_solve((chol, True), y - mean), chol, mean, s2, ell, cov, centre, span, degree)
 
 
 def tangent_angles(x_m: ArrayLike, z_m: ArrayLike, sd_m: ArrayLike) -> dict[str, NDArray]:
