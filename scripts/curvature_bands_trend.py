@@ -29,7 +29,15 @@ def bands(s, y, cov, q):
         _, ks = g._k(q, g.s)
         return cho_solve((g.chol, True), ks.T).T
 
-    D = Wm(g1) - Wm(g2)
+    # plug-in bias of the linear-trend estimate, with the quadratic-trend fit as the pilot truth:
+    # b = W1 (S2 y) - k2, S2 the pilot's smoother at the data (K2 without noise times K2^-1)
+    W1, W2 = Wm(g1), Wm(g2)
+    K2f = g2._k(g2.s, g2.s)[0]
+    S2 = K2f @ cho_solve((g2.chol, True), np.eye(s.size))
+    b = W1 @ (S2 @ (y - g1.mean)) - p2["kappa"]  # the pilot's mean cancels in W1 (trend in the kernel)
+    B = W1 @ S2 - W2
+    vb = np.einsum("mi,ij,mj->m", B, g1.noise_cov, B)
+    D = W1 - W2
     vd = np.einsum("mi,ij,mj->m", D, g1.noise_cov, D)
     b2 = np.maximum(d2 - vd, 0)
 
@@ -41,6 +49,11 @@ def bands(s, y, cov, q):
     pick2 = loo(g2, y) < loo(g1, y)
     PICK.append(pick2)
     return {
+        "pb": (p1["kappa"], np.sqrt(p1["kappa_se2"] + b**2)),
+        "pbc": (p1["kappa"], np.sqrt(p1["kappa_se2"] + np.maximum(b**2 - vb, 0))),
+        "pbs": (p1["kappa"], np.sqrt(p1["kappa_se2"] + b**4 / (b**2 + vb + 1e-300))),
+        "pbq": (p1["kappa"], np.sqrt(p1["kappa_se2"] + np.maximum(b**2 - 0.25 * vb, 0))),
+        "pbh": (p1["kappa"], np.sqrt(p1["kappa_se2"] + np.maximum(b**2 - 0.5 * vb, 0))),
         "cv": (p2["kappa"], p2["kappa_sd"]) if pick2 else (p1["kappa"], p1["kappa_sd"]),
         "lep1c": (p1["kappa"], np.sqrt(p1["kappa_se2"] + b2)),
         "lep2c": (p2["kappa"], np.sqrt(p2["kappa_se2"] + b2)),

@@ -15,18 +15,23 @@ derivative follows from the kernel's derivatives:
 so E[kappa(s*)] = k_s(s*, S) K^-1 (theta - m) = W (theta - m) and the posterior
 variance is Var[kappa(s*)] = s2 a^2 - k_s K^-1 k_s^T, K = k(S, S) + Sigma.
 
-Two uncertainties are reported (docs/model.md, "Curvature uncertainty"):
+Three pieces of uncertainty are reported (docs/vision.md, "Curvature uncertainty"):
 
 * ``kappa_var``: the Bayesian posterior variance under the Matern-3/2 prior.
   When the stem is smoother than that prior (elastica shapes are), it is
-  conservative: its 90% band covered 99.6-99.9% of the true curvature in the
-  checks of tests/test_curvature.py.
+  conservative: its 90% band covered 99.6-99.9% of the true curvature on arcs.
 * ``kappa_se2``: the sampling variance of the curvature estimate itself,
-  diag(W Sigma W^T), the noise propagated through the fitted smoother. Its 90%
-  band covered 88-92% on arcs and elastica shapes (same checks), so this is the
-  band ``kappa_sd`` used downstream by the direct estimator. It leaves out the
-  smoothing bias, which matters only where the curvature changes on scales
-  shorter than the fitted length scale.
+  diag(W Sigma W^T), the noise propagated through the fitted smoother. It
+  leaves out the smoothing bias: where the fitted length scale smooths over
+  kappa's changes (or the fit collapses onto the trend, s2 -> 0) its band
+  covered as little as 47% of elastica curvature.
+* ``kappa_bias2``: a plug-in estimate of that bias, squared. A pilot GP with a
+  trend one degree higher (a linear curvature unpenalised) is fitted to the
+  same data; the bias is what this smoother makes of the pilot's theta(s)
+  minus the pilot's own kappa, b = W (theta_pilot(S) - m) - kappa_pilot.
+
+``kappa_sd`` = sqrt(kappa_se2 + kappa_bias2) is the band used downstream by the
+direct estimator.
 """
 
 from __future__ import annotations
@@ -59,6 +64,7 @@ class CurvatureGP:
     centre: float  # trend coordinate u = (s - centre) / span
     span: float
     degree: int = 1  # polynomial trend degree
+    pilot: CurvatureGP | None = None  # quadratic-trend fit of the same data, for the smoothing bias
 
     @property
     def noise_var(self) -> float:
@@ -84,7 +90,8 @@ class CurvatureGP:
         dict of (m,) arrays
             ``theta``, ``theta_var`` (posterior), ``kappa`` (posterior mean of theta'),
             ``kappa_var`` (posterior variance), ``kappa_se2`` (sampling variance of the
-            estimate, diag(W Sigma W^T)) and ``kappa_sd`` = sqrt(kappa_se2), the calibrated band.
+            estimate, diag(W Sigma W^T)), ``kappa_bias2`` (squared plug-in smoothing bias,
+            0 without a pilot) and ``kappa_sd`` = sqrt(kappa_se2 + kappa_bias2), the band.
         """
         q = np.asarray(s_query, float)
         k, ks = self._k(q, self.s)
@@ -98,13 +105,20 @@ class CurvatureGP:
         var_theta = np.maximum(prior_theta - np.sum(k * v.T, axis=1), 0.0)
         var_kappa = np.maximum(prior_kappa - np.sum(ks * W, axis=1), 0.0)
         se2 = np.maximum(np.einsum("mi,ij,mj->m", W, self.noise_cov, W), 0.0)
+        bias2 = np.zeros(q.size)
+        if self.pilot is not None:
+            # what this smoother makes of the pilot's theta(s), minus the pilot's own kappa: the smoothing
+            # bias if the truth were the pilot (docs/vision.md, "Curvature uncertainty")
+            at_data = self.pilot.predict(self.s)["theta"]
+            bias2 = (W @ (at_data - self.mean) - self.pilot.predict(q)["kappa"]) ** 2
         return {
             "theta": theta,
             "theta_var": var_theta,
             "kappa": kappa,
             "kappa_var": var_kappa,
             "kappa_se2": se2,
-            "kappa_sd": np.sqrt(se2),
+            "kappa_bias2": bias2,
+            "kappa_sd": np.sqrt(se2 + bias2),
         }
 
 
@@ -160,6 +174,7 @@ def fit_curvature_gp(
     n_restarts: int = 2,
     seed: int = 0,
     degree: int = 1,
+    bias: bool = True,
 ) -> CurvatureGP:
     """Fit the GP (linear trend + Matern-3/2) to theta(s) by marginal likelihood.
 
@@ -174,8 +189,13 @@ def fit_curvature_gp(
         Without either, a white-noise level is fitted too.
     degree : int
         Degree of the broad polynomial trend (default 1: a constant curvature is not shrunk).
-        2 puts a linear curvature in the trend; measured and not adopted as the default
-        (docs/vision.md, ``scripts/curvature_bands_trend.py``).
+        2 puts a linear curvature in the trend: measured as the estimate and not adopted
+        (docs/vision.md, ``scripts/curvature_bands_trend.py``); it serves as the pilot.
+    bias : bool
+        Also fit the pilot (the same GP with a trend of degree + 1) so that :meth:`CurvatureGP.predict`
+        adds the plug-in smoothing bias to ``kappa_sd`` (default). Without it the band is the
+        sampling sd alone, which under-covers wherever the fitted length scale smooths kappa's
+        changes (measured 47-91% on elastica shapes, docs/vision.md).
     """
     s = np.asarray(s_m, float)
     y = np.asarray(theta_rad, float)
@@ -202,7 +222,11 @@ def fit_curvature_gp(
     gp = CurvatureGP(s, np.zeros(s.size), np.eye(s.size), mean, s2, ell, cov, centre, span, degree)
     K = gp._k(s, s)[0] + cov
     chol = np.linalg.cholesky(K)
-    return CurvatureGP(s, cho_solve((chol, True), y - mean), chol, mean, s2, ell, cov, centre, span, degree)
+    pilot = None
+    if bias:
+        pilot = fit_curvature_gp(s, y, noise_cov=cov, n_restarts=n_restarts, seed=seed, degree=degree + 1, bias=False)
+    alpha = cho_solve((chol, True), y - mean)
+    return CurvatureGP(s, alpha, chol, mean, s2, ell, cov, centre, span, degree, pilot)
 
 
 def tangent_angles(x_m: ArrayLike, z_m: ArrayLike, sd_m: ArrayLike) -> dict[str, NDArray]:
