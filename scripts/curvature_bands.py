@@ -3,7 +3,7 @@
     python scripts/curvature_bands.py
 
 Coverage of the 90% band of four uncertainty estimates for the GP curvature:
-``se`` (kappa_sd, the sampling sd: what bayesrod uses), ``post`` (the posterior
+``se`` (the sampling sd alone: bayesrod's band before session 5, now kappa_sd adds a bias term), ``post`` (the posterior
 sd), ``geo`` (geometric mean of the two variances) and ``bias`` (sampling
 variance plus the squared residual-based bias estimate W (S y - y)), on a
 circle, a clothoid and a sine (theta noise 0.01 rad) and on elastica shapes
@@ -26,7 +26,7 @@ def bands(gp, q, y):
     th_hat = gp.mean + k @ gp.alpha  # smoothed theta at the data (the kernel without noise)
     b = W @ (th_hat - y)
     out = {
-        "se": pr["kappa_sd"],
+        "se": np.sqrt(pr["kappa_se2"]),
         "post": np.sqrt(pr["kappa_var"]),
         "geo": (pr["kappa_se2"] * pr["kappa_var"]) ** 0.25,
         "bias": np.sqrt(pr["kappa_se2"] + b**2),

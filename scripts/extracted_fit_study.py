@@ -1,6 +1,7 @@
 """Are intervals from extracted centerlines calibrated? (issue 4: the correlated error model)
 
     python scripts/extracted_fit_study.py --out extracted-study [--preset twig] [--seeds 11:21] [--workers 1]
+        [--arm trailing|leading]
 
 Per seed: simulate a dataset with RGB-D frames (``bayesrod simulate --frames``),
 extract its centerlines (``bayesrod extract``), and fit forces and extracted
@@ -30,11 +31,11 @@ FIELDS += [f"{n}_{q}" for n in ("EI0", "p") for q in ("truth", "median", "q05", 
 
 
 def one(job) -> list[dict]:
-    preset, seed = job
+    preset, seed, arm = job
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        make_dataset(tmp / "sim", preset, seed=seed, frames=True)
+        make_dataset(tmp / "sim", preset, seed=seed, frames=True, arm=arm)
         cli(["extract", str(tmp / "sim"), "--out", str(tmp / "ext"), "--quiet"])
         for weight in ("auto", "1"):
             out = tmp / f"fit-{weight}"
@@ -81,13 +82,14 @@ def main() -> None:
     ap.add_argument("--preset", default="twig", choices=["twig", "grass"])
     ap.add_argument("--seeds", default="11:21", metavar="START:STOP")
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--arm", default="trailing", choices=["trailing", "leading"], help="where the probe's bar is")
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     csv = out / "extracted_fit_study.csv"
     done = {int(r["seed"]) for r in read_rows(csv) if r["preset"] == args.preset}
     a, b = map(int, args.seeds.split(":"))
-    jobs = [(args.preset, s) for s in range(a, b) if s not in done]
+    jobs = [(args.preset, s, args.arm) for s in range(a, b) if s not in done]
 
     def rows():
         with ProcessPoolExecutor(args.workers) as ex:

@@ -61,7 +61,8 @@ class DirectEstimate:
     se : (B,) standard error of EI [N m^2]
     rel_se : (B,) relative standard error
     n : (B,) frames contributing
-    samples : dict of (K,) arrays ``s_m``, ``EI``, ``EI_sd``, ``height_m``: every frame-bin sample
+    samples : dict of (K,) arrays ``s_m``, ``EI``, ``EI_sd`` (its band sd, smoothing bias included), ``height_m``:
+        every frame-bin sample
     """
 
     s_m: NDArray
@@ -111,12 +112,13 @@ def _push_frames(push: Push) -> list[FrameSample]:
 
 
 def _frame_curvature(fs: FrameSample, s_query: NDArray):
-    """GP curvature (mean, sd) at arc lengths ``s_query`` below the contact, and z there; NaN outside."""
+    """GP curvature at arc lengths ``s_query`` below the contact: mean, band sd (sampling and smoothing
+    bias), sampling sd alone, and z there; NaN outside."""
     below = fs.z_m < fs.height_m - 0.01 * fs.height_m
     x, z = fs.x_m[below], fs.z_m[below]
     nan = np.full(s_query.size, np.nan)
     if x.size < 8:
-        return nan, nan, nan
+        return nan, nan, nan, nan
     seg = np.hypot(np.diff(x), np.diff(z))
     ok = np.concatenate([[True], seg > 0])
     x, z = x[ok], z[ok]
@@ -128,12 +130,12 @@ def _frame_curvature(fs: FrameSample, s_query: NDArray):
         gp = fit_curvature_gp(ta["s"], ta["theta"])
     s_nodes = ta["s_nodes"]
     inside = (s_query >= ta["s"][0]) & (s_query <= ta["s"][-1])
-    kap, sd, zq = nan.copy(), nan.copy(), nan.copy()
+    kap, sd, se, zq = nan.copy(), nan.copy(), nan.copy(), nan.copy()
     if inside.any():
         pr = gp.predict(s_query[inside])
-        kap[inside], sd[inside] = pr["kappa"], pr["kappa_sd"]
+        kap[inside], sd[inside], se[inside] = pr["kappa"], pr["kappa_sd"], np.sqrt(pr["kappa_se2"])
         zq[inside] = np.interp(s_query[inside], s_nodes, z)
-    return kap, sd, zq
+    return kap, sd, se, zq
 
 
 def direct_estimate(
@@ -156,29 +158,33 @@ def direct_estimate(
     s_top = max(fs.height_m for fs in frames)
     edges = np.linspace(s_min_m, s_top, n_bins + 1)
     centres = 0.5 * (edges[:-1] + edges[1:])
-    S, C, SDC, H = [], [], [], []
+    S, C, SDC, SEC, H = [], [], [], [], []
     for fs in frames:
-        kap, ksd, z = _frame_curvature(fs, centres)
+        kap, ksd, kse, z = _frame_curvature(fs, centres)
         M = fs.force_N * (fs.height_m - z)  # eq. M_determinate
         ok = np.isfinite(kap) & (M > 0.05 * fs.force_N * fs.height_m) & (fs.force_N > 3 * fs.force_sd_N)
         if not ok.any():
             continue
         c = kap[ok] / M[ok]
-        sd_c = np.sqrt((ksd[ok] / M[ok]) ** 2 + (c * fs.force_sd_N / fs.force_N) ** 2)
+        force_part = (c * fs.force_sd_N / fs.force_N) ** 2
         S.append(centres[ok])
         C.append(c)
-        SDC.append(sd_c)
+        SDC.append(np.sqrt((ksd[ok] / M[ok]) ** 2 + force_part))  # one frame's band, bias included
+        # the bins weigh frames by the sampling error alone (the seed's weights): the smoothing bias is
+        # shared by neighbouring frames rather than averaged away, and weighting by it made the two-stage
+        # p worse (grass: mean error 0.0252 -> 0.0409, scripts/compare_two_stage.py); Birge covers scatter
+        SEC.append(np.sqrt((kse[ok] / M[ok]) ** 2 + force_part))
         H.append(np.full(c.size, fs.height_m))
     if not S:
         raise ValueError(f"{spec.specimen}: no frame had enough centerline points below the contact (need 8)")
-    S, C, SDC, H = (np.concatenate(a) for a in (S, C, SDC, H))
+    S, C, SDC, SEC, H = (np.concatenate(a) for a in (S, C, SDC, SEC, H))
     EI, se, rel, n = (np.full(n_bins, np.nan) for _ in range(4))
     for b, sc in enumerate(centres):
         sel = S == sc
         n[b] = sel.sum()
         if n[b] < 2:
             continue
-        w = 1.0 / SDC[sel] ** 2
+        w = 1.0 / SEC[sel] ** 2
         cbar = np.sum(w * C[sel]) / np.sum(w)
         se_c = 1.0 / np.sqrt(np.sum(w))
         birge = np.sqrt(np.sum(w * (C[sel] - cbar) ** 2) / (n[b] - 1))
