@@ -76,10 +76,10 @@ def build_parser() -> argparse.ArgumentParser:
     sm.add_argument("--frames", action="store_true", help="also render RGB-D video frames")
     sm.add_argument(
         "--arm",
-        default="trailing",
+        default="leading",
         choices=["trailing", "leading"],
-        help="with --frames: the probe's holder trails the push (as on the seed's rig, default) or "
-        "leads it, hiding the stem the push bends forward",
+        help="with --frames: the bar holding the probe leads the push, hiding the stem the push bends "
+        "forward (default), or trails it",
     )
     sm.add_argument("--effect", action="append", metavar="NAME=VALUE", help="add a model effect (repeatable)")
     sm.add_argument("--heights", help="override the preset's heights [m]: X,Y,Z or start:stop:num")

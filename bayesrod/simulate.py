@@ -241,7 +241,7 @@ def write_simulated(
     *,
     frames: bool = False,
     camera: dict | None = None,
-    arm: str = "trailing",
+    arm: str = "leading",
 ) -> None:
     """Write a ``bayesrod.dataset/1`` directory (into ``out``, which must exist).
 

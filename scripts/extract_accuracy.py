@@ -1,6 +1,6 @@
 """Centerline extraction against the simulator's true shapes (issue 4; the table in docs/vision.md).
 
-    python scripts/extract_accuracy.py [--seeds 3,4,5] [--presets twig,grass] [--frames-engaged N] [--arm leading]
+    python scripts/extract_accuracy.py [--seeds 3,4,5] [--presets twig,grass] [--frames-engaged N] [--arm trailing]
 
 For each preset and seed: simulates a dataset with RGB-D frames, extracts every
 frame and prints medians over frames of the point-to-curve error (all points;
@@ -27,7 +27,7 @@ from tests.conftest import make_dataset  # noqa: E402
 from tests.test_extract import frame_metrics  # noqa: E402
 
 
-def one(preset: str, seed: int, n_frames: int | None, arm: str = "trailing") -> str:
+def one(preset: str, seed: int, n_frames: int | None, arm: str = "leading") -> str:
     kw = {"arm": arm} if n_frames is None else {"n_frames_engaged": n_frames, "arm": arm}
     with tempfile.TemporaryDirectory() as tmp:
         root = make_dataset(Path(tmp) / preset, preset, seed=seed, frames=True, **kw)
@@ -49,7 +49,7 @@ def main() -> None:
     ap.add_argument("--seeds", default="3,4,5")
     ap.add_argument("--presets", default="twig,grass")
     ap.add_argument("--frames-engaged", type=int, default=None, help="frames per push (default: the simulator's)")
-    ap.add_argument("--arm", default="trailing", choices=["trailing", "leading"], help="where the probe's holder is")
+    ap.add_argument("--arm", default="leading", choices=["trailing", "leading"], help="where the probe's holder is")
     args = ap.parse_args()
     print(
         "| preset | arm | seed | frames | pixel | median error | error, seen | coverage | coverage, seen points"

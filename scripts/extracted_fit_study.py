@@ -1,7 +1,7 @@
 """Are intervals from extracted centerlines calibrated? (issue 4: the correlated error model)
 
     python scripts/extracted_fit_study.py --out extracted-study [--preset twig] [--seeds 11:21] [--workers 1]
-        [--arm trailing|leading]
+        [--arm leading|trailing]
 
 Per seed: simulate a dataset with RGB-D frames (``bayesrod simulate --frames``),
 extract its centerlines (``bayesrod extract``), and fit forces and extracted
@@ -82,7 +82,7 @@ def main() -> None:
     ap.add_argument("--preset", default="twig", choices=["twig", "grass"])
     ap.add_argument("--seeds", default="11:21", metavar="START:STOP")
     ap.add_argument("--workers", type=int, default=1)
-    ap.add_argument("--arm", default="trailing", choices=["trailing", "leading"], help="where the probe's bar is")
+    ap.add_argument("--arm", default="leading", choices=["trailing", "leading"], help="where the probe's bar is")
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -11,7 +11,7 @@ BLUEBERRY = REPO.parent / "shared" / "data" / "blueberry-canes"
 
 def make_dataset(path: Path, preset="twig", **kw) -> Path:
     frames = kw.pop("frames", False)
-    arm = kw.pop("arm", "trailing")
+    arm = kw.pop("arm", "leading")
     cfg = SimConfig.from_preset(preset, **kw)
     path.mkdir(parents=True, exist_ok=True)
     camera = None

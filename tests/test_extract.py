@@ -156,9 +156,9 @@ def test_grass_centerline_within_a_pixel_and_covers_the_stem(grass_frames):
     _check_accuracy(_accuracy(grass_frames), 0.03)
 
 
-def test_leading_arm_is_bridged_too(tmp_path):
-    """The arm on the other side (over the stem the push bends forward) is bridged as well."""
-    root = make_dataset(tmp_path / "g", "grass", seed=6, frames=True, n_frames_engaged=4, arm="leading")
+def test_trailing_arm_is_bridged_too(tmp_path):
+    """The bar on the other side (behind the push, where the flattened blade also lies) is bridged as well."""
+    root = make_dataset(tmp_path / "g", "grass", seed=6, frames=True, n_frames_engaged=4, arm="trailing")
     _check_accuracy(_accuracy(root), 0.03)
 
 

@@ -80,14 +80,14 @@ def _background(rng: np.random.Generator, Z0: float):
 ARMS = ("trailing", "leading")
 
 
-def render_frame(bg_rgb, bg_depth, xz_m, s_m, length_m, p, d0, camera, Z0, probe_xz, rng, arm="trailing"):
+def render_frame(bg_rgb, bg_depth, xz_m, s_m, length_m, p, d0, camera, Z0, probe_xz, rng, arm="leading"):
     """One RGB (uint8) and depth (uint16 mm) image of the stem centerline ``xz_m`` (2, n).
 
     ``arm`` places the bar that holds the probe, in front of the stem at the contact
-    height: ``"trailing"`` runs it from the probe back to the image edge behind the push
-    (-x), as on the seed's rig -- the wire sensor's anchors lead the contact by the wire's
-    deflection and the UR10 holds them from behind; ``"leading"`` runs it ahead (+x), over
-    the part of the stem that the push bends forward, a deliberately harder occlusion.
+    height: ``"leading"`` (default, used for every validation number) runs it ahead (+x) to
+    the image edge, over the part of the stem the push bends forward, a deliberately hard
+    occlusion; ``"trailing"`` runs it back (-x), as a rig held from behind the push would
+    (the seed's wire anchors lead the contact by the wire's deflection).
     """
     rgb = bg_rgb.copy()
     depth = bg_depth.copy()
@@ -134,7 +134,7 @@ def render_frame(bg_rgb, bg_depth, xz_m, s_m, length_m, p, d0, camera, Z0, probe
     return rgb, d_mm
 
 
-def render_push_frames(cfg, sp, folder: Path, camera: dict, rng: np.random.Generator, arm: str = "trailing") -> None:
+def render_push_frames(cfg, sp, folder: Path, camera: dict, rng: np.random.Generator, arm: str = "leading") -> None:
     """Write ``folder/index.csv`` and one RGB and one depth PNG per simulated frame (``arm``: see render_frame)."""
     if arm not in ARMS:
         raise ValueError(f"arm: expected one of {ARMS}, got {arm!r}")
