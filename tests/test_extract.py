@@ -151,7 +151,7 @@ def test_twig_centerline_within_a_pixel_and_covers_the_stem(twig_frames):
 
 
 def test_grass_centerline_within_a_pixel_and_covers_the_stem(grass_frames):
-    # In the large-deflection frames the blade lies flat along the probe's arm, 40-60% of it out of sight:
+    # In the large-deflection frames the blade lies flat along the probe's bar, 40-60% of it out of sight:
     # seen points alone cover 0.80-0.82 of it; the spline's bridge (flagged observed = 0) covers the rest.
     _check_accuracy(_accuracy(grass_frames), 0.03)
 

@@ -15,7 +15,7 @@ derivative follows from the kernel's derivatives:
 so E[kappa(s*)] = k_s(s*, S) K^-1 (theta - m) = W (theta - m) and the posterior
 variance is Var[kappa(s*)] = s2 a^2 - k_s K^-1 k_s^T, K = k(S, S) + Sigma.
 
-Three pieces of uncertainty are reported (docs/vision.md, "Curvature uncertainty"):
+Three pieces of uncertainty are reported (docs/vision.md, "Curvature with uncertainty"):
 
 * ``kappa_var``: the Bayesian posterior variance under the Matern-3/2 prior.
   When the stem is smoother than that prior (elastica shapes are), it is
@@ -82,6 +82,11 @@ class CurvatureGP:
         ks = -self.signal_var * c**2 * r * e + TREND_SD**2 * dpa @ pb.T
         return k, ks
 
+    def _mean(self, q: NDArray) -> tuple[NDArray, NDArray]:
+        """Posterior means of theta and kappa at ``q`` (m,)."""
+        k, ks = self._k(q, self.s)
+        return self.mean + k @ self.alpha, ks @ self.alpha
+
     def predict(self, s_query: ArrayLike) -> dict[str, NDArray]:
         """Theta [rad] and kappa [1/m] at ``s_query`` (m,), each with its uncertainty.
 
@@ -108,9 +113,9 @@ class CurvatureGP:
         bias2 = np.zeros(q.size)
         if self.pilot is not None:
             # what this smoother makes of the pilot's theta(s), minus the pilot's own kappa: the smoothing
-            # bias if the truth were the pilot (docs/vision.md, "Curvature uncertainty")
-            at_data = self.pilot.predict(self.s)["theta"]
-            bias2 = (W @ (at_data - self.mean) - self.pilot.predict(q)["kappa"]) ** 2
+            # bias if the truth were the pilot (docs/vision.md, "Curvature with uncertainty")
+            at_data, _ = self.pilot._mean(self.s)
+            bias2 = (W @ (at_data - self.mean) - self.pilot._mean(q)[1]) ** 2
         return {
             "theta": theta,
             "theta_var": var_theta,

@@ -655,7 +655,7 @@ def _bridge_sd(s: NDArray, s0: float, s1: float, spl, fine: NDArray, sf: NDArray
     Its heading there is uncertain by ``BRIDGE_HEADING_RAD`` plus half the turn the stem makes across
     the gap, |theta(s1) - theta(s0)|; the position error this accumulates vanishes at both ends and is
     largest mid-gap: g tau (1 - tau) (0.1 + 0.5 |dtheta|), g = s1 - s0, added in quadrature to the noise.
-    Measured on rendered frames (docs/vision.md, "Occlusions"): 86-92% of bridged points within 1.645 sd.
+    Measured on rendered frames (docs/vision.md, "Occlusions"): 85-95% of bridged points within 1.645 sd.
     """
     ends = np.interp([s0, s1], sf, fine)
     d = np.asarray(spl(ends, nu=1))  # (2, 2): derivatives (x', z') at both ends
