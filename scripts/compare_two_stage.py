@@ -28,14 +28,17 @@ FIELDS = ["preset", "seed", "EI0_true", "p_true", "ts_EI0", "ts_p", "bayes_EI0",
 FIELDS += ["bayes_EI0_q05", "bayes_EI0_q95", "bayes_p_q05", "bayes_p_q95", "rhat_max"]
 
 
-def one(preset: str, seed: int) -> dict:
+def _simulated(preset: str, seed: int, tmp: str):
+    """Simulate a dataset into ``tmp``; return its config and the seed's two-stage estimate."""
     cfg = SimConfig.from_preset(preset, seed=seed)
+    write_simulated(cfg, simulate(cfg), Path(tmp))
+    return cfg, two_stage_fit(read_dataset(tmp))
+
+
+def one(preset: str, seed: int) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
-        ds = Path(tmp) / "ds"
-        ds.mkdir()
-        write_simulated(cfg, simulate(cfg), ds)
-        ts = two_stage_fit(read_dataset(ds))
-        fit = fit_for_calibration(ds, "default", seed=seed, target_ess=1000)
+        cfg, ts = _simulated(preset, seed, tmp)
+        fit = fit_for_calibration(Path(tmp), "default", seed=seed, target_ess=1000)
     return {
         "preset": preset,
         "seed": seed,
@@ -88,10 +91,8 @@ def main():
         for preset in ("twig", "grass"):
             e, pe = [], []
             for seed in range(1, a.seeds + 1):
-                cfg = SimConfig.from_preset(preset, seed=seed)
                 with tempfile.TemporaryDirectory() as tmp:
-                    write_simulated(cfg, simulate(cfg), Path(tmp))
-                    ts = two_stage_fit(read_dataset(tmp))
+                    cfg, ts = _simulated(preset, seed, tmp)
                 e.append(abs(ts.EI0 / cfg.EI0 - 1))
                 pe.append(abs(ts.p - cfg.p))
             print(f"{preset}: two-stage mean rel. error of EI0 {np.mean(e):.2%}, of p (abs.) {np.mean(pe):.4f}")

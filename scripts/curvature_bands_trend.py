@@ -21,6 +21,8 @@ from scipy.linalg import cho_solve
 from bayesrod.physics.elastica import contact_from_force_nd
 from bayesrod.vision.curvature import fit_curvature_gp, tangent_angles
 
+PICK = []  # per replicate: whether leave-one-out preferred the quadratic trend
+
 
 def _w(g, q):
     """Derivative weights (m, n) of a fitted GP: kappa(q) = W (theta - mean)."""
@@ -55,9 +57,6 @@ def bands(s, y, cov, q):
         "lepmax": (p1["kappa"], np.sqrt(np.maximum(se1, se2) + d2)),
         "cv": (p2["kappa"], np.sqrt(se2)) if pick2 else (p1["kappa"], np.sqrt(se1)),
     }
-
-
-PICK = []
 
 
 def run(name, gen, reps=10, seed=1, keys=None):

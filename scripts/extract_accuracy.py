@@ -28,7 +28,7 @@ from tests.test_extract import frame_metrics  # noqa: E402
 
 
 def one(preset: str, seed: int, n_frames: int | None, arm: str = "leading") -> str:
-    kw = {"arm": arm} if n_frames is None else {"n_frames_engaged": n_frames, "arm": arm}
+    kw = {"arm": arm} | ({} if n_frames is None else {"n_frames_engaged": n_frames})
     with tempfile.TemporaryDirectory() as tmp:
         root = make_dataset(Path(tmp) / preset, preset, seed=seed, frames=True, **kw)
         rows = list(frame_metrics(root))

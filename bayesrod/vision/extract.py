@@ -44,6 +44,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+BRIDGE_WEIGHT = 0.01  # weight of hidden (bridged, coasted) path pixels in the smoothing spline
+BRIDGE_HEADING_RAD = 0.1  # heading uncertainty of a bridge across a hidden stretch [rad]
+
 
 @dataclass(frozen=True)
 class Centerline:
@@ -663,7 +666,3 @@ def _bridge_sd(s: NDArray, s0: float, s1: float, spl, fine: NDArray, sf: NDArray
     g = s1 - s0
     tau = np.clip((s - s0) / g, 0.0, 1.0)
     return np.sqrt(sd**2 + (g * tau * (1 - tau) * (BRIDGE_HEADING_RAD + 0.5 * turn)) ** 2)
-
-
-BRIDGE_WEIGHT = 0.01  # weight of hidden (bridged, coasted) path pixels in the smoothing spline
-BRIDGE_HEADING_RAD = 0.1  # heading uncertainty of a bridge across a hidden stretch [rad]
