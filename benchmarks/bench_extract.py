@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from bayesrod.dataset import read_dataset
-from bayesrod.simulate import SimConfig, simulate, write_simulated
+from bayesrod.dataset.simulate import SimConfig, simulate, write_simulated
 from bayesrod.vision.extract import extract_frame
 from bayesrod.vision.render import default_camera
 

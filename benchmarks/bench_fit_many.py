@@ -15,8 +15,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from bayesrod.simulate import SimConfig, simulate, write_simulated
-from bayesrod.survey import fit_many
+from bayesrod.api.survey import fit_many
+from bayesrod.dataset.simulate import SimConfig, simulate, write_simulated
 
 
 def main():

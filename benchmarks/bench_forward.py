@@ -24,7 +24,7 @@ import numpy as np
 
 from bayesrod.physics import reference as R
 from bayesrod.physics.elastica import contact_from_force_nd, force_from_displacement_nd
-from bayesrod.presets import PRESETS
+from bayesrod.physics.presets import PRESETS
 
 RTOLS = [1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12]
 

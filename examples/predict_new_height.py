@@ -2,20 +2,25 @@
 
     python examples/predict_new_height.py
 
-Uses the forward model with the seed paper's published twig parameters, then
-the small-deflection stiffnesses k_theta and k_x of eqs. (kdist) and (kx).
+First with the seed paper's published twig parameters (one rod: numbers), then
+over a posterior (a fit of simulated forces: 90% bands), with the
+small-deflection stiffnesses k_theta and k_x of eqs. (kdist) and (kx).
+About 15 s.
 """
 
 import numpy as np
 
-from bayesrod import PRESETS, force_from_displacement, k_theta, k_x
+import bayesrod
 
-twig = PRESETS["twig"]
-L, EI0, p = twig["length_m"], twig["EI0"], twig["p"]
-h = 0.60  # m, between the published 0.55 and 0.65 m
-D = np.linspace(0.0, 0.40, 9)  # contact displacement since first contact [m]
-sol = force_from_displacement(D, h, EI0, p, L)
-print(f"twig, h = {h} m: k_theta = {k_theta(h, EI0, p, L):.3f} N m/rad, k_x = {k_x(h, EI0, p, L):.2f} N/m")
-for d, f, s_c, slipped in zip(D, sol.force_N, sol.contact_s_m, sol.slipped, strict=True):
-    state = "slipped past the sensor" if slipped else f"F = {f:.3f} N, contact at s = {s_c:.3f} m"
-    print(f"  D = {d:.3f} m: {state}")
+D = np.linspace(0.0, 0.40, 5)  # contact displacement since first contact [m]
+one = bayesrod.predict(0.60, D, preset="twig").to_dict()
+print(f"twig, h = 0.60 m: k_theta = {one['k_theta_Nm_per_rad']:.3f} N m/rad, k_x = {one['k_x_N_per_m']:.2f} N/m")
+for pt in one["points"]:
+    state = "slipped past the sensor" if pt["slipped"] else f"F = {pt['force_N']:.3f} N"
+    print(f"  D = {pt['displacement_m']:.2f} m: {state}")
+
+ds = bayesrod.simulate("twig", seed=5, heights_m=[0.45, 0.65], config_overrides={"n_frames_engaged": 2})
+post = bayesrod.fit(ds, use_shapes=False, progress=False, target_ess=400)
+band = post.predict_force(0.60, D)
+for d, lo, med, hi, ps in zip(band.x, band.lower, band.median, band.upper, band.slip_probability, strict=True):
+    print(f"  posterior, D = {d:.2f} m: F = {med:.3f} [{lo:.3f}, {hi:.3f}] N, P(slipped) = {ps:.2f}")

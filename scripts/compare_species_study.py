@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from bayesrod.cli import main as cli
-from bayesrod.simulate import SimConfig, simulate, write_simulated
+from bayesrod.dataset.simulate import SimConfig, simulate, write_simulated
 
 
 def make(root: Path, name: str, species: str, EI0: float, p: float, L: float, seed: int) -> Path:

@@ -18,11 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
+from bayesrod.api.calibration import fit_for_calibration
 from bayesrod.dataset import read_dataset
-from bayesrod.inference.calibration import fit_for_calibration
+from bayesrod.dataset.io import append_rows, read_rows
+from bayesrod.dataset.simulate import SimConfig, simulate, write_simulated
 from bayesrod.inference.direct import two_stage_fit
-from bayesrod.io import append_rows, read_rows
-from bayesrod.simulate import SimConfig, simulate, write_simulated
 
 FIELDS = ["preset", "seed", "EI0_true", "p_true", "ts_EI0", "ts_p", "bayes_EI0", "bayes_p"]
 FIELDS += ["bayes_EI0_q05", "bayes_EI0_q95", "bayes_p_q05", "bayes_p_q95", "rhat_max"]

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from bayesrod.inference.calibration import fit_for_calibration
+from bayesrod.api.calibration import fit_for_calibration
+from bayesrod.dataset.simulate import SimConfig, simulate, write_simulated
 from bayesrod.inference.design import PushPlan, design_heights
-from bayesrod.simulate import SimConfig, simulate, write_simulated
 
 
 def main() -> None:

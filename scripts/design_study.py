@@ -28,10 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from bayesrod.inference.calibration import fit_for_calibration
+from bayesrod.api.calibration import fit_for_calibration
+from bayesrod.dataset.io import append_rows, read_rows
+from bayesrod.dataset.simulate import SimConfig, simulate, write_simulated
 from bayesrod.inference.design import PushPlan, design_heights
-from bayesrod.io import append_rows, read_rows
-from bayesrod.simulate import SimConfig, simulate, write_simulated
 
 STRATEGIES = ("design", "even", "extremes", "random")
 FIELDS = ["specimen", "kind", "EI0_true", "p_true", "length_m", "h1"]

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bayesrod.diagnosis import run_diagnose
-from bayesrod.io import append_rows, read_rows
+import bayesrod
+from bayesrod.dataset.io import append_rows, read_rows
 
 FIELDS = ["cane", "heights", "added", "fitted", "force_before", "force_after", "heldout_before", "heldout_after"]
 FIELDS += ["unexplained", "structured_blocks_after", "top_round1"]
@@ -26,7 +26,9 @@ FIELDS += ["unexplained", "structured_blocks_after", "top_round1"]
 
 def one(job) -> dict:
     ds, out = job
-    doc = run_diagnose(ds, out, use_shapes=False, force=True, log=lambda *a: None)
+    res = bayesrod.diagnose(ds, use_shapes=False)
+    res.save(out, overwrite=True)
+    doc = res.to_dict()
     b, a = doc["before"], doc["after"]
     r1 = sorted((c for c in doc["candidates"] if c["round"] == 1), key=lambda c: -c["statistic"])[:3]
     return {

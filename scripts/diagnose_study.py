@@ -21,11 +21,11 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from bayesrod.dataset import read_dataset
+from bayesrod.dataset.io import append_rows, read_rows
+from bayesrod.dataset.simulate import SimConfig, simulate, write_simulated
 from bayesrod.inference.diagnose import ForwardModel, diagnose
 from bayesrod.inference.likelihood import prepare_data
-from bayesrod.io import append_rows, read_rows
 from bayesrod.physics import Effects
-from bayesrod.simulate import SimConfig, simulate, write_simulated
 
 # material sizes on the twig (L = 0.8 m, EI0 = 2.63 N m^2, heights 0.45-0.65 m)
 EFFECTS = {

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from bayesrod.dataset import read_dataset
+from bayesrod.dataset.simulate import SimConfig, simulate, write_simulated
 from bayesrod.inference.direct import direct_estimate
-from bayesrod.simulate import SimConfig, simulate, write_simulated
 
 
 def main() -> None:

@@ -16,21 +16,19 @@ bridged points with the fraction within 1.645 of their sd_m (90% nominal).
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from tests.conftest import make_dataset  # noqa: E402
-from tests.test_extract import frame_metrics  # noqa: E402
+import bayesrod
+from bayesrod.vision.accuracy import frame_metrics
 
 
 def one(preset: str, seed: int, n_frames: int | None, arm: str = "leading") -> str:
-    kw = {"arm": arm} | ({} if n_frames is None else {"n_frames_engaged": n_frames})
+    kw = {} if n_frames is None else {"n_frames_engaged": n_frames}
     with tempfile.TemporaryDirectory() as tmp:
-        root = make_dataset(Path(tmp) / preset, preset, seed=seed, frames=True, **kw)
+        root = bayesrod.simulate(preset, seed=seed, config_overrides=kw).save(Path(tmp) / preset, frames=True, arm=arm)
         rows = list(frame_metrics(root))
     keys = ("err", "err_seen", "cover", "cover_seen", "cover_visible", "extent", "px")
     med = {k: float(np.median([r[k] for r in rows])) for k in keys}

@@ -16,15 +16,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import tempfile
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bayesrod.cli import main as cli  # noqa: E402
-from bayesrod.io import append_rows, read_rows  # noqa: E402
-from tests.conftest import make_dataset  # noqa: E402
+import bayesrod
+from bayesrod.cli import main as cli
+from bayesrod.dataset.io import append_rows, read_rows
 
 FIELDS = ["case", "preset", "seed", "weight", "shape_weight", "tau_along", "tau_frames", "n_points"]
 FIELDS += [f"{n}_{q}" for n in ("EI0", "p") for q in ("truth", "median", "q05", "q95", "covered")]
@@ -35,7 +33,7 @@ def one(job) -> list[dict]:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        make_dataset(tmp / "sim", preset, seed=seed, frames=True, arm=arm)
+        bayesrod.simulate(preset, seed=seed).save(tmp / "sim", frames=True, arm=arm)
         cli(["extract", str(tmp / "sim"), "--out", str(tmp / "ext"), "--quiet"])
         for weight in ("auto", "1"):
             out = tmp / f"fit-{weight}"

@@ -10,7 +10,7 @@ forces and centerlines (no RGB-D frames, to keep the package small).
 import shutil
 from pathlib import Path
 
-from bayesrod.simulate import SimConfig, simulate, write_simulated
+from bayesrod.dataset.simulate import SimConfig, simulate, write_simulated
 
 out = Path(__file__).resolve().parents[1] / "bayesrod" / "data" / "default"
 if out.exists():

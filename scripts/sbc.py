@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bayesrod.inference.calibration import sbc_replicate
-from bayesrod.io import append_rows, read_rows
+from bayesrod.api.calibration import sbc_replicate
+from bayesrod.dataset.io import append_rows, read_rows
 
 PRIOR = str(Path(__file__).with_name("sbc_prior.json"))
 

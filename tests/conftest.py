@@ -3,7 +3,7 @@ from pathlib import Path
 
 import pytest
 
-from bayesrod.simulate import SimConfig, simulate, write_simulated
+from bayesrod.dataset.simulate import SimConfig, simulate, write_simulated
 
 REPO = Path(__file__).resolve().parents[1]
 BLUEBERRY = REPO.parent / "shared" / "data" / "blueberry-canes"

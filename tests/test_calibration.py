@@ -4,7 +4,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bayesrod.inference.calibration import sbc_replicate
+from bayesrod.api.calibration import sbc_replicate
 
 PRIOR = str(Path(__file__).resolve().parents[1] / "scripts" / "sbc_prior.json")
 

@@ -1,4 +1,4 @@
-"""`bayesrod predict` as a user runs it (CONTRACT.md sections 2 and 3)."""
+"""`bayesrod predict` as a user runs it (docs/format.md, sections 2 and 3)."""
 
 import json
 import subprocess

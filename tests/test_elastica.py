@@ -11,7 +11,7 @@ from bayesrod.physics import (
     k_x,
 )
 from bayesrod.physics import reference as R
-from bayesrod.presets import PRESETS
+from bayesrod.physics.presets import PRESETS
 
 
 # --------------------------------------------------------------------------- #

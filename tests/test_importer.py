@@ -7,7 +7,7 @@ import pytest
 
 from bayesrod.cli import main
 from bayesrod.dataset import read_dataset, validate_dataset
-from bayesrod.importers import hinge_onset, unwrap_counter
+from bayesrod.dataset.importers import hinge_onset, unwrap_counter
 
 from .conftest import BLUEBERRY
 

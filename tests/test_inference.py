@@ -36,7 +36,7 @@ def test_prior_files_normalised_and_justified(name):
 
 def test_prior_errors(tmp_path):
     assert {"default", "grass", "woody"} <= set(available_priors())
-    with pytest.raises(ValueError, match="--prior"):
+    with pytest.raises(ValueError, match="prior: expected"):
         load_prior("nonexistent")
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"parameters": {"EI0": {"dist": "lognormal", "median": -1, "sigma_log": 1}}}))
@@ -83,11 +83,11 @@ def test_forces_only_and_shapes_only(twig_noisy):
     spec = read_dataset(twig_noisy)
     assert RodLikelihood(spec, use_shapes=False).names == ["EI0", "p", "sigma_force_N"]
     assert RodLikelihood(spec, use_forces=False).names == ["EI0", "p", "shape_sd_scale"]
-    with pytest.raises(ValueError, match="--effects: expected effects from"):
+    with pytest.raises(ValueError, match="effects: expected effects from"):
         RodLikelihood(spec, effects=("gravity",))
     with pytest.raises(ValueError, match="at most one"):
         RodLikelihood(spec, effects=("rest_curvature", "base_tilt"))
-    with pytest.raises(ValueError, match="--forces-only"):
+    with pytest.raises(ValueError, match="force-only fit"):
         RodLikelihood(spec, effects=("yield",))
     with pytest.raises(ValueError, match="self_weight cannot be fitted yet"):
         RodLikelihood(spec, effects=("self_weight",))

@@ -16,10 +16,10 @@ needs_chromium = pytest.mark.skipif(render.chromium() is None, reason="chromium 
 
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
-    from bayesrod.fit import fit_dataset
+    import bayesrod
 
     out = tmp_path_factory.mktemp("run") / "run"
-    fit_dataset(REPO / "bayesrod" / "data" / "default", out, progress=False, target_ess=200, log=lambda *a: None)
+    bayesrod.fit(REPO / "bayesrod" / "data" / "default", progress=False, target_ess=200).save(out)
     return out
 
 

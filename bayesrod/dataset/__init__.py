@@ -1,12 +1,13 @@
-"""Datasets (CONTRACT.md section 1): typed observations, reader/validator, engagement."""
+"""Datasets (docs/format.md, section 1): typed observations, reader/validator, engagement."""
 
 from .engagement import Engagement, detect_engagement
-from .model import FORMAT, Camera, ForceSeries, FrameRecord, Push, Sensor, ShapeFrame, Specimen
-from .reader import DatasetError, Problem, read_dataset, validate_dataset
+from .model import FORMAT, Camera, Dataset, ForceSeries, FrameRecord, Push, Sensor, ShapeFrame, Specimen
+from .reader import DatasetError, Problem, read_dataset, validate_dataset, validate_in_memory
 
 __all__ = [
     "FORMAT",
     "Camera",
+    "Dataset",
     "DatasetError",
     "Engagement",
     "ForceSeries",
@@ -19,4 +20,5 @@ __all__ = [
     "detect_engagement",
     "read_dataset",
     "validate_dataset",
+    "validate_in_memory",
 ]

@@ -38,7 +38,7 @@ def robust_noise(force_N: ArrayLike) -> float:
 
 
 def detect_engagement(force_N: ArrayLike, *, drop_fraction: float = 0.25, min_sigmas: float = 5.0) -> Engagement:
-    """Engaged samples of one push (CONTRACT.md: first contact until the slip).
+    """Engaged samples of one push (docs/format.md: first contact until the slip).
 
     The series starts at first contact, so the force rises from the sensor's
     baseline. After the peak, the slip is the first sample whose force has

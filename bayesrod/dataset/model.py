@@ -1,4 +1,4 @@
-"""Typed, immutable observations (CONTRACT.md section 1). No I/O here."""
+"""Typed, immutable observations (docs/format.md, section 1). No I/O here."""
 
 from __future__ import annotations
 
@@ -109,8 +109,12 @@ class Push:
 
 
 @dataclass(frozen=True)
-class Specimen:
-    """A dataset: one stem and its pushes. ``extra`` keeps unknown top-level keys."""
+class Dataset:
+    """A dataset: one stem and its pushes (docs/format.md). Immutable; ``extra`` keeps unknown top-level keys.
+
+    Read one with :func:`bayesrod.load`, build one from memory with :meth:`from_arrays` or
+    :meth:`from_frame`, check it with :meth:`validate`, write it with :meth:`save`.
+    """
 
     specimen: str
     length_m: float
@@ -123,6 +127,7 @@ class Specimen:
 
     @property
     def heights_m(self) -> NDArray:
+        """Contact height of every push [m], shape (n_pushes,)."""
         return np.array([p.height_m for p in self.pushes])
 
     def push(self, push_id: str) -> Push:
@@ -130,3 +135,150 @@ class Specimen:
             if p.id == push_id:
                 return p
         raise KeyError(push_id)
+
+    @classmethod
+    def from_arrays(
+        cls,
+        *,
+        length_m: float,
+        height_m,
+        displacement_m,
+        force_N,
+        time_s=None,
+        push_id=None,
+        specimen: str = "specimen",
+        species: str | None = None,
+        force_range_N: tuple[float, float] | None = None,
+    ) -> Dataset:
+        """A forces-only dataset from arrays in memory.
+
+        Parameters
+        ----------
+        length_m : float
+            Stem length L [m].
+        height_m : sequence of float, shape (n_pushes,)
+            Contact height of each push [m].
+        displacement_m, force_N : sequence of arrays, one (n_i,) array per push
+            Horizontal contact displacement since first contact [m] and the measured force [N].
+        time_s : sequence of arrays or None
+            Sample times [s]; default the sample index.
+        push_id : sequence of str or None
+            Push ids; default ``h<height in mm>``.
+        """
+        heights = np.atleast_1d(np.asarray(height_m, dtype=float))
+        if heights.ndim != 1:
+            raise ValueError(f"height_m: expected one height per push, got shape {heights.shape}")
+        n = heights.size
+        D_list, F_list = _per_push(displacement_m, n, "displacement_m"), _per_push(force_N, n, "force_N")
+        T_list = _per_push(time_s, n, "time_s") if time_s is not None else [None] * n
+        ids = list(push_id) if push_id is not None else [f"h{round(h * 1000):d}" for h in heights]
+        if len(ids) != n:
+            raise ValueError(f"push_id: expected {n} ids (one per height), got {len(ids)}")
+        pushes = []
+        for i in range(n):
+            D, F = D_list[i], F_list[i]
+            if D.shape != F.shape:
+                raise ValueError(
+                    f"force_N[{i}]: expected as many samples as displacement_m[{i}] ({D.size}), got {F.size}"
+                )
+            T = np.arange(D.size, dtype=float) if T_list[i] is None else T_list[i]
+            if T.shape != D.shape:
+                raise ValueError(f"time_s[{i}]: expected {D.size} samples, got {T.size}")
+            pushes.append(Push(str(ids[i]), float(heights[i]), ForceSeries(T, F, D)))
+        sensor = Sensor("unknown", None, tuple(force_range_N)) if force_range_N is not None else None
+        return cls(str(specimen), float(length_m), tuple(pushes), species, sensor)
+
+    @classmethod
+    def from_frame(
+        cls,
+        df,
+        *,
+        length_m: float,
+        height: str = "height_m",
+        displacement: str = "robot_x_m",
+        force: str = "force_N",
+        time: str | None = "time_s",
+        push: str | None = None,
+        specimen: str = "specimen",
+        species: str | None = None,
+    ) -> Dataset:
+        """A forces-only dataset from a long table (pandas DataFrame or a mapping of columns), one row per sample.
+
+        Pushes are the groups of ``push`` (default: of ``height``), in order of first appearance. Column
+        names are parameters; a missing column is a ValueError naming it.
+        """
+        cols = {}
+        for role, name in (
+            ("height", height),
+            ("displacement", displacement),
+            ("force", force),
+            ("time", time),
+            ("push", push),
+        ):
+            if name is None:
+                continue
+            if name not in df:
+                have = ", ".join(map(str, list(df.keys())))
+                raise ValueError(f"{role}: expected a column named {name!r}, got columns {have}")
+            cols[role] = np.asarray(df[name])
+        key = cols.get("push", cols["height"])
+        _, first = np.unique(key, return_index=True)
+        groups = [key[i] for i in sorted(first)]
+        H, D, F, T, ids = [], [], [], [], []
+        for g in groups:
+            m = key == g
+            hs = np.unique(cols["height"][m].astype(float))
+            if hs.size != 1:
+                raise ValueError(f"{height}: expected one height per push, got {hs.tolist()} in push {g!r}")
+            H.append(float(hs[0]))
+            D.append(cols["displacement"][m].astype(float))
+            F.append(cols["force"][m].astype(float))
+            T.append(cols["time"][m].astype(float) if "time" in cols else None)
+            ids.append(str(g) if "push" in cols else None)
+        return cls.from_arrays(
+            length_m=length_m,
+            height_m=H,
+            displacement_m=D,
+            force_N=F,
+            time_s=T if "time" in cols else None,
+            push_id=ids if "push" in cols else None,
+            specimen=specimen,
+            species=species,
+        )
+
+    def validate(self) -> list:
+        """Every problem found (a list of :class:`~bayesrod.dataset.Problem`; empty when valid).
+
+        A dataset read from disk is checked file by file (as ``bayesrod validate``); one built in memory,
+        array by array.
+        """
+        from .reader import validate_dataset, validate_in_memory
+
+        if self.root is not None and Path(self.root, "specimen.json").is_file():
+            return validate_dataset(self.root)
+        return validate_in_memory(self)
+
+    def save(self, path, *, overwrite: bool = False) -> Path:
+        """Write the dataset directory ``path`` (docs/format.md) atomically; returns the path."""
+        from .writer import write_dataset
+
+        return write_dataset(self, path, overwrite=overwrite)
+
+
+#: the name the code used before the public API (kept: old scripts import it)
+Specimen = Dataset
+
+
+def _per_push(values, n: int, name: str) -> list[NDArray]:
+    if n == 1 and (
+        (isinstance(values, np.ndarray) and values.ndim == 1)
+        or (isinstance(values, (list, tuple)) and len(values) and np.isscalar(values[0]))
+    ):
+        values = [values]  # one push given as one flat array
+    try:
+        out = [np.asarray(v, dtype=float).ravel() for v in values]
+    except (TypeError, ValueError):
+        raise TypeError(f"{name}: expected one array of numbers per push, got {type(values).__name__}") from None
+    if len(out) != n:
+        raise ValueError(f"{name}: expected {n} arrays (one per push), got {len(out)}")
+    return out

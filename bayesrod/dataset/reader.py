@@ -1,4 +1,4 @@
-"""Read and validate datasets in the ``bayesrod.dataset/1`` format (CONTRACT.md section 1).
+"""Read and validate datasets in the ``bayesrod.dataset/1`` format (docs/format.md, section 1).
 
 ``validate_dataset`` lists every problem found; ``read_dataset`` returns typed,
 immutable objects or raises :class:`DatasetError` carrying the same list. Each
@@ -499,3 +499,50 @@ def read_dataset(path, *, check_images: bool = False) -> Specimen:
     if spec is None:
         raise DatasetError(problems)
     return spec
+
+
+def validate_in_memory(ds) -> list[Problem]:
+    """Problems of a dataset built in memory (:meth:`Dataset.from_arrays`): the reader's checks, array by array.
+
+    Problems name the push as ``pushes[i]`` and the array as the column it would be written to.
+    """
+    probs: list[Problem] = []
+
+    def add(where, fld, expected, got, row=None):
+        probs.append(Problem(where, fld, expected, got, row))
+
+    L = ds.length_m
+    if not (isinstance(ds.specimen, str) and ds.specimen.strip()):
+        add("dataset", "specimen", "a non-empty name", _fmt(ds.specimen))
+    if not (np.isfinite(L) and L > 0):
+        add("dataset", "length_m", "a number > 0", _fmt(L))
+        L = None
+    if not ds.pushes:
+        add("dataset", "pushes", "a list of at least one push", "none")
+    seen = set()
+    for i, p in enumerate(ds.pushes):
+        where = f"pushes[{i}] ({p.id})"
+        if p.id in seen:
+            add(where, "id", "a unique push id", f"{p.id!r} again")
+        seen.add(p.id)
+        if not np.isfinite(p.height_m) or p.height_m <= 0 or (L is not None and p.height_m >= L):
+            add(where, "height_m", f"0 < height_m < length_m ({_fmt(L)} m)", _fmt(p.height_m))
+        f = p.force
+        if len(f) < 2:
+            add(where, "rows", "at least 2 samples", str(len(f)))
+        for col in ("time_s", "force_N", "robot_x_m"):
+            v = getattr(f, col)
+            bad = np.flatnonzero(~np.isfinite(v))
+            for k in bad[:MAX_PER_COLUMN]:
+                add(where, f"column {col}", "a finite number", _fmt(v[k]), row=int(k) + 1)
+        dt = np.diff(f.time_s)
+        bad = np.flatnonzero(~(dt > 0) & np.isfinite(dt))
+        for k in bad[:MAX_PER_COLUMN]:
+            add(
+                where,
+                "column time_s",
+                "strictly increasing times",
+                f"{f.time_s[k + 1]:g} after {f.time_s[k]:g}",
+                row=int(k) + 2,
+            )
+    return probs

@@ -160,7 +160,7 @@ def _functional_gradients(target: str, theta: NDArray, length_m: float, target_h
     if target == "k_theta":
         if target_height_m is None or not (0 < target_height_m < length_m):
             raise ValueError(
-                f"--target-height: expected a height in (0, L = {length_m:g}) m for target k_theta, "
+                f"target_height_m: expected a height in (0, L = {length_m:g}) m for target k_theta, "
                 f"got {target_height_m!r}"
             )
         eta = target_height_m / length_m
@@ -174,7 +174,7 @@ def _functional_gradients(target: str, theta: NDArray, length_m: float, target_h
         s = np.linspace(0.0, 0.9, 10)  # log EI(s) = log EI0 + 4 p log(1 - s/L), eq. EI_taper
         g = np.stack([np.ones_like(s), 4.0 * np.log1p(-s)], axis=-1)
         return np.broadcast_to(g, (K, s.size, 2))
-    raise ValueError(f"--target: expected one of {', '.join(TARGETS)}, got {target!r}")
+    raise ValueError(f"target: expected one of {', '.join(TARGETS)}, got {target!r}")
 
 
 def eig_gaussian(
@@ -356,11 +356,11 @@ def design_heights(
     from tqdm.auto import tqdm
 
     if target not in TARGETS:
-        raise ValueError(f"--target: expected one of {', '.join(TARGETS)}, got {target!r}")
+        raise ValueError(f"target: expected one of {', '.join(TARGETS)}, got {target!r}")
     if method not in ("gaussian", "nmc"):
-        raise ValueError(f"--method: expected gaussian or nmc, got {method!r}")
+        raise ValueError(f"method: expected gaussian or nmc, got {method!r}")
     if method == "nmc" and target != "params":
-        raise ValueError(f"--method nmc: expected --target params (nested MC is for (log EI0, p)), got {target!r}")
+        raise ValueError(f"method: expected target params for nmc (nested MC is for (log EI0, p)), got {target!r}")
     if "sigma_force_N" not in samples:
         raise ValueError(
             "samples: expected a posterior with force noise sigma_force_N (a fit that used forces), got "

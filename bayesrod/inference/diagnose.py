@@ -8,7 +8,7 @@ loop repeats until nothing further helps.
 Fits here are maximum-likelihood fits of the *direct* forward model
 (:func:`bayesrod.physics.force_from_displacement`, any combination of effects,
 no tables) by scipy's trust-region least squares, with the noise scales
-profiled. Posterior sampling is what ``bayesrod fit --effects`` is for; the
+profiled. Posterior sampling is what ``bayesrod.fit(..., effects=...)`` is for; the
 diagnosis needs many fits and compares models.
 
 Statistics (all on residuals weighted by the fitted noise sd):
@@ -482,7 +482,7 @@ def diagnose(
     log = log or (lambda msg: None)
     unknown = [c for c in candidates if c not in CATALOG]
     if unknown:
-        raise ValueError(f"--candidates: expected effects from {', '.join(CATALOG)}, got {', '.join(unknown)}")
+        raise ValueError(f"candidates: expected effects from {', '.join(CATALOG)}, got {', '.join(unknown)}")
     dg = Diagnoser(model)
     L = model.length_m
     log("fitting the plain model")

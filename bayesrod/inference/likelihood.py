@@ -259,18 +259,18 @@ class RodLikelihood:
     ):
         if "self_weight" in effects:
             raise ValueError(
-                "--effects: self_weight cannot be fitted yet (its forward solves take ~80 s per table node and "
+                "effects: self_weight cannot be fitted yet (its forward solves take ~80 s per table node and "
                 "height, an hour per fit); expected effects from " + ", ".join(FITTABLE_EFFECTS)
             )
         unsupported = [e for e in effects if e not in FITTABLE_EFFECTS]
         if unsupported:
             raise ValueError(
-                f"--effects: expected effects from {', '.join(FITTABLE_EFFECTS)}, got {', '.join(unsupported)}"
+                f"effects: expected effects from {', '.join(FITTABLE_EFFECTS)}, got {', '.join(unsupported)}"
             )
         tabled = [e for e in effects if e in TABLE_EFFECTS]
         if len(tabled) > 1:
             raise ValueError(
-                f"--effects: expected at most one of {', '.join(TABLE_EFFECTS)} (plus force_offset), "
+                f"effects: expected at most one of {', '.join(TABLE_EFFECTS)} (plus force_offset), "
                 f"got {', '.join(tabled)}"
             )
         if tabled and (effect_axis is None or effect_axis.name != tabled[0]):
@@ -278,7 +278,7 @@ class RodLikelihood:
         self.axis = effect_axis if tabled else None
         if "yield" in effects and use_shapes and any(p.shapes for p in spec.pushes):
             raise ValueError(
-                "--effects yield: expected a force-only fit (add --forces-only): the forces on the plastic "
+                "effects: yield expects a force-only fit (centerlines not used): the forces on the plastic "
                 "branch are exact (F = M_y/h) but the shapes there are not modelled"
             )
         self.spec = spec
@@ -453,7 +453,7 @@ class RodLikelihood:
         return ll
 
     def fit_error(self, params: dict) -> dict:
-        """RMS force error [N] and shape error [mm] at one parameter set (CONTRACT summary.fit_error)."""
+        """RMS force error [N] and shape error [mm] at one parameter set (docs/format.md: summary.fit_error)."""
         res = self.residuals({k: np.atleast_1d(v) for k, v in params.items()})
         out = {}
         f = res.get("force")  # engaged samples only (see prepare_data)

@@ -169,7 +169,7 @@ def load_prior(name_or_path: str | None = None) -> Prior:
     if path.suffix == ".json" or path.exists():
         if not path.is_file():
             raise ValueError(
-                f"--prior: expected a prior name ({', '.join(available_priors())}) or a JSON file, "
+                f"prior: expected a prior name ({', '.join(available_priors())}) or a JSON file, "
                 f"got {name_or_path!r} (no such file)"
             )
         text, source = path.read_text(), str(path)
@@ -177,7 +177,7 @@ def load_prior(name_or_path: str | None = None) -> Prior:
         res = _priors_dir() / f"{name_or_path}.json"
         if not res.is_file():
             raise ValueError(
-                f"--prior: expected one of {', '.join(available_priors())} or a JSON file, got {name_or_path!r}"
+                f"prior: expected one of {', '.join(available_priors())} or a JSON file, got {name_or_path!r}"
             )
         text, source = res.read_text(), f"priors/{name_or_path}.json"
     try:

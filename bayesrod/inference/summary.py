@@ -88,7 +88,7 @@ def to_inference_data(chain: np.ndarray, log_prob: np.ndarray, post, spec, attrs
 
 
 def build_summary(spec, post, samples: dict, diag: dict, fit_error: dict, effects, extra: dict) -> dict:
-    """summary.json (CONTRACT.md section 3), plus extensions under their own keys."""
+    """summary.json (docs/format.md, section 3), plus extensions under their own keys."""
     L = spec.length_m
     params = {name: _scalar_q(samples[name]) for name in post.names}
     heights = [p.height_m for p in spec.pushes]

@@ -1,6 +1,6 @@
 """Model effects beyond the seed paper's clamped, straight, frictionless rod.
 
-Each effect has the name CONTRACT.md gives it. Values are SI; an effect that is
+Each effect has the name docs/format.md gives it. Values are SI; an effect that is
 absent takes its neutral value (the seed model). The forward solver works with
 the nondimensional groups returned by :meth:`Effects.nondim`.
 
@@ -150,8 +150,8 @@ def parse_effect_assignments(items: list[str] | None) -> Effects:
     for item in items or []:
         name, sep, value = item.partition("=")
         if not sep or not name.strip() or not value.strip():
-            raise ValueError(f"--effect: expected NAME=VALUE, got {item!r}")
+            raise ValueError(f"effect: expected NAME=VALUE, got {item!r}")
         if name.strip() in values:
-            raise ValueError(f"--effect: effect {name.strip()!r} given twice")
+            raise ValueError(f"effect: effect {name.strip()!r} given twice")
         values[name.strip()] = value.strip()
     return Effects.from_mapping(values)

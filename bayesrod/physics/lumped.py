@@ -50,20 +50,29 @@ def kx_nd(eta: ArrayLike, p: ArrayLike) -> NDArray:
 
 
 def k_theta(
-    height_m: ArrayLike, EI0: ArrayLike, p: ArrayLike, length_m: float, base_compliance: ArrayLike = np.inf
+    height_m: ArrayLike,
+    EI0: ArrayLike,
+    p: ArrayLike,
+    length_m: float,
+    base_stiffness_Nm_per_rad: ArrayLike = np.inf,
 ) -> NDArray:
     """Small-deflection rotational stiffness k_theta(h) [N m/rad] (eq. kdist).
 
-    A base spring of stiffness ``base_compliance`` [N m/rad] acts in series:
-    1/k = 1/k_rod + 1/k_b. For constant EI (p = 0) and a clamp, k_theta = 2 EI/h.
+    A base spring of stiffness ``base_stiffness_Nm_per_rad`` k_b (the ``base_compliance`` effect's value,
+    docs/model.md; inf = a rigid clamp) acts in series: 1/k = 1/k_rod + 1/k_b. For constant EI (p = 0)
+    and a clamp, k_theta = 2 EI/h. Broadcasts over all arguments.
     """
     L = float(length_m)
     k_rod = ktheta_nd(np.asarray(height_m, float) / L, p) * np.asarray(EI0, float) / L
-    return 1.0 / (1.0 / k_rod + 1.0 / np.asarray(base_compliance, float))
+    return 1.0 / (1.0 / k_rod + 1.0 / np.asarray(base_stiffness_Nm_per_rad, float))
 
 
 def k_x(
-    height_m: ArrayLike, EI0: ArrayLike, p: ArrayLike, length_m: float, base_compliance: ArrayLike = np.inf
+    height_m: ArrayLike,
+    EI0: ArrayLike,
+    p: ArrayLike,
+    length_m: float,
+    base_stiffness_Nm_per_rad: ArrayLike = np.inf,
 ) -> NDArray:
     """Small-deflection translational stiffness k_x(h) [N/m] (eq. kx).
 
@@ -73,7 +82,7 @@ def k_x(
     L = float(length_m)
     h = np.asarray(height_m, float)
     k_rod = kx_nd(h / L, p) * np.asarray(EI0, float) / L**3
-    return 1.0 / (1.0 / k_rod + h**2 / np.asarray(base_compliance, float))
+    return 1.0 / (1.0 / k_rod + h**2 / np.asarray(base_stiffness_Nm_per_rad, float))
 
 
 def wire_dx_from_elongation(elongation_m: ArrayLike, wire_length_m: float) -> NDArray:

@@ -1,4 +1,4 @@
-"""Render synthetic RGB-D frames of a simulated push (``bayesrod simulate --frames``).
+"""Render synthetic RGB-D frames of a simulated push (``bayesrod.simulate(...).save(path, frames=True)``).
 
 Deliberately hard: the background is cluttered with branches and leaves of
 the stem's own colour (at other depths), the probe occludes the stem around
@@ -17,7 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..io import write_csv
+from ..dataset.io import write_csv
 
 WIDTH, HEIGHT = 640, 480
 FOCAL = 600.0
@@ -31,7 +31,7 @@ def plane_depth(length_m: float) -> float:
 
 
 def default_camera(length_m: float) -> dict:
-    """Camera block for specimen.json (CONTRACT.md section 1)."""
+    """Camera block for specimen.json (docs/format.md, section 1)."""
     return {
         "fx": FOCAL,
         "fy": FOCAL,

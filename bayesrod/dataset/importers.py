@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .dataset.model import FORMAT
 from .io import write_csv, write_json
+from .model import FORMAT
 
 GF_TO_N = 9.80665e-3
 
@@ -171,7 +171,7 @@ def import_blueberry(src: Path, out: Path, length_m: float) -> dict:
     if not src.is_dir():
         raise ValueError(f"SRC: expected the blueberry-canes folder (or its csv_files/), got {src}")
     if not (length_m > 0 and np.isfinite(length_m)):
-        raise ValueError(f"--length-m: expected an assumed cane length > 0 m, got {length_m}")
+        raise ValueError(f"length_m: expected an assumed cane length > 0 m, got {length_m}")
     files = sorted(p for p in src.iterdir() if _NAME.search(p.name))
     if not files:
         raise ValueError(f"SRC: expected files named bush_B_branch_C_trial_T.csv, got none in {src}")

@@ -1,27 +1,28 @@
-"""Command line: ``bayesrod <command> ...`` (CONTRACT.md section 2).
+"""Command line: ``bayesrod <command> ...`` (docs/cli.md, docs/format.md).
 
-I/O lives here and in the readers; the physics never sees a file. Bad input
-ends with one line ``bayesrod <command>: error: <message>`` on stderr and a
-non-zero exit, never a traceback (set BAYESROD_DEBUG=1 to see one).
+Each command is parse -> call the public API (:mod:`bayesrod.api`) -> save/print.
+Only this module knows flag names: errors from the library name the parameter
+(``prior: expected ...``) and :func:`main` shows it as the flag (``--prior``).
+Bad input ends with one line ``bayesrod <command>: error: <message>`` on stderr
+and a non-zero exit, never a traceback (set BAYESROD_DEBUG=1 to see one).
+Progress and log lines go to stderr (``--quiet`` silences them); results to
+stdout, as JSON with ``--json``.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import math
+import logging
 import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-import numpy as np
-
-from . import __version__  # noqa: F401  (re-exported for --version)
-from ._parse import parse_values
-from .physics import Effects, force_from_displacement, k_theta, k_x
-from .physics.effects import parse_effect_assignments
-from .presets import PRESETS, get_preset
+from .._version import __version__
+from ..physics.effects import parse_effect_assignments
+from ..physics.presets import PRESETS
+from .parse import parse_values
 
 EXIT_BAD_INPUT = 2
 
@@ -63,10 +64,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="contact displacement(s) since first contact [m]: X, X,Y,Z or start:stop:num",
     )
     p.add_argument("--effect", action="append", metavar="NAME=VALUE", help="add a model effect (repeatable)")
-    p.add_argument("--json", action="store_true", help="print JSON (CONTRACT.md section 3) instead of a table")
     v = sub.add_parser("validate", help="check a dataset and list every problem found")
     v.add_argument("dataset", help="dataset directory (holding specimen.json)")
-    v.add_argument("--json", action="store_true", help="print the problems as JSON")
 
     sm = sub.add_parser("simulate", help="write a synthetic dataset from the forward model")
     sm.add_argument("--preset", required=True, choices=sorted(PRESETS), help="published specimen to simulate")
@@ -88,7 +87,6 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("dataset", help="dataset directory whose pushes have frames")
     ex.add_argument("--out", required=True, help="directory for the copy of the dataset with extracted shapes")
     ex.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
-    ex.add_argument("--quiet", action="store_true", help="no progress bar")
     fm = sub.add_parser("fit-many", help="fit every dataset of a folder on a Dask cluster; survey table")
     fm.add_argument("root", metavar="DIR_OF_DATASETS", help="folder whose sub-directories are datasets")
     fm.add_argument("--out", required=True, help="output folder (runs/, survey.csv, survey.parquet)")
@@ -97,7 +95,6 @@ def build_parser() -> argparse.ArgumentParser:
     fm.add_argument("--prior", default="default", help="prior name or JSON file")
     fm.add_argument("--seed", type=int, default=0, help="random seed of every fit (default 0)")
     fm.add_argument("--forces-only", action="store_true", help="ignore centerlines")
-    fm.add_argument("--quiet", action="store_true", help="no progress bar")
     cp = sub.add_parser("compare", help="compare species: hierarchical model over fitted specimens")
     cp.add_argument("inputs", nargs="+", metavar="RUN_OR_DATASET", help="fit run directories or datasets")
     cp.add_argument("--out", required=True, help="output directory (compare.json, figures/)")
@@ -137,7 +134,6 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ft.add_argument("--resume", action="store_true", help="continue an interrupted run in --out")
     ft.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
-    ft.add_argument("--quiet", action="store_true", help="no progress bars")
 
     de = sub.add_parser("design", help="rank contact heights for the next push by expected information gain")
     de.add_argument("source", metavar="DATASET_OR_RUN", help="fit run directory, or a dataset (fitted first)")
@@ -164,7 +160,6 @@ def build_parser() -> argparse.ArgumentParser:
     de.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     de.add_argument("--forces-only", action="store_true", help="when fitting a dataset first: ignore centerlines")
     de.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
-    de.add_argument("--quiet", action="store_true", help="no progress bar")
 
     dg = sub.add_parser("diagnose", help="residual analysis: which missing effect explains the misfit; refit")
     dg.add_argument("dataset", help="dataset directory")
@@ -187,155 +182,131 @@ def build_parser() -> argparse.ArgumentParser:
         "--dataset",
         help="run the story on this dataset instead of the bundled one (frames are extracted first)",
     )
+    for cmd in sub.choices.values():  # every command: quiet, and its result as JSON on stdout
+        cmd.add_argument("--quiet", action="store_true", help="no progress bars or log lines (errors still shown)")
+        cmd.add_argument("--json", action="store_true", help="print the result as JSON on stdout (docs/format.md)")
     return parser
 
 
+#: library parameter names -> the flags that set them, for error messages
+FLAGS = {
+    "effect": "--effect",
+    "effects": "--effects",
+    "preset": "--preset",
+    "prior": "--prior",
+    "noise": "--noise",
+    "candidates": "--candidates",
+    "target": "--target",
+    "target_height_m": "--target-height",
+    "method": "--method",
+    "sensor": "--force-range",
+    "displacement_m": "--displacement",
+    "height_m": "--height",
+    "heights_m": "--heights",
+    "EI0": "--EI0",
+    "p": "--p",
+    "length_m": "--length-m",
+    "shape_weight": "--shape-weight",
+    "alpha": "--alpha",
+    "n_workers": "--workers",
+    "checkpoint": "--resume",
+    "arm": "--arm",
+}
+
+
+def _flag_message(message: str, command: str) -> str:
+    """A library error ``name: ...`` shown with the flag that sets ``name``; output-exists hints."""
+    name, sep, rest = message.partition(":")
+    if sep and name in FLAGS:
+        flag = FLAGS[name]
+        if command == "predict" and name == "length_m":
+            flag = "--length"
+        return f"{flag}:{rest}"
+    return message
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    from ..dataset.io import OutputExistsError
+
     parser = build_parser()
     args = parser.parse_args(argv)
+    _setup_logging(args.quiet)
     try:
         return _COMMANDS[args.command](args)
+    except OutputExistsError as exc:
+        if os.environ.get("BAYESROD_DEBUG"):
+            raise
+        print(f"bayesrod {args.command}: error: --out: {exc} (add --force to replace it)", file=sys.stderr)
+        return EXIT_BAD_INPUT
     except (ValueError, TypeError, OSError, KeyError) as exc:
         if os.environ.get("BAYESROD_DEBUG"):
             raise
         message = str(exc) if not isinstance(exc, KeyError) else f"missing key {exc}"
-        print(f"bayesrod {args.command}: error: {message}", file=sys.stderr)
+        print(f"bayesrod {args.command}: error: {_flag_message(message, args.command)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print(f"bayesrod {args.command}: interrupted", file=sys.stderr)
         return 130
 
 
+class _StderrHandler(logging.Handler):
+    """Log lines to the current sys.stderr (looked up at each line, so captured streams work)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            print(f"  {record.getMessage()}", file=sys.stderr, flush=True)
+        except Exception:  # pragma: no cover - logging must never break a command
+            self.handleError(record)
+
+
+def _setup_logging(quiet: bool) -> None:
+    logger = logging.getLogger("bayesrod")
+    for h in list(logger.handlers):
+        if isinstance(h, _StderrHandler):
+            logger.removeHandler(h)
+    logger.addHandler(_StderrHandler())
+    logger.setLevel(logging.WARNING if quiet else logging.INFO)
+    logger.propagate = False
+
+
+def _progress(args) -> bool:
+    return not args.quiet
+
+
+def _emit_json(doc) -> None:
+    from ..dataset.io import _json_default
+
+    print(json.dumps(doc, indent=2, default=_json_default))
+
+
+def _prepare_out(args) -> Path:
+    """Refuse a non-empty --out unless --force (checked before any computing)."""
+    from ..dataset.io import check_out_dir
+
+    return check_out_dir(args.out, getattr(args, "force", False))
+
+
 # --------------------------------------------------------------------------- #
 # predict
 # --------------------------------------------------------------------------- #
-def _rod_from_args(args: argparse.Namespace) -> tuple[float, float, float]:
-    values = {"EI0": args.EI0, "p": args.p, "length": args.length}
-    if args.preset:
-        preset = get_preset(args.preset)
-        defaults = {"EI0": preset["EI0"], "p": preset["p"], "length": preset["length_m"]}
-        values = {k: (v if v is not None else defaults[k]) for k, v in values.items()}
-    missing = [f"--{k}" for k, v in values.items() if v is None]
-    if missing:
-        raise ValueError(f"{', '.join(missing)}: expected a value (or --preset, or --posterior RUN), got none")
-    for key, val in values.items():
-        if not math.isfinite(val):
-            raise ValueError(f"--{key}: expected a finite number, got {val}")
-    if values["EI0"] <= 0:
-        raise ValueError(f"--EI0: expected a flexural rigidity > 0 N m^2, got {values['EI0']}")
-    if values["p"] < 0:
-        raise ValueError(f"--p: expected a taper exponent >= 0, got {values['p']}")
-    if values["length"] <= 0:
-        raise ValueError(f"--length: expected a stem length > 0 m, got {values['length']}")
-    return values["EI0"], values["p"], values["length"]
-
-
-def _check_height(h: float, length: float) -> None:
-    if not (math.isfinite(h) and 0 < h < length):
-        raise ValueError(f"--height: expected 0 < height < length ({length:g} m), got {h:g}")
-
-
-def _check_displacements(D: np.ndarray) -> None:
-    if np.any(D < 0):
-        raise ValueError(f"--displacement: expected values >= 0 m, got {D[D < 0][0]:g}")
-
-
 @_command("predict")
 def cmd_predict(args: argparse.Namespace) -> int:
+    from ..api import predict
+
     effects = parse_effect_assignments(args.effect)
     D = parse_values(args.displacement, "--displacement")
-    _check_displacements(D)
     if args.posterior:
-        result = predict_posterior(args.posterior, args.height, D, effects)
-        if args.json:
-            print(json.dumps(result, indent=2))
-        else:
-            _print_posterior_prediction(result)
+        res = predict(args.height, D, posterior=args.posterior, effects=effects).to_dict()
+        _emit_json(res) if args.json else _print_posterior_prediction(res)
         return 0
-    EI0, p, L = _rod_from_args(args)
-    _check_height(args.height, L)
-    result = predict_point(EI0, p, L, args.height, D, effects)
-    if args.json:
-        print(json.dumps(result, indent=2))
-    else:
-        _print_prediction(result, EI0, p, L, effects)
+    if args.posterior is None and args.preset is None and None in (args.EI0, args.p, args.length):
+        missing = [f for f, v in (("--EI0", args.EI0), ("--p", args.p), ("--length", args.length)) if v is None]
+        raise ValueError(f"{', '.join(missing)}: expected a value (or --preset, or --posterior RUN), got none")
+    res = predict(
+        args.height, D, EI0=args.EI0, p=args.p, length_m=args.length, preset=args.preset, effects=effects
+    ).to_dict()
+    _emit_json(res) if args.json else _print_prediction(res)
     return 0
-
-
-def predict_point(EI0: float, p: float, L: float, h: float, D: np.ndarray, effects: Effects) -> dict:
-    """The ``predict --json`` document for one parameter set (CONTRACT.md section 3)."""
-    sol = force_from_displacement(D, h, EI0, p, L, effects)
-    points = []
-    for i, d in enumerate(D):
-        slipped = bool(sol.slipped[i])
-        points.append(
-            {
-                "displacement_m": float(d),
-                "force_N": None if slipped else float(sol.force_N[i]),
-                "contact_s_m": None if slipped else float(sol.contact_s_m[i]),
-                "slipped": slipped,
-                "yielded": bool(sol.yielded[i]),
-            }
-        )
-    return {
-        "height_m": float(h),
-        "k_theta_Nm_per_rad": float(k_theta(h, EI0, p, L, effects.base_compliance)),
-        "k_x_N_per_m": float(k_x(h, EI0, p, L, effects.base_compliance)),
-        "model": {"EI0": EI0, "p": p, "length_m": L, "effects": effects.to_mapping()},
-        "points": points,
-    }
-
-
-def _load_run_samples(run: str) -> dict:
-    path = Path(run) / "samples.npz"
-    if not path.is_file():
-        raise ValueError(f"--posterior: expected a fit run directory holding samples.npz, got {run}")
-    with np.load(path) as z:
-        return {k: z[k] for k in z.files}
-
-
-def predict_posterior(run: str, h: float, D: np.ndarray, effects: Effects, n_draws: int = 400) -> dict:
-    """``predict --posterior``: force and stiffness bands from a fit's posterior draws."""
-    from .inference.summary import predictive_forces, quantiles
-
-    samples = _load_run_samples(run)
-    L = float(samples.pop("length_m"))
-    _check_height(h, L)
-    rng = np.random.default_rng(0)
-    n = samples["EI0"].size
-    idx = rng.choice(n, size=min(n_draws, n), replace=False)
-    EI0, p = samples["EI0"][idx], samples["p"][idx]
-    pred = predictive_forces(samples, idx, D, h, L, effects)
-    F = pred["force_N"]
-    slip_prob = pred["slipped"].mean(axis=0)
-    kb = samples["base_compliance"][idx] if "base_compliance" in samples else effects.base_compliance
-    kt = k_theta(h, EI0, p, L, kb)
-    kx = k_x(h, EI0, p, L, kb)
-
-    def q(x):
-        qq = quantiles(x)
-        return {k: (None if not np.isfinite(v) else float(v)) for k, v in qq.items()}
-
-    points = []
-    for i, d in enumerate(D):
-        col = F[:, i]
-        ok = np.isfinite(col)
-        points.append(
-            {
-                "displacement_m": float(d),
-                "force_N": q(col[ok]) if ok.sum() >= 2 else None,
-                "contact_s_m": q(pred["contact_s_m"][ok, i]) if ok.sum() >= 2 else None,
-                "slipped": bool(slip_prob[i] > 0.5),
-                "slip_probability": float(slip_prob[i]),
-            }
-        )
-    return {
-        "height_m": float(h),
-        "k_theta_Nm_per_rad": q(kt),
-        "k_x_N_per_m": q(kx),
-        "posterior": {"run": str(run), "draws": int(idx.size), "length_m": L},
-        "points": points,
-    }
 
 
 def _print_posterior_prediction(result: dict) -> None:
@@ -356,9 +327,10 @@ def _print_posterior_prediction(result: dict) -> None:
         print(f"{pt['displacement_m']:17.4f} {med:>17} {band:>22}  {pt['slip_probability']:.2f}")
 
 
-def _print_prediction(result: dict, EI0: float, p: float, L: float, effects: Effects) -> None:
-    eff = ", ".join(f"{k}={v:g}" for k, v in effects.to_mapping().items()) or "none"
-    print(f"Tapered rod: EI0 = {EI0:g} N m^2, p = {p:g}, L = {L:g} m, effects: {eff}")
+def _print_prediction(result: dict) -> None:
+    m = result["model"]
+    eff = ", ".join(f"{k}={v:g}" for k, v in m["effects"].items()) or "none"
+    print(f"Tapered rod: EI0 = {m['EI0']:g} N m^2, p = {m['p']:g}, L = {m['length_m']:g} m, effects: {eff}")
     print(
         f"Contact height h = {result['height_m']:g} m:  k_theta = {result['k_theta_Nm_per_rad']:.4g} N m/rad,  "
         f"k_x = {result['k_x_N_per_m']:.4g} N/m  (small-deflection, eqs. kdist/kx)"
@@ -373,20 +345,16 @@ def _print_prediction(result: dict, EI0: float, p: float, L: float, effects: Eff
 
 
 # --------------------------------------------------------------------------- #
-# validate, simulate
+# validate, simulate, extract, import
 # --------------------------------------------------------------------------- #
 @_command("validate")
 def cmd_validate(args: argparse.Namespace) -> int:
-    from .dataset import validate_dataset
+    from ..dataset import validate_dataset
 
     problems = validate_dataset(args.dataset)
     errors = [p for p in problems if p.severity == "error"]
     if args.json:
-        print(
-            json.dumps(
-                {"dataset": args.dataset, "valid": not errors, "problems": [dict(vars(p)) for p in problems]}, indent=2
-            )
-        )
+        _emit_json({"dataset": args.dataset, "valid": not errors, "problems": [dict(vars(p)) for p in problems]})
     else:
         for prob in problems:
             print(prob, file=sys.stderr if prob.severity == "error" else sys.stdout)
@@ -399,32 +367,31 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 @_command("simulate")
 def cmd_simulate(args: argparse.Namespace) -> int:
-    from .io import atomic_dir, check_out_dir
-    from .simulate import SimConfig, simulate, write_simulated
-    from .vision.render import default_camera
+    from ..api import simulate
 
     effects = parse_effect_assignments(args.effect)
-    check_out_dir(args.out, args.force)
-    overrides = {}
-    if args.heights:
-        overrides["heights_m"] = tuple(parse_values(args.heights, "--heights"))
-    cfg = SimConfig.from_preset(args.preset, seed=args.seed, noise=args.noise, effects=effects, **overrides)
-    for h in cfg.heights_m:
-        _check_height(h, cfg.length_m)
-    pushes = simulate(cfg, progress=sys.stderr.isatty())
-    with atomic_dir(args.out, args.force) as tmp:
-        write_simulated(
-            cfg,
-            pushes,
-            tmp,
-            frames=args.frames,
-            camera=default_camera(cfg.length_m) if args.frames else None,
-            arm=args.arm,
-        )
+    _prepare_out(args)
+    heights = tuple(parse_values(args.heights, "--heights")) if args.heights else None
+    ds = simulate(
+        args.preset, seed=args.seed, noise=args.noise, effects=effects, heights_m=heights, progress=_progress(args)
+    )
+    ds.save(args.out, overwrite=args.force, frames=args.frames, arm=args.arm)
     eff = ", ".join(f"{k}={v:g}" for k, v in effects.to_mapping().items()) or "none"
+    if args.json:
+        _emit_json(
+            {
+                "out": str(args.out),
+                "specimen": ds.specimen,
+                "heights_m": list(ds.heights_m),
+                "noise": args.noise,
+                "effects": effects.to_mapping(),
+                "frames": args.frames,
+            }
+        )
+        return 0
     print(
-        f"wrote {args.out}: {cfg.specimen}, {len(pushes)} pushes at "
-        f"{', '.join(f'{h:g}' for h in cfg.heights_m)} m, noise {args.noise}, effects {eff}"
+        f"wrote {args.out}: {ds.specimen}, {len(ds.pushes)} pushes at "
+        f"{', '.join(f'{h:g}' for h in ds.heights_m)} m, noise {args.noise}, effects {eff}"
         + (", with RGB-D frames" if args.frames else "")
     )
     return 0
@@ -432,60 +399,25 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 @_command("extract")
 def cmd_extract(args: argparse.Namespace) -> int:
-    from .extraction import extract_dataset
-    from .io import check_out_dir
+    from ..api import extract
 
-    check_out_dir(args.out, args.force)
-    extract_dataset(args.dataset, args.out, force=args.force, progress=not args.quiet and sys.stderr.isatty())
+    _prepare_out(args)
+    res = extract(args.dataset, progress=_progress(args))
+    res.save(args.out, overwrite=args.force)
+    if args.json:
+        _emit_json({"out": str(args.out), **res.to_dict()})
+        return 0
     print(f"wrote {args.out}: shapes_extracted.csv per push, extract_report.json, figures/extract_*.png")
-    return 0
-
-
-@_command("fit-many")
-def cmd_fit_many(args: argparse.Namespace) -> int:
-    from .survey import fit_many
-
-    if args.workers < 1:
-        raise ValueError(f"--workers: expected at least 1, got {args.workers}")
-    res = fit_many(
-        args.root,
-        args.out,
-        scheduler=args.scheduler,
-        n_workers=args.workers,
-        options={"prior": args.prior, "seed": args.seed, "use_shapes": not args.forces_only},
-        progress=not args.quiet and sys.stderr.isatty(),
-    )
-    print(
-        f"wrote {args.out}: {res['fitted']} of {res['datasets']} specimens in survey.csv / survey.parquet"
-        + (f"; {len(res['failed'])} failed (failures.json)" if res["failed"] else "")
-    )
-    return 1 if res["failed"] else 0
-
-
-@_command("compare")
-def cmd_compare(args: argparse.Namespace) -> int:
-    from .compare import compare
-    from .io import check_out_dir
-
-    check_out_dir(args.out, args.force)
-    res = compare(args.inputs, args.out, height_m=args.height, seed=args.seed, force=args.force)
-    for c in res["contrasts"]:
-        if c["parameter"] == "EI0":
-            print(
-                f"EI0 {c['a']} / {c['b']}: {c['ratio_median']:.3g} [{c['ratio_q05']:.3g}, {c['ratio_q95']:.3g}] "
-                f"(90%), P({c['a']} stiffer) = {c['prob_a_greater']:.3f}"
-            )
-    print(f"wrote {args.out}/compare.json and figures/forest.png")
     return 0
 
 
 @_command("import")
 def cmd_import(args: argparse.Namespace) -> int:
-    from .dataset import validate_dataset
-    from .importers import import_blueberry
-    from .io import atomic_dir, check_out_dir
+    from ..dataset import validate_dataset
+    from ..dataset.importers import import_blueberry
+    from ..dataset.io import atomic_dir
 
-    check_out_dir(args.out, args.force)
+    _prepare_out(args)
     with atomic_dir(args.out, args.force) as tmp:
         report = import_blueberry(args.src, tmp, args.length_m)
         for cane in report["canes"]:
@@ -493,6 +425,9 @@ def cmd_import(args: argparse.Namespace) -> int:
                 errors = [p for p in validate_dataset(tmp / cane["dataset"]) if p.severity == "error"]
                 if errors:
                     raise ValueError(f"imported dataset {cane['dataset']} does not validate: {errors[0]}")
+    if args.json:
+        _emit_json(report)
+        return 0
     n_ok = sum(c["status"] == "imported" for c in report["canes"])
     n_tr = sum(t["status"] == "imported" for c in report["canes"] for t in c["trials"])
     n_all = sum(len(c["trials"]) for c in report["canes"])
@@ -510,36 +445,9 @@ def cmd_import(args: argparse.Namespace) -> int:
     return 0
 
 
-@_command("fit")
-def cmd_fit(args: argparse.Namespace) -> int:
-    from .fit import fit_dataset
-    from .io import check_out_dir
-
-    if args.forces_only and args.shapes_only:
-        raise ValueError("--forces-only, --shapes-only: expected at most one, got both")
-    effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
-    if not args.resume:
-        check_out_dir(args.out, args.force)
-        if args.force and Path(args.out).is_dir():
-            import shutil
-
-            shutil.rmtree(args.out)
-    summary = fit_dataset(
-        args.dataset,
-        args.out,
-        prior=args.prior,
-        effects=effects,
-        seed=args.seed,
-        use_forces=not args.shapes_only,
-        use_shapes=not args.forces_only,
-        resume=args.resume,
-        progress=not args.quiet,
-        shape_weight=_shape_weight(args.shape_weight),
-    )
-    _print_fit(summary, args.out)
-    return 0
-
-
+# --------------------------------------------------------------------------- #
+# fit, fit-many, demo
+# --------------------------------------------------------------------------- #
 def _shape_weight(text: str) -> str | float:
     if text == "auto":
         return "auto"
@@ -552,7 +460,69 @@ def _shape_weight(text: str) -> str | float:
     return w
 
 
-def _print_fit(summary: dict, out) -> None:
+def _fit_and_save(
+    dataset,
+    out: Path,
+    args,
+    *,
+    seed: int,
+    use_forces=True,
+    use_shapes=True,
+    prior=None,
+    effects=(),
+    shape_weight="auto",
+):
+    """Fit with the API, checkpointing into ``out/chains.h5``, then save the run into ``out``."""
+    from ..api import fit
+
+    post = fit(
+        dataset,
+        prior=prior,
+        effects=effects,
+        seed=seed,
+        progress=_progress(args),
+        use_forces=use_forces,
+        use_shapes=use_shapes,
+        shape_weight=shape_weight,
+        checkpoint=out / "chains.h5",
+    )
+    post.save(out, overwrite=True)
+    return post
+
+
+@_command("fit")
+def cmd_fit(args: argparse.Namespace) -> int:
+    if args.forces_only and args.shapes_only:
+        raise ValueError("--forces-only, --shapes-only: expected at most one, got both")
+    effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
+    out = Path(args.out)
+    if not args.resume:
+        _prepare_out(args)
+        if args.force and out.is_dir():
+            import shutil
+
+            shutil.rmtree(out)
+    elif out.is_dir() and (out / "summary.json").is_file() and not (out / "chains.h5").is_file():
+        raise ValueError(f"--resume: expected an interrupted run (chains.h5) in {out}, got a finished run without one")
+    post = _fit_and_save(
+        args.dataset,
+        out,
+        args,
+        seed=args.seed,
+        use_forces=not args.shapes_only,
+        use_shapes=not args.forces_only,
+        prior=args.prior,
+        effects=effects,
+        shape_weight=_shape_weight(args.shape_weight),
+    )
+    _print_fit(post.to_dict(), out, args)
+    return 0
+
+
+def _print_fit(summary: dict, out, args) -> None:
+    if args.json:
+        _emit_json(summary)
+        return
     for name, q in summary["parameters"].items():
         print(f"  {name:>15} = {q['median']:.4g}  [{q['q05']:.4g}, {q['q95']:.4g}]  (median [90% interval])")
     for row in summary["k_theta"]:
@@ -562,12 +532,125 @@ def _print_fit(summary: dict, out) -> None:
     print(f"wrote {out}/summary.json, posterior.nc, report.html")
 
 
+@_command("fit-many")
+def cmd_fit_many(args: argparse.Namespace) -> int:
+    from ..api import fit_many
+
+    res = fit_many(
+        args.root,
+        args.out,
+        scheduler=args.scheduler,
+        n_workers=args.workers,
+        prior=args.prior,
+        seed=args.seed,
+        use_shapes=not args.forces_only,
+        progress=_progress(args),
+    )
+    res.save(args.out)
+    if args.json:
+        _emit_json(res.to_dict())
+    else:
+        print(
+            f"wrote {args.out}: {len(res.rows)} of {res.n_datasets} specimens in survey.csv / survey.parquet"
+            + (f"; {len(res.failures)} failed (failures.json)" if res.failures else "")
+        )
+    return 1 if res.failures else 0
+
+
+@_command("demo")
+def cmd_demo(args: argparse.Namespace) -> int:
+    from ..api import DEMO_DATASET, extract, load
+
+    _prepare_out(args)
+    out = Path(args.out)
+    if args.force and out.is_dir():
+        import shutil
+
+        shutil.rmtree(out)
+    dataset = Path(args.dataset) if args.dataset else DEMO_DATASET
+    say = (lambda *a: None) if args.json else print
+    ds = load(dataset)
+    if any(p.frames for p in ds.pushes):
+        say(f"bayesrod demo: extracting centerlines from the frames of {dataset} ...")
+        ex = extract(ds, progress=_progress(args))
+        ex.save(out / "extracted")
+        n = sum(len(p["frames"]) for p in ex.to_dict()["pushes"].values())
+        say(f"  {n} frames extracted into {out / 'extracted'}")
+        dataset = out / "extracted"
+    else:
+        say(f"bayesrod demo: {dataset} has no RGB-D frames (centerlines are given); no extraction needed")
+    say(f"bayesrod demo: fitting {dataset} ...")
+    post = _fit_and_save(dataset, out / "fit", args, seed=0)
+    summary = post.to_dict()
+    _print_fit(summary, out / "fit", args)
+    if args.json:
+        return 0
+    truth = summary.get("truth")
+    if truth:
+        print(f"  (simulated truth: EI0 = {truth['EI0']:g} N m^2, p = {truth['p']:g})")
+    print(f"report: {(out / 'fit' / 'report.html').resolve()}")
+    return 0
+
+
+# --------------------------------------------------------------------------- #
+# compare, design, diagnose
+# --------------------------------------------------------------------------- #
+@_command("compare")
+def cmd_compare(args: argparse.Namespace) -> int:
+    from ..api import Posterior, compare
+    from ..api.compare import _is_run, expand_inputs
+
+    out = _prepare_out(args)
+    posts, fitted = [], []
+    for path in expand_inputs(args.inputs):
+        if _is_run(path):
+            posts.append(Posterior.load(path))
+        elif (path / "specimen.json").is_file():
+            logging.getLogger("bayesrod").info("%s: a dataset; fitting it first", path)
+            from ..api import fit
+
+            post = fit(path, seed=args.seed, progress=False)
+            posts.append(post)
+            fitted.append(post)
+        else:
+            raise ValueError(f"{path}: expected a fit run (summary.json + samples.npz) or a dataset (specimen.json)")
+    res = compare(posts, height_m=args.height, seed=args.seed)
+    res.save(out, overwrite=args.force)
+    for post in fitted:
+        post.save(out / "fits" / post.specimen)
+    if args.json:
+        _emit_json(res.to_dict())
+        return 0
+    for c in res.contrasts:
+        if c["parameter"] == "EI0":
+            print(
+                f"EI0 {c['a']} / {c['b']}: {c['ratio_median']:.3g} [{c['ratio_q05']:.3g}, {c['ratio_q95']:.3g}] "
+                f"(90%), P({c['a']} stiffer) = {c['prob_a_greater']:.3f}"
+            )
+    print(f"wrote {args.out}/compare.json and figures/forest.png")
+    return 0
+
+
+def _design_source(args, out: Path):
+    """The posterior to design from: a run as it is, or a dataset fitted first into OUT/fit."""
+    from ..api import Posterior
+
+    src = Path(args.source)
+    if (src / "samples.npz").is_file():
+        return Posterior.load(src), None
+    if (src / "specimen.json").is_file():
+        logging.getLogger("bayesrod").info("%s: a dataset; fitting it into %s first", src, out / "fit")
+        from ..api import fit
+
+        return None, fit(src, seed=args.seed, use_shapes=not args.forces_only, progress=_progress(args))
+    raise ValueError(f"{src}: expected a fit run (samples.npz) or a dataset (specimen.json)")
+
+
 @_command("design")
 def cmd_design(args: argparse.Namespace) -> int:
-    from .design import run_design
-    from .io import check_out_dir
+    from ..api import design
 
-    check_out_dir(args.out, args.force)
+    out = _prepare_out(args)
     rng = None
     if args.force_range:
         try:
@@ -576,59 +659,79 @@ def cmd_design(args: argparse.Namespace) -> int:
             rng = None
         if rng is None or len(rng) != 2:
             raise ValueError(f"--force-range: expected LOW,HIGH in N, got {args.force_range!r}")
-    method = args.method or ("nmc" if args.target == "params" else "gaussian")
-    res = run_design(
-        args.source,
-        args.out,
-        candidates=args.candidates,
+    loaded, fitted = _design_source(args, out)
+    post = loaded or fitted
+    heights = parse_candidates(args.candidates) if args.candidates else None
+    res = design(
+        post,
+        heights,
+        sensor=rng,
         displacement_m=args.displacement,
         n_samples=args.samples,
-        force_range_N=rng,
         confidence=args.confidence,
         target=args.target,
         target_height_m=args.target_height,
-        method=method,
+        method=args.method,
         seed=args.seed,
-        forces_only=args.forces_only,
-        progress=not args.quiet,
+        progress=_progress(args),
     )
-    for r in res["candidates"]:
-        g = r["expected_information_gain_nats"]
-        mark = "*" if r["height_m"] == res["recommended_height_m"] else " "
-        why = "" if r["feasible"] else f"  infeasible: {r['reason']}"
-        print(f" {mark} h = {r['height_m']:.3f} m  EIG {'-' if g is None else f'{g:.3f}'} nats{why}")
-    if res["recommended_height_m"] is None:
+    res.save(out, overwrite=args.force)
+    if fitted is not None:
+        fitted.save(out / "fit")
+    doc = res.to_dict()
+    if args.json:
+        _emit_json(doc)
+    else:
+        for r in doc["candidates"]:
+            g = r["expected_information_gain_nats"]
+            mark = "*" if r["height_m"] == doc["recommended_height_m"] else " "
+            why = "" if r["feasible"] else f"  infeasible: {r['reason']}"
+            print(f" {mark} h = {r['height_m']:.3f} m  EIG {'-' if g is None else f'{g:.3f}'} nats{why}")
+    if doc["recommended_height_m"] is None:
         print(f"no feasible height among the candidates; wrote {args.out}/design.json", file=sys.stderr)
         return 1
-    print(f"recommended next height: {res['recommended_height_m']:.3f} m; wrote {args.out}/design.json")
+    if not args.json:
+        print(f"recommended next height: {doc['recommended_height_m']:.3f} m; wrote {args.out}/design.json")
     return 0
+
+
+def parse_candidates(text: str):
+    """``start:stop:num`` heights for ``design --candidates``."""
+    import numpy as np
+
+    parts = text.split(":")
+    try:
+        if len(parts) != 3:
+            raise ValueError
+        a, b, n = float(parts[0]), float(parts[1]), int(parts[2])
+    except ValueError:
+        raise ValueError(f"--candidates: expected start:stop:num (metres, metres, count), got {text!r}") from None
+    if n < 1 or not (np.isfinite(a) and np.isfinite(b)):
+        raise ValueError(f"--candidates: expected num >= 1 and finite heights, got {text!r}")
+    return np.linspace(a, b, n)
 
 
 @_command("diagnose")
 def cmd_diagnose(args: argparse.Namespace) -> int:
-    from .diagnosis import run_diagnose
-    from .inference.diagnose import CATALOG
-    from .io import check_out_dir
+    from ..api import diagnose
+    from ..inference.diagnose import CATALOG
 
-    check_out_dir(args.out, args.force)
+    out = _prepare_out(args)
     cands = CATALOG
     if args.candidates:
         cands = tuple(c.strip() for c in args.candidates.split(",") if c.strip())
-        bad = [c for c in cands if c not in CATALOG]
-        if bad or not cands:
-            raise ValueError(f"--candidates: expected effects from {', '.join(CATALOG)}, got {args.candidates!r}")
-    if not (0 < args.alpha < 1):
-        raise ValueError(f"--alpha: expected a level in (0, 1), got {args.alpha}")
-    doc = run_diagnose(
+    res = diagnose(
         args.dataset,
-        args.out,
         candidates=cands,
         use_shapes=not args.forces_only,
         alpha=args.alpha,
         min_heldout_gain=args.min_heldout_gain,
-        force=args.force,
-        log=lambda msg: print(f"  {msg}", flush=True),
     )
+    res.save(out, overwrite=args.force)
+    doc = res.to_dict()
+    if args.json:
+        _emit_json(doc)
+        return 0
     b, a = doc["before"], doc["after"]
     print(f"added effects: {', '.join(doc['added_effects']) or 'none'}")
     for k in ("force_rmse_N", "shape_rmse_mm", "heldout_force_rmse_N"):
@@ -637,42 +740,6 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     if doc["unexplained_structure"]:
         print("  unexplained structure remains in the residuals (see report.html)")
     print(f"wrote {args.out}/diagnose.json and report.html")
-    return 0
-
-
-@_command("demo")
-def cmd_demo(args: argparse.Namespace) -> int:
-    from importlib import resources
-
-    from .fit import fit_dataset
-    from .io import check_out_dir
-
-    check_out_dir(args.out, args.force)
-    if args.force and Path(args.out).is_dir():
-        import shutil
-
-        shutil.rmtree(args.out)
-    dataset = Path(args.dataset) if args.dataset else resources.files("bayesrod") / "data" / "default"
-    from .dataset import read_dataset
-
-    spec = read_dataset(dataset)
-    if any(p.frames for p in spec.pushes):
-        from .extraction import extract_dataset
-
-        print(f"bayesrod demo: extracting centerlines from the frames of {dataset} ...")
-        rep = extract_dataset(dataset, Path(args.out) / "extracted", log=lambda *a: None)
-        n = sum(len(p["frames"]) for p in rep["pushes"].values())
-        print(f"  {n} frames extracted into {Path(args.out) / 'extracted'}")
-        dataset = Path(args.out) / "extracted"
-    else:
-        print(f"bayesrod demo: {dataset} has no RGB-D frames (centerlines are given); no extraction needed")
-    print(f"bayesrod demo: fitting {dataset} ...")
-    summary = fit_dataset(str(dataset), Path(args.out) / "fit", seed=0)
-    _print_fit(summary, Path(args.out) / "fit")
-    truth = summary.get("truth")
-    if truth:
-        print(f"  (simulated truth: EI0 = {truth['EI0']:g} N m^2, p = {truth['p']:g})")
-    print(f"report: {(Path(args.out) / 'fit' / 'report.html').resolve()}")
     return 0
 
 

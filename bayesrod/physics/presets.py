@@ -35,4 +35,4 @@ def get_preset(name: str) -> MappingProxyType:
     try:
         return PRESETS[name]
     except KeyError:
-        raise ValueError(f"--preset: expected one of {', '.join(PRESETS)}, got {name!r}") from None
+        raise ValueError(f"preset: expected one of {', '.join(PRESETS)}, got {name!r}") from None

@@ -1,6 +1,6 @@
-"""``bayesrod fit-many``: fit every dataset of a folder on a Dask cluster; one RUN each and a survey table.
+"""``bayesrod.fit_many``: fit every dataset of a folder on a Dask cluster; one run each and a survey table.
 
-Layout of ``--out``::
+Layout of the output folder::
 
     OUT/runs/<specimen>/         a normal fit run (summary.json, posterior.nc, report.html, ...)
     OUT/runs/<specimen>.done     written after the run finished (the restart marker)
@@ -8,18 +8,25 @@ Layout of ``--out``::
     OUT/failures.json            datasets that failed, with the one-line reason
 
 Restartable: a rerun skips specimens with a ``.done`` marker and resumes
-interrupted ones from their ``chains.h5`` checkpoint (``bayesrod fit --resume``).
+interrupted ones from their ``chains.h5`` checkpoint.
 One failing dataset is reported and does not stop the others. Each dataset is
-fitted with the same seed, so a run equals ``bayesrod fit DATASET --seed N``.
+fitted with the same seed, so a run equals ``bayesrod.fit(dataset, seed=N)``.
 """
 
 from __future__ import annotations
 
+import copy
 import json
+import logging
 import time
+from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
 
-from .io import write_json, write_text_atomic
+from ..dataset.io import write_json
+
+log = logging.getLogger("bayesrod")
 
 SURVEY_COLUMNS = [
     "specimen",
@@ -54,15 +61,16 @@ def find_datasets(root) -> list[Path]:
 
 
 def fit_one(dataset: str, run: str, options: dict) -> dict:
-    """Worker task: fit one dataset into ``run`` (resuming a checkpoint); never raises."""
-    from .fit import fit_dataset
+    """Worker task: fit one dataset and save it into ``run`` (resuming its checkpoint); never raises."""
+    from .fitting import fit
 
     t0 = time.perf_counter()
     try:
-        s = fit_dataset(dataset, run, progress=False, resume=True, log=lambda *a: None, **options)
+        post = fit(dataset, progress=False, checkpoint=Path(run) / "chains.h5", **options)
+        post.save(run, overwrite=True)
     except Exception as e:  # reported per dataset; the others go on
         return {"dataset": dataset, "ok": False, "error": f"{type(e).__name__}: {e}"}
-    return {"dataset": dataset, "ok": True, "summary": s, "seconds": time.perf_counter() - t0}
+    return {"dataset": dataset, "ok": True, "summary": post.to_dict(), "seconds": time.perf_counter() - t0}
 
 
 def _row(summary: dict, run: Path) -> dict:
@@ -87,26 +95,58 @@ def _row(summary: dict, run: Path) -> dict:
     }
 
 
-def write_survey(out: Path) -> list[dict]:
-    """survey.csv and survey.parquet from every finished run (atomic writes)."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
+def finished_rows(out: Path) -> list[dict]:
+    """One survey row per finished run under ``out/runs`` (a ``.done`` marker and its summary.json)."""
     rows = []
-    for done in sorted((out / "runs").glob("*.done")):
+    for done in sorted((Path(out) / "runs").glob("*.done")):
         run = done.with_suffix("")
         s = run / "summary.json"
         if s.is_file():
             rows.append(_row(json.loads(s.read_text()), run))
-    lines = [",".join(SURVEY_COLUMNS)]
-    for r in rows:
-        lines.append(",".join("" if r[c] is None else str(r[c]).replace(",", ";") for c in SURVEY_COLUMNS))
-    write_text_atomic(out / "survey.csv", "\n".join(lines) + "\n")
-    table = pa.table({c: [r[c] for r in rows] for c in SURVEY_COLUMNS})
-    tmp = out / ".survey.parquet.tmp"
-    pq.write_table(table, tmp)
-    tmp.replace(out / "survey.parquet")
     return rows
+
+
+@dataclass(frozen=True, eq=False)
+class Survey:
+    """Every specimen of a folder fitted: one row per finished run, and the failures with their reason."""
+
+    rows: tuple[Mapping, ...]
+    failures: Mapping[str, Mapping]
+    n_datasets: int
+
+    def to_frame(self):
+        """The survey as a pandas DataFrame (columns as survey.csv)."""
+        import pandas as pd
+
+        return pd.DataFrame([dict(r) for r in self.rows], columns=SURVEY_COLUMNS)
+
+    def to_dict(self) -> dict:
+        return {
+            "datasets": self.n_datasets,
+            "fitted": len(self.rows),
+            "failed": copy.deepcopy(dict(self.failures)),
+            "rows": [dict(r) for r in self.rows],
+        }
+
+    def save(self, path) -> Path:
+        """Write ``survey.csv``, ``survey.parquet`` and ``failures.json`` into ``path`` (each atomically)."""
+        import io
+
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        from ..dataset.io import write_bytes_atomic, write_json, write_text_atomic
+
+        path = Path(path)
+        lines = [",".join(SURVEY_COLUMNS)]
+        for r in self.rows:
+            lines.append(",".join("" if r[c] is None else str(r[c]).replace(",", ";") for c in SURVEY_COLUMNS))
+        write_text_atomic(path / "survey.csv", "\n".join(lines) + "\n")
+        buf = io.BytesIO()
+        pq.write_table(pa.table({c: [r[c] for r in self.rows] for c in SURVEY_COLUMNS}), buf)
+        write_bytes_atomic(path / "survey.parquet", buf.getvalue())
+        write_json(path / "failures.json", dict(self.failures))
+        return path
 
 
 def fit_many(
@@ -115,26 +155,46 @@ def fit_many(
     *,
     scheduler: str | None = None,
     n_workers: int = 2,
-    options: dict | None = None,
+    prior=None,
+    seed: int = 0,
+    use_shapes: bool = True,
     progress: bool = True,
-    log=print,
-) -> dict:
-    """Fit every dataset under ``root`` into ``out`` on Dask; returns counts and failures."""
+) -> Survey:
+    """Fit every dataset under ``root`` on Dask, each saved as a run in ``out/runs/<specimen>``.
+
+    Restartable: specimens with a ``.done`` marker are skipped and interrupted ones resume from their
+    checkpoint. One failing dataset is reported in ``Survey.failures`` and does not stop the others.
+
+    Parameters
+    ----------
+    root : path
+        A folder whose sub-directories are datasets (or one dataset).
+    out : path
+        Where the runs go (``out/runs``); :meth:`Survey.save` writes the table.
+    scheduler : str or None
+        Address of a running Dask scheduler; None starts a local cluster of ``n_workers`` processes.
+    prior, seed, use_shapes
+        As :func:`bayesrod.fit`, the same for every dataset.
+    """
     from dask.distributed import Client, LocalCluster, as_completed
     from tqdm.auto import tqdm
 
-    options = dict(options or {})
+    from ._common import progress_enabled
+
+    if not (isinstance(n_workers, int) and n_workers >= 1):
+        raise ValueError(f"n_workers: expected at least 1, got {n_workers!r}")
+    options = {"prior": prior, "seed": seed, "use_shapes": use_shapes}
     out = Path(out)
     datasets = find_datasets(root)
-    (out / "runs").mkdir(parents=True, exist_ok=True)
     names = {}
     for d in datasets:
         name = json.loads((d / "specimen.json").read_text()).get("specimen") or d.name
         if name in names:
             raise ValueError(f"{d / 'specimen.json'}: field specimen: expected a unique name, got {name!r} twice")
         names[name] = d
+    (out / "runs").mkdir(parents=True, exist_ok=True)
     todo = {n: d for n, d in names.items() if not (out / "runs" / f"{n}.done").is_file()}
-    log(f"{len(names)} datasets, {len(names) - len(todo)} already fitted, {len(todo)} to fit")
+    log.info("%d datasets, %d already fitted, %d to fit", len(names), len(names) - len(todo), len(todo))
     failures = {}
     if todo:
         cluster = None
@@ -148,7 +208,9 @@ def fit_many(
                 client.submit(fit_one, str(d), str(out / "runs" / n), options, key=f"fit-{n}", pure=False): n
                 for n, d in todo.items()
             }
-            bar = tqdm(total=len(futures), desc="fitting specimens", unit="specimen", disable=not progress)
+            bar = tqdm(
+                total=len(futures), desc="fitting specimens", unit="specimen", disable=not progress_enabled(progress)
+            )
             for fut in as_completed(futures):
                 n = futures[fut]
                 try:
@@ -159,13 +221,12 @@ def fit_many(
                     write_json(out / "runs" / f"{n}.done", {"seconds": res["seconds"], "dataset": str(todo[n])})
                 else:
                     failures[n] = {"dataset": str(todo[n]), "error": res["error"]}
-                    log(f"{n}: failed: {res['error']}")
+                    log.warning("%s: failed: %s", n, res["error"])
                 bar.update()
             bar.close()
         finally:
             client.close()
             if cluster is not None:
                 cluster.close()
-    write_json(out / "failures.json", failures)
-    rows = write_survey(out)
-    return {"datasets": len(names), "fitted": len(rows), "failed": failures}
+    rows = tuple(MappingProxyType(r) for r in finished_rows(out))
+    return Survey(rows, MappingProxyType(failures), len(names))

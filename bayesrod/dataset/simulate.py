@@ -17,13 +17,13 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
-from .dataset.model import FORMAT
+from .._version import __version__
+from ..physics import Effects, force_from_displacement
+from ..physics.elastica import centerline_at, force_from_displacement_nd
+from ..physics.lumped import wire_elongation_from_dx
+from ..physics.presets import get_preset
 from .io import write_csv, write_json
-from .physics import Effects, force_from_displacement
-from .physics.elastica import centerline_at, force_from_displacement_nd
-from .physics.lumped import wire_elongation_from_dx
-from .presets import get_preset
+from .model import FORMAT
 
 WIRE_LENGTH = 0.44  # m, the seed's wire sensor span
 WIRE_STIFFNESS = 2000.0  # N/m axial stiffness of the whole wire
@@ -79,7 +79,7 @@ class SimConfig:
     ) -> SimConfig:
         pr = get_preset(name)
         if noise not in ("default", "none"):
-            raise ValueError(f"--noise: expected default or none, got {noise!r}")
+            raise ValueError(f"noise: expected default or none, got {noise!r}")
         nm = DEFAULT_NOISE[name] if noise == "default" else NoiseModel.none()
         kw = dict(
             specimen=f"{pr['specimen']}-sim-{seed}",
@@ -305,7 +305,7 @@ def write_simulated(
         )
         entry["truth_shapes"] = f"{sp.id}/truth_shapes.csv"
         if frames:
-            from .vision.render import render_push_frames
+            from ..vision.render import render_push_frames
 
             render_push_frames(
                 cfg, sp, d / "frames", camera, np.random.default_rng([cfg.seed, round(sp.height_m * 1e6)]), arm

@@ -13,15 +13,21 @@ from pathlib import Path
 import numpy as np
 
 
+class OutputExistsError(ValueError):
+    """An output directory that already holds results; the caller decides whether to overwrite."""
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        super().__init__(f"{self.path}: expected a new or empty directory, got one that is not empty")
+
+
 def check_out_dir(out: str | os.PathLike, force: bool) -> Path:
-    """Refuse an existing non-empty ``--out`` directory unless ``force``."""
+    """Refuse an existing non-empty output directory unless ``force`` (:class:`OutputExistsError`)."""
     out = Path(out)
     if out.exists() and not out.is_dir():
-        raise ValueError(f"--out: expected a directory path, got {out} which is a file")
+        raise ValueError(f"{out}: expected a directory path, got a file")
     if out.is_dir() and any(out.iterdir()) and not force:
-        raise ValueError(
-            f"--out: expected a new or empty directory, got {out} which is not empty (add --force to replace it)"
-        )
+        raise OutputExistsError(out)
     return out
 
 
@@ -56,6 +62,21 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
+    """Write bytes via a temporary sibling and an atomic rename (parents created)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):

@@ -2,9 +2,16 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-from .inference.summary import ei_band, k_theta_band, predictive_forces, quantiles
+from ..inference.diagnose import CATALOG
+from ..inference.summary import ei_band, k_theta_band, predictive_forces, quantiles
+
+if TYPE_CHECKING:
+    from ..inference.diagnose import ForwardModel
+    from ..inference.hierarchical import SpecimenPosterior
 
 
 def _ax(ax):
@@ -65,7 +72,7 @@ def plot_k_theta_band(samples: dict, length_m: float, heights_pushed, ax=None, c
     marks = [ax.axvline(x, color="0.5", ls=":", lw=1) for x in heights_pushed]
     pts = None
     if lumped:
-        from .physics import k_x
+        from ..physics import k_x
 
         kb = samples.get("base_compliance")
         kb = np.inf if kb is None else np.asarray(kb)[:, None]
@@ -199,4 +206,165 @@ def plot_rank(idata, n_ensembles: int, var_names=("EI0", "p"), axes=None, bins: 
         ax.set(title=f"rank plot: {name}", xlabel="rank bin (all draws)", ylabel="count / mean", ylim=(0, 2))
         ax.legend(fontsize=7, ncol=2)
         out[name] = lines
+    return out
+
+
+def plot_design(result: dict, ax=None, pushed_m=()):
+    """Expected information gain against height; infeasible heights greyed, the pick marked. Returns artists."""
+    if ax is None:
+        import matplotlib.pyplot as plt
+
+        _, ax = plt.subplots(figsize=(6.4, 3.6))
+    rows = [r for r in result["candidates"] if r["expected_information_gain_nats"] is not None]
+    h = np.array([r["height_m"] for r in rows])
+    g = np.array([r["expected_information_gain_nats"] for r in rows])
+    ok = np.array([r["feasible"] for r in rows])
+    art = {"line": ax.plot(h, g, "-", color="0.6", lw=1)[0]}
+    art["feasible"] = ax.plot(h[ok], g[ok], "o", color="C0", label="feasible")[0]
+    art["infeasible"] = ax.plot(h[~ok], g[~ok], "x", color="C3", label="infeasible (see design.json)")[0]
+    rec = result["recommended_height_m"]
+    if rec is not None:
+        art["recommended"] = ax.axvline(rec, color="C2", lw=2, label=f"recommended {rec:.3g} m")
+    for k, hp in enumerate(pushed_m):
+        ax.axvline(hp, color="k", ls=":", lw=1, label="already pushed" if k == 0 else None)
+    ax.set_xlabel("contact height h [m]")
+    ax.set_ylabel(f"expected information gain [nats]\n(target: {result['target']})")
+    ax.legend(fontsize=8)
+    return art
+
+
+def plot_forest(fit: dict, specimens: list[SpecimenPosterior], ax=None):
+    """Species-level EI0 (90% interval) with each specimen's median: a forest plot. Returns the artists."""
+    if ax is None:
+        import matplotlib.pyplot as plt
+
+        _, ax = plt.subplots(figsize=(6.4, 0.6 + 0.5 * len(specimens) + 0.6 * len(fit["species"])))
+    artists = {"species": [], "specimens": []}
+    y = 0
+    ticks, labels = [], []
+    for g, sp in enumerate(fit["species"]):
+        q05, q50, q95 = np.exp(np.quantile(fit["mu"][:, g, 0], [0.05, 0.5, 0.95]))
+        artists["species"].append(ax.errorbar(q50, y, xerr=[[q50 - q05], [q95 - q50]], fmt="D", color=f"C{g}", ms=7))
+        ticks.append(y)
+        labels.append(f"{sp} (species)")
+        y -= 1
+        for s in [s for s in specimens if s.species == sp]:
+            lo, med, hi = np.exp(np.quantile(s.draws[:, 0], [0.05, 0.5, 0.95]))
+            artists["specimens"].append(
+                ax.errorbar(med, y, xerr=[[med - lo], [hi - med]], fmt="o", color=f"C{g}", ms=4, alpha=0.7)
+            )
+            ticks.append(y)
+            labels.append(f"  {s.specimen}")
+            y -= 1
+        y -= 0.5
+    ax.set_yticks(ticks, labels)
+    ax.set(xscale="log", xlabel="EI0 [N m$^2$] (median, 90% interval)", title="Species comparison (forest plot)")
+    return artists
+
+
+def plot_residual_structure(model: ForwardModel, before, after, axes=None, bins: int = 12):
+    """Force residuals against displacement and shape residuals against height, before and after.
+
+    ``before`` / ``after``: :class:`~bayesrod.inference.diagnose.MapFit`. Binned means (lines)
+    over the raw residuals (dots). ``axes``: two axes, or None for a new figure. Returns the artists.
+    """
+    if axes is None:
+        import matplotlib.pyplot as plt
+
+        _, axes = plt.subplots(1, 2, figsize=(11, 3.8))
+    art = {"force": [], "shape": []}
+    for k, d in enumerate(model.data):
+        col = f"C{k}"
+        sel = model.force_push == k
+        for fit, ls, lab in ((before, ":", "plain"), (after, "-", "after")):
+            r = fit.r_force[sel]
+            if r.size:
+                if fit is before:
+                    axes[0].plot(d.D_m * 1000, r, ".", ms=2, color=col, alpha=0.35)
+                art["force"].append(
+                    axes[0].plot(*_binned(d.D_m * 1000, r, bins), ls, color=col, label=f"h = {d.height_m:g} m, {lab}")[
+                        0
+                    ]
+                )
+        selp = model.point_push == k
+        if selp.any():
+            for fit, ls in ((before, ":"), (after, "-")):
+                art["shape"].append(axes[1].plot(*_binned(d.z_m, 1000 * fit.r_shape[selp], bins), ls, color=col)[0])
+    for ax in axes:
+        ax.axhline(0, color="k", lw=0.8)
+    axes[0].set(xlabel="contact displacement [mm]", ylabel="force residual [N]", title="forces (dots: plain model)")
+    axes[0].legend(fontsize=7, ncol=2)
+    axes[1].set(xlabel="height z of the point [m]", ylabel="shape residual [mm]", title="shapes (binned means)")
+    if not art["shape"]:
+        axes[1].text(0.5, 0.5, "no centerlines", ha="center", va="center", transform=axes[1].transAxes)
+    return art
+
+
+def _binned(t, r, bins):
+    edges = np.linspace(np.min(t), np.max(t), bins + 1)
+    k = np.clip(np.digitize(t, edges) - 1, 0, bins - 1)
+    c = np.array([t[k == b].mean() if np.any(k == b) else np.nan for b in range(bins)])
+    m = np.array([r[k == b].mean() if np.any(k == b) else np.nan for b in range(bins)])
+    return c, m
+
+
+def plot_statistics(result: dict, ax=None):
+    """Each effect's test statistic per round (log scale) against its selection threshold. Returns the bars."""
+    from scipy import stats
+
+    if ax is None:
+        import matplotlib.pyplot as plt
+
+        _, ax = plt.subplots(figsize=(6.4, 3.6))
+    rows = result["candidates"]
+    rounds = sorted({r["round"] for r in rows})
+    width = 0.8 / max(len(rounds), 1)
+    bars = []
+    for j, rnd in enumerate(rounds):
+        rr = {r["effect"]: r for r in rows if r["round"] == rnd}
+        x = np.arange(len(CATALOG)) + j * width
+        val = [max(rr[e]["statistic"], 1e-2) if e in rr else np.nan for e in CATALOG]
+        col = ["C2" if e in rr and rr[e]["selected"] else f"C{j}" for e in CATALOG]
+        bars.append(ax.bar(x, val, width=width, color=col, label=f"round {rnd}"))
+        level = next(iter(rr.values()))["level"]
+        ax.hlines(stats.chi2.isf(level, 1), x[0] - width / 2, x[-1] + width / 2, colors="k", linestyles=":")
+    ax.set_yscale("log")
+    ax.set_xticks(np.arange(len(CATALOG)) + 0.4 - width / 2, CATALOG, rotation=30, ha="right", fontsize=8)
+    ax.set_ylabel("test statistic (chi^2 scale)")
+    ax.set_title("effect tests (green: added; dotted: threshold)", fontsize=9)
+    ax.legend(fontsize=8)
+    return bars
+
+
+def plot_extraction(rgb, line, ax=None, camera=None, direction=1):
+    """RGB frame with the segmentation (orange), skeleton (blue) and tracked pixel path (cyan).
+
+    With ``camera`` (the specimen's pinhole block) the written points are drawn too: seen points
+    yellow, points bridged across an occlusion hollow magenta. Returns the artists drawn.
+    """
+    if ax is None:
+        import matplotlib.pyplot as plt
+
+        _, ax = plt.subplots(figsize=(8, 6))
+    img = ax.imshow(rgb)
+    mask = ax.imshow(np.ma.masked_where(~line.mask, line.mask), cmap="autumn", alpha=0.45)
+    vv, uu = np.nonzero(line.skeleton)
+    sk = ax.plot(uu, vv, ",", color="b")[0]
+    (path,) = ax.plot(
+        line.path_uv[:, 0], line.path_uv[:, 1], "c-", lw=1.2, label="pixel path (Dijkstra + tip tracking)"
+    )
+    out = {"image": img, "mask": mask, "skeleton": sk, "path": path}
+    if camera is not None:
+        u0, v0 = camera["base_px"]
+        u = u0 + direction * line.x_m * camera["fx"] / line.plane_depth_m
+        v = v0 - line.z_m * camera["fy"] / line.plane_depth_m
+        seen = line.observed if line.observed is not None else np.ones(u.size, bool)
+        out["seen"] = ax.plot(u[seen], v[seen], "o", ms=2.5, color="yellow", label="centerline points")[0]
+        if (~seen).any():
+            out["bridged"] = ax.plot(
+                u[~seen], v[~seen], "o", ms=4, mfc="none", color="magenta", label="bridged across an occlusion"
+            )[0]
+    ax.set(title=f"extracted length {line.length_m:.3f} m, plane depth {line.plane_depth_m:.3f} m")
+    ax.legend(loc="upper right", fontsize=8)
+    ax.axis("off")
     return out

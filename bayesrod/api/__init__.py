@@ -1,0 +1,38 @@
+"""The public API: datasets in, posteriors and their bands out, designs, comparisons, diagnoses.
+
+Every function here computes and returns an immutable result object; only the
+objects' ``save()`` / ``report()`` write files. See docs/api.md.
+"""
+
+from .bands import Band, ForceBand
+from .compare import Comparison, compare
+from .data import DEMO_DATASET, SimulatedDataset, load, simulate
+from .design import Design, design
+from .diagnose import Diagnosis, diagnose
+from .extract import Extraction, extract
+from .fitting import Posterior, fit
+from .predict import Prediction, predict
+from .survey import Survey, fit_many
+
+__all__ = [
+    "DEMO_DATASET",
+    "Band",
+    "Comparison",
+    "Design",
+    "Diagnosis",
+    "Extraction",
+    "ForceBand",
+    "Posterior",
+    "Prediction",
+    "SimulatedDataset",
+    "Survey",
+    "compare",
+    "design",
+    "diagnose",
+    "extract",
+    "fit",
+    "fit_many",
+    "load",
+    "predict",
+    "simulate",
+]

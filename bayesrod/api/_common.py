@@ -1,0 +1,40 @@
+"""Small helpers the public API shares: dataset coercion, intervals, when to show progress."""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..dataset.model import Specimen
+
+
+def as_dataset(dataset) -> Specimen:
+    """A :class:`~bayesrod.Dataset` from itself or from a dataset directory (read and validated)."""
+    from ..dataset import read_dataset
+
+    if isinstance(dataset, Specimen):
+        return dataset
+    if isinstance(dataset, (str, os.PathLike)):
+        return read_dataset(dataset)
+    raise TypeError(f"dataset: expected a bayesrod.Dataset or a dataset directory path, got {type(dataset).__name__}")
+
+
+def interval(draws: ArrayLike, level: float, axis: int = 0) -> tuple[NDArray, NDArray, NDArray]:
+    """Equal-tailed ``level`` interval and median over ``axis``: (lower, median, upper); NaNs ignored."""
+    q = np.nanquantile(np.asarray(draws, float), [(1 - level) / 2, 0.5, (1 + level) / 2], axis=axis)
+    return q[0], q[1], q[2]
+
+
+def progress_enabled(progress: bool) -> bool:
+    """Show progress bars only when asked and someone watches: a terminal on stderr, or a notebook."""
+    if not progress:
+        return False
+    if "ipykernel" in sys.modules:
+        return True
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False

@@ -1,0 +1,171 @@
+"""Datasets in: :func:`load` from disk, :func:`simulate` from the forward model."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..dataset.model import Dataset, ForceSeries, Push, Sensor, ShapeFrame
+from ..physics.effects import Effects
+
+
+def _demo_dataset() -> Path:
+    from importlib import resources
+
+    return Path(str(resources.files("bayesrod") / "data" / "default"))
+
+
+#: the bundled twig dataset (three heights, forces and centerlines; what ``bayesrod demo`` fits)
+DEMO_DATASET: Path = _demo_dataset()
+
+
+def load(path) -> Dataset:
+    """Read and validate a dataset directory (docs/format.md).
+
+    Raises
+    ------
+    bayesrod.dataset.DatasetError
+        (a ValueError) listing every problem found, each with file, field, row and what was expected.
+    """
+    from ..dataset import read_dataset
+
+    if not isinstance(path, (str, Path)):
+        raise TypeError(f"path: expected a dataset directory path, got {type(path).__name__}")
+    return read_dataset(path)
+
+
+@dataclass(frozen=True)
+class SimulatedDataset(Dataset):
+    """A simulated dataset in memory; :meth:`save` also writes the noise-free shapes and, if asked, RGB-D frames."""
+
+    simulation: tuple = field(default=(), compare=False, repr=False)
+
+    def save(self, path, *, overwrite: bool = False, frames: bool = False, arm: str = "leading") -> Path:
+        """Write the dataset directory ``path`` atomically (docs/format.md).
+
+        ``frames=True`` renders RGB-D frames of every push (docs/vision.md); ``arm`` places the bar holding
+        the probe: ``leading`` (hides the stem the push bends forward) or ``trailing``.
+        """
+        from ..dataset.io import atomic_dir
+        from ..dataset.simulate import write_simulated
+
+        if arm not in ("leading", "trailing"):
+            raise ValueError(f"arm: expected leading or trailing, got {arm!r}")
+        cfg, pushes = self.simulation
+        camera = None
+        if frames:
+            from ..vision.render import default_camera
+
+            camera = default_camera(cfg.length_m)
+        with atomic_dir(path, overwrite) as tmp:
+            write_simulated(cfg, list(pushes), tmp, frames=frames, camera=camera, arm=arm)
+        return Path(path)
+
+
+def simulate(
+    preset_or_stem: str | Mapping = "twig",
+    *,
+    seed: int = 0,
+    noise: str = "default",
+    effects: Effects | Mapping | None = None,
+    heights_m: Sequence[float] | None = None,
+    progress: bool = False,
+    noise_model=None,
+    config_overrides: Mapping | None = None,
+) -> SimulatedDataset:
+    """A synthetic dataset from the forward elastica with measurement noise (docs/data.md).
+
+    Parameters
+    ----------
+    preset_or_stem : str or mapping
+        A preset name (``twig``, ``grass``) or a stem ``{"EI0": .., "p": .., "length_m": .., "heights_m": [..]}``
+        (optional ``species``, ``specimen``; the noise then follows the twig preset's).
+    seed : int
+        Random seed (the same seed gives the same data).
+    noise : {"default", "none"}
+        The preset's measurement noise, or none.
+    effects : Effects or mapping
+        Model effects switched on (docs/model.md), e.g. ``{"base_compliance": 40.0}``.
+    heights_m : sequence of float or None
+        Contact heights [m]; default the preset's.
+    noise_model : bayesrod.dataset.simulate.NoiseModel or None
+        Explicit noise (overrides ``noise``), e.g. for calibration studies.
+    config_overrides : mapping or None
+        Further :class:`~bayesrod.dataset.simulate.SimConfig` fields (samples per push, frames, ...).
+    """
+    from ..dataset.simulate import WIRE_LENGTH, SimConfig
+    from ..dataset.simulate import simulate as simulate_pushes
+    from ..physics.lumped import wire_dx_from_elongation
+    from ._common import progress_enabled
+
+    eff = effects if isinstance(effects, Effects) else Effects.from_mapping(dict(effects or {}))
+    overrides = {}
+    if isinstance(preset_or_stem, str):
+        base = preset_or_stem
+    elif isinstance(preset_or_stem, Mapping):
+        base = "twig"
+        stem = dict(preset_or_stem)
+        missing = [k for k in ("EI0", "p", "length_m") if k not in stem]
+        if missing:
+            raise ValueError(f"preset_or_stem: expected keys EI0, p, length_m, got none for {', '.join(missing)}")
+        overrides = {k: stem[k] for k in ("EI0", "p", "length_m", "species", "specimen") if k in stem}
+        for k in ("EI0", "length_m"):
+            if not (np.isfinite(float(overrides[k])) and float(overrides[k]) > 0):
+                raise ValueError(f"preset_or_stem.{k}: expected a number > 0, got {overrides[k]!r}")
+        if "heights_m" in stem and heights_m is None:
+            heights_m = stem["heights_m"]
+        if "specimen" not in overrides:
+            overrides["specimen"] = f"stem-sim-{seed}"
+        if heights_m is None:
+            heights_m = tuple(float(overrides["length_m"]) * f for f in (0.56, 0.69, 0.81))
+    else:
+        raise TypeError(f"preset_or_stem: expected a preset name or a mapping, got {type(preset_or_stem).__name__}")
+    if heights_m is not None:
+        overrides["heights_m"] = tuple(float(h) for h in heights_m)
+    cfg = SimConfig.from_preset(base, seed=seed, noise=noise, effects=eff, **overrides)
+    if noise_model is not None or config_overrides:
+        from dataclasses import replace
+
+        cfg = replace(
+            cfg, **({"noise": noise_model} if noise_model is not None else {}), **dict(config_overrides or {})
+        )
+    for h in cfg.heights_m:
+        if not (np.isfinite(h) and 0 < h < cfg.length_m):
+            raise ValueError(f"heights_m: expected 0 < height < length ({cfg.length_m:g} m), got {h:g}")
+    sim = simulate_pushes(cfg, progress=progress_enabled(progress))
+    pushes = []
+    for sp in sim:
+        contact = sp.robot_x_m - wire_dx_from_elongation(np.clip(sp.wire_elongation_m, 0, None), WIRE_LENGTH)
+        force = ForceSeries(sp.time_s, sp.force_N, sp.robot_x_m, sp.wire_elongation_m, contact)
+        frames = []
+        sd = cfg.noise.shape_sd_m if cfg.noise.shape_sd_reported_m is None else cfg.noise.shape_sd_reported_m
+        for k, t in enumerate(sp.frame_time_s):
+            seen = np.isfinite(sp.shapes_obs[k, 0])
+            frames.append(
+                ShapeFrame(
+                    float(t),
+                    sp.shapes_obs[k, 0, seen],
+                    sp.shapes_obs[k, 1, seen],
+                    np.full(seen.sum(), sd) if cfg.noise.shape_sd_m > 0 else None,
+                )
+            )
+        pushes.append(Push(sp.id, float(sp.height_m), force, 1, tuple(frames)))
+    truth = {
+        "EI0": cfg.EI0,
+        "p": cfg.p,
+        "effects": cfg.effects.to_mapping(),
+        "noise": {"force_sd_N": cfg.noise.force_sd_N, "shape_sd_m": cfg.noise.shape_sd_m},
+        "seed": cfg.seed,
+    }
+    return SimulatedDataset(
+        specimen=cfg.specimen,
+        length_m=cfg.length_m,
+        pushes=tuple(pushes),
+        species=cfg.species,
+        sensor=Sensor("wire", WIRE_LENGTH, tuple(cfg.force_range_N)),
+        extra={"truth": truth},
+        simulation=(cfg, tuple(sim)),
+    )

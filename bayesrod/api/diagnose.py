@@ -1,0 +1,162 @@
+"""``bayesrod.diagnose``: where does the plain rod fail on these data, and what fixes it?
+
+The statistics are :mod:`bayesrod.inference.diagnose`; :func:`diagnose` returns a
+:class:`Diagnosis` whose ``save`` writes ``diagnose.json`` (docs/format.md, with
+extensions), ``figures/residuals.png`` (before/after residual structure),
+``figures/statistics.png`` (every effect's test) and ``report.html``.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import logging
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+from ..inference.diagnose import CATALOG, ForwardModel
+from ..inference.diagnose import diagnose as diagnose_model
+from ..inference.likelihood import prepare_data
+
+log = logging.getLogger("bayesrod")
+
+
+@dataclass(frozen=True, eq=False)
+class Diagnosis:
+    """What the plain rod misses on a dataset and what fixes it (the content of ``diagnose.json``).
+
+    ``added_effects`` names the effects added; ``before``/``after`` hold the in-sample and held-out errors;
+    ``unexplained_structure`` says whether residual structure remains.
+    """
+
+    doc: Mapping = field(repr=False)
+    model: Any = field(repr=False, default=None)
+    plain: Any = field(repr=False, default=None)
+    after: Any = field(repr=False, default=None)
+
+    @property
+    def added_effects(self) -> list[str]:
+        return list(self.doc["added_effects"])
+
+    @property
+    def unexplained_structure(self) -> bool:
+        return bool(self.doc["unexplained_structure"])
+
+    def to_dict(self) -> dict:
+        """diagnose.json's content (docs/format.md), a fresh copy."""
+        return copy.deepcopy(dict(self.doc))
+
+    def plot_residuals(self, axes=None):
+        """Force and shape residual structure before (plain rod) and after; returns the artists."""
+        from ..report.plots import plot_residual_structure
+
+        return plot_residual_structure(self.model, self.plain, self.after, axes=axes)
+
+    def plot_statistics(self, ax=None):
+        """Each effect's test statistic per round against its threshold; returns the bars."""
+        from ..report.plots import plot_statistics
+
+        return plot_statistics(self.doc, ax=ax)
+
+    def figures(self) -> dict[str, bytes]:
+        from ..report.figures import render
+        from ..report.plots import plot_residual_structure, plot_statistics
+
+        return {
+            "residuals": render(
+                lambda axes: plot_residual_structure(self.model, self.plain, self.after, axes=axes), 11, 3.8, ncols=2
+            ),
+            "statistics": render(lambda ax: plot_statistics(self.doc, ax=ax), 6.4, 3.8),
+        }
+
+    def report(self, path) -> Path:
+        """Write the HTML report to ``path`` (atomically)."""
+        from ..dataset.io import write_text_atomic
+        from ..report.html import diagnose_report
+
+        write_text_atomic(path, diagnose_report(self.to_dict(), self.figures()))
+        return Path(path)
+
+    def save(self, path, *, overwrite: bool = False) -> Path:
+        """Write ``diagnose.json``, ``figures/`` and ``report.html`` into the directory ``path`` (atomically)."""
+        from ..dataset.io import atomic_dir, write_bytes_atomic, write_json, write_text_atomic
+        from ..report.html import diagnose_report
+
+        path = Path(path)
+        with atomic_dir(path, overwrite) as tmp:
+            write_json(tmp / "diagnose.json", self.to_dict())
+            pngs = self.figures()
+            for k, v in pngs.items():
+                write_bytes_atomic(tmp / "figures" / f"{k}.png", v)
+            write_text_atomic(tmp / "report.html", diagnose_report(self.to_dict(), pngs))
+        return path
+
+
+def diagnose(
+    dataset,
+    *,
+    candidates=CATALOG,
+    use_shapes: bool = True,
+    alpha: float = 0.01,
+    min_heldout_gain: float = 0.10,
+) -> Diagnosis:
+    """Residual analysis: which missing effect explains the misfit, refit, error before and after.
+
+    Parameters
+    ----------
+    dataset : path or Dataset
+    candidates : sequence of str
+        Effects to test (default: the whole catalog, docs/diagnose.md).
+    use_shapes : bool
+        Use centerlines as well as forces.
+    alpha : float
+        Family-wise test level per round, in (0, 1).
+    min_heldout_gain : float
+        Relative drop of the held-out force error an effect must bring.
+    """
+    from ._common import as_dataset
+
+    spec = as_dataset(dataset)
+    candidates = tuple(candidates)
+    bad = [c for c in candidates if c not in CATALOG]
+    if bad or not candidates:
+        raise ValueError(
+            f"candidates: expected effects from {', '.join(CATALOG)}, got {', '.join(candidates) or 'none'}"
+        )
+    if not (0 < alpha < 1):
+        raise ValueError(f"alpha: expected a level in (0, 1), got {alpha}")
+    model = ForwardModel(prepare_data(spec, use_forces=True, use_shapes=use_shapes), spec.length_m)
+    res = diagnose_model(
+        model,
+        candidates=candidates,
+        alpha=alpha,
+        min_heldout_gain=min_heldout_gain,
+        log=lambda msg: log.info("%s", msg),
+    )
+    fit_after, plain = res.pop("_fit"), res.pop("_plain")
+    doc = {
+        "specimen": spec.specimen,
+        "dataset": str(Path(spec.root).resolve()) if spec.root is not None else None,
+        "length_m": spec.length_m,
+        "observations": {"n_force": model.n_force, "n_shape_points": model.n_points},
+        **res,
+        "settings": {"alpha": alpha, "min_heldout_gain": min_heldout_gain, "candidates": list(candidates)},
+    }
+    truth = spec.extra.get("truth")
+    if truth:
+        doc["truth"] = truth
+    doc = json.loads(json.dumps(doc, default=_plain))
+    return Diagnosis(MappingProxyType(doc), model, plain, fit_after)
+
+
+def _plain(obj):
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    raise TypeError(type(obj).__name__)

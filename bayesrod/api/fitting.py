@@ -1,0 +1,723 @@
+"""``bayesrod.fit``: the posterior of EI0, p and noise for one dataset, as an immutable :class:`Posterior`.
+
+Computing never writes: :func:`fit` returns a :class:`Posterior`; only
+:meth:`Posterior.save` and :meth:`Posterior.report` touch the disk (and the
+optional ``checkpoint`` file, which the user names so that a long run can be
+resumed). A run directory written by :meth:`Posterior.save` holds
+``config.json`` (what was asked), ``posterior.nc`` (ArviZ), ``samples.npz``
+(thinned natural-unit draws), ``summary.json`` (docs/format.md), ``figures/``
+and ``report.html``.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import logging
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .._version import __version__
+from ..dataset.model import Specimen
+from ..inference.likelihood import LogPosterior, build_likelihood, effective_shape_weight
+from ..inference.priors import load_prior
+from ..inference.sampler import find_start, run_ensembles
+from ..inference.summary import build_summary, predictive_forces, to_inference_data
+from ..physics import flexural_rigidity, k_theta, k_x
+from ._common import as_dataset, interval, progress_enabled
+from .bands import Band, ForceBand
+
+log = logging.getLogger("bayesrod")
+
+#: the fit options a checkpoint must share with the run it resumes
+_RESUME_KEYS = ("dataset", "prior", "effects", "seed", "use_forces", "use_shapes", "shape_weight")
+
+
+def _readonly(a) -> NDArray:
+    arr = np.array(a, dtype=float)
+    arr.setflags(write=False)
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class Posterior:
+    """Posterior draws of one fit, immutable.
+
+    Attributes
+    ----------
+    samples : Mapping[str, ndarray]
+        Every post-burn-in draw in natural units, shape (n_draws,) each, read-only:
+        ``EI0`` [N m^2], ``p`` [-], the noise terms and the fitted effects by name.
+    idata : arviz.InferenceData
+        The same draws as chains (walkers of all ensembles) x draws, with ``sample_stats.lp``.
+    length_m : float
+        The stem length L the fit assumed [m].
+    specimen : str
+        The dataset's specimen name.
+    effects : tuple of str
+        The model effects fitted (docs/model.md).
+    config : Mapping
+        What was asked (prior, effects, seed, data used, ...).
+    dataset : Specimen or None
+        The data fitted (None when a saved run's dataset is no longer on disk).
+    """
+
+    samples: Mapping[str, NDArray]
+    idata: Any = field(repr=False)
+    length_m: float
+    specimen: str
+    effects: tuple[str, ...]
+    config: Mapping = field(repr=False)
+    doc: Mapping = field(repr=False)
+    dataset: Specimen | None = field(default=None, repr=False)
+    likelihood: Any = field(default=None, repr=False)
+    direct: Any = field(default=None, repr=False)
+    draws_are_thinned: bool = field(default=False, repr=False)
+
+    # ------------------------------------------------------------------ numbers
+    def to_dict(self) -> dict:
+        """The content of ``summary.json`` (docs/format.md), a fresh copy."""
+        return copy.deepcopy(dict(self.doc))
+
+    def summary(self, level: float = 0.9):
+        """One row per sampled parameter: mean, sd, median, equal-tailed interval at ``level``, R-hat, bulk ESS.
+
+        Returns a :class:`pandas.DataFrame` indexed by parameter name; the interval columns are named
+        ``q05``/``q95`` for ``level=0.9`` (``q025``/``q975`` for 0.95, ...) and ``df.attrs["level"]`` holds it.
+        """
+        import pandas as pd
+
+        level = _check_level(level)
+        lo_name, hi_name = _q_names(level)
+        conv = self.doc.get("convergence", {})
+        rows = {}
+        for name in self.doc["parameters"]:
+            x = self.samples[name]
+            lo, med, hi = interval(x, level)
+            rows[name] = {
+                "mean": float(np.mean(x)),
+                "sd": float(np.std(x, ddof=1)),
+                "median": float(med),
+                lo_name: float(lo),
+                hi_name: float(hi),
+                "r_hat": conv.get("rhat", {}).get(name, np.nan),
+                "ess_bulk": conv.get("ess_bulk", {}).get(name, np.nan),
+            }
+        df = pd.DataFrame.from_dict(rows, orient="index")
+        df.attrs["level"] = level
+        return df
+
+    def thinned(self, n: int = 4000) -> dict[str, NDArray]:
+        """A fixed random subset of ``n`` draws (seeded by the fit's seed): the draws ``samples.npz`` holds."""
+        m = self.samples["EI0"].size
+        if self.draws_are_thinned and m <= n:  # loaded from samples.npz alone: these are the thinned draws
+            return dict(self.samples)
+        keep = np.random.default_rng(int(self.config.get("seed", 0))).choice(m, size=min(n, m), replace=False)
+        return {k: v[keep] for k, v in self.samples.items()}
+
+    def _base_stiffness(self):
+        """Fitted base spring [N m/rad] per draw (the ``base_compliance`` effect), or inf for a clamp."""
+        kb = self.samples.get("base_compliance")
+        return np.inf if kb is None else np.asarray(kb)[:, None]
+
+    def ei_band(self, s_m: ArrayLike, level: float = 0.9) -> Band:
+        """EI(s) (eq. EI_taper) over arc lengths ``s_m`` [m], shape (m,): median and equal-tailed band [N m^2]."""
+        level = _check_level(level)
+        s = _grid(s_m, "s_m", 0.0, self.length_m, closed=True)
+        EI = flexural_rigidity(s[None, :], self.samples["EI0"][:, None], self.samples["p"][:, None], self.length_m)
+        return Band(s, *interval(EI, level), level=level, x_name="s_m", unit="N m^2")
+
+    def k_theta_band(self, height_m: ArrayLike, level: float = 0.9) -> Band:
+        """Lumped rotational stiffness k_theta(h) (eq. kdist) over heights ``height_m`` [m], shape (m,) [N m/rad]."""
+        level = _check_level(level)
+        h = _grid(height_m, "height_m", 0.0, self.length_m)
+        k = k_theta(
+            h[None, :], self.samples["EI0"][:, None], self.samples["p"][:, None], self.length_m, self._base_stiffness()
+        )
+        return Band(h, *interval(k, level), level=level, x_name="height_m", unit="N m/rad")
+
+    def k_x_band(self, height_m: ArrayLike, level: float = 0.9) -> Band:
+        """Small-deflection translational stiffness k_x(h) (eq. kx) over ``height_m`` [m], shape (m,) [N/m]."""
+        level = _check_level(level)
+        h = _grid(height_m, "height_m", 0.0, self.length_m)
+        k = k_x(
+            h[None, :], self.samples["EI0"][:, None], self.samples["p"][:, None], self.length_m, self._base_stiffness()
+        )
+        return Band(h, *interval(k, level), level=level, x_name="height_m", unit="N/m")
+
+    def predict_force(
+        self, height_m: float, displacement_m: ArrayLike, level: float = 0.9, n_draws: int = 400, seed: int = 0
+    ) -> ForceBand:
+        """Posterior-predictive contact force at a contact height (pushed or not) [N].
+
+        Parameters
+        ----------
+        height_m : float
+            Contact height h [m], 0 < h < L.
+        displacement_m : array_like, shape (m,)
+            Horizontal contact displacements since first contact [m], >= 0.
+        level : float
+            Credible level of the band (equal-tailed).
+        n_draws : int
+            Posterior draws pushed through the elastica (a fixed random subset, ``seed``).
+
+        Returns
+        -------
+        ForceBand
+            ``lower``, ``median``, ``upper`` of the force where the stem still holds the sensor (NaN where
+            fewer than two draws do), and ``slip_probability`` per displacement.
+        """
+        level = _check_level(level)
+        h = float(_grid([height_m], "height_m", 0.0, self.length_m)[0])
+        D = np.atleast_1d(np.asarray(displacement_m, dtype=float))
+        if D.ndim != 1 or not np.all(np.isfinite(D)) or np.any(D < 0):
+            raise ValueError(f"displacement_m: expected finite values >= 0 m in one dimension, got {D!r}")
+        if not (isinstance(n_draws, (int, np.integer)) and n_draws >= 2):
+            raise ValueError(f"n_draws: expected an integer >= 2, got {n_draws!r}")
+        n = self.samples["EI0"].size
+        idx = np.random.default_rng(seed).choice(n, size=min(n_draws, n), replace=False)
+        pred = predictive_forces(self.samples, idx, D, h, self.length_m)
+        F = pred["force_N"]
+        enough = np.isfinite(F).sum(axis=0) >= 2
+        lo, med, hi = (np.where(enough, q, np.nan) for q in interval(F, level))
+        return ForceBand(
+            D,
+            lo,
+            med,
+            hi,
+            level=level,
+            x_name="displacement_m",
+            unit="N",
+            height_m=h,
+            slip_probability=pred["slipped"].mean(axis=0),
+        )
+
+    # ------------------------------------------------------------------ plots
+    def plot_ei(self, ax=None, truth: dict | None = None):
+        """EI(s) median and 90% band (with the seed's direct estimate when shapes were fitted); returns the artists."""
+        from ..report.plots import plot_ei_band
+
+        return plot_ei_band(
+            self.samples, self.length_m, ax=ax, truth=truth or self.doc.get("truth"), direct=self.direct
+        )
+
+    def plot_k_theta(self, ax=None):
+        """k_theta(h) median and 90% band, pushed heights marked; returns the artists."""
+        from ..report.plots import plot_k_theta_band
+
+        heights = self.doc.get("data", {}).get("heights_m", [])
+        return plot_k_theta_band(self.samples, self.length_m, heights, ax=ax)
+
+    def plot_forces(self, ax=None, unseen_height: float | None = None):
+        """Measured forces with posterior 90% bands per height (and at ``unseen_height``); returns the artists."""
+        from ..report.plots import plot_force_fit
+
+        lik = self._require_likelihood("plot_forces")
+        return plot_force_fit(self.dataset, lik, self.samples, ax=ax, unseen_height=unseen_height)
+
+    def plot_residuals(self, axes=None):
+        """Force and shape residuals at the posterior median (two axes); returns the artists."""
+        from ..report.plots import plot_residuals
+
+        lik = self._require_likelihood("plot_residuals")
+        return plot_residuals(lik, self._median(), axes=axes)
+
+    def plot_corner(self, fig=None, names: Sequence[str] = ("EI0", "p")):
+        """Corner plot of ``names``; returns the figure."""
+        from ..report.plots import plot_corner
+
+        return plot_corner(self.samples, names=tuple(names), truth=self.doc.get("truth"), fig=fig)
+
+    def plot_rank(self, axes=None):
+        """Rank histograms per independent ensemble for EI0 and p; returns the drawn lines."""
+        from ..report.plots import plot_rank
+
+        return plot_rank(self.idata, self.doc.get("sampler", {}).get("ensembles", 4), axes=axes)
+
+    def _median(self) -> dict:
+        return {k: float(np.median(v)) for k, v in self.samples.items()}
+
+    def _require_likelihood(self, what: str):
+        if self.likelihood is None:
+            raise ValueError(
+                f"{what}: expected the fitted dataset, got a saved run whose dataset "
+                f"{self.config.get('dataset')!r} is not on disk"
+            )
+        return self.likelihood
+
+    # ------------------------------------------------------------------ files
+    def figures(self) -> dict[str, bytes]:
+        """The report's figures as PNG bytes, by name (nothing written)."""
+        from ..report.figures import render
+
+        sub = {k: v[:: max(1, len(v) // 2000)] for k, v in self.samples.items()}
+        truth = self.doc.get("truth")
+        heights = self.doc.get("data", {}).get("heights_m", [])
+        from ..report.plots import plot_ei_band, plot_force_fit, plot_k_theta_band, plot_rank
+
+        out = {
+            "ei_band": render(
+                lambda ax: plot_ei_band(sub, self.length_m, ax=ax, truth=truth, direct=self.direct), 6.4, 4.2, dpi=110
+            ),
+            "k_theta_band": render(
+                lambda ax: plot_k_theta_band(
+                    sub, self.length_m, heights, ax=ax, lumped=_lumped_points(self.likelihood)
+                ),
+                6.4,
+                4.2,
+                dpi=110,
+            ),
+        }
+        if self.likelihood is not None:
+            out["force_fit"] = render(
+                lambda ax: plot_force_fit(
+                    self.dataset, self.likelihood, sub, ax=ax, unseen_height=unseen_height(heights, self.length_m)
+                ),
+                6.4,
+                4.2,
+                dpi=110,
+            )
+        from ..report.figures import png_bytes
+
+        out["corner"] = png_bytes(self._corner_figure(sub, truth), dpi=90)
+        if self.likelihood is not None:
+            from ..report.plots import plot_residuals
+
+            med = self._median()
+            out["residuals"] = render(lambda axes: plot_residuals(self.likelihood, med, axes=axes), 10, 3.6, ncols=2)
+        n_ens = self.doc.get("sampler", {}).get("ensembles", 4)
+        out["rank"] = render(lambda axes: plot_rank(self.idata, n_ens, axes=axes), 10, 3.4, ncols=2)
+        return out
+
+    @staticmethod
+    def _corner_figure(sub, truth):
+        from matplotlib.figure import Figure
+
+        from ..report.plots import plot_corner
+
+        return plot_corner(sub, truth=truth, fig=Figure(figsize=(5, 5)))
+
+    def report_html(self) -> str:
+        """The HTML report as a string (figures embedded)."""
+        from ..report.html import fit_report
+
+        prov = self.dataset.extra.get("provenance") if self.dataset is not None else None
+        return fit_report(self.to_dict(), self.figures(), provenance=prov, source=str(self.config.get("dataset")))
+
+    def report(self, path) -> Path:
+        """Write the self-contained HTML report to ``path`` (atomically); returns the path."""
+        from ..dataset.io import write_text_atomic
+
+        path = Path(path)
+        write_text_atomic(path, self.report_html())
+        return path
+
+    def save(self, path, *, overwrite: bool = False, figures: bool = True) -> Path:
+        """Write the run directory ``path`` (docs/format.md): every file atomically.
+
+        An existing directory that already holds a saved fit (``summary.json``) is refused unless
+        ``overwrite``. Returns the path.
+        """
+        from ..dataset.io import OutputExistsError, write_bytes_atomic, write_json
+
+        path = Path(path)
+        if path.exists() and not path.is_dir():
+            raise ValueError(f"path: expected a directory, got {path} which is a file")
+        if (path / "summary.json").exists() and not overwrite:
+            raise OutputExistsError(path)
+        path.mkdir(parents=True, exist_ok=True)
+        write_json(path / "config.json", {k: v for k, v in self.config.items() if k != "run"})
+        write_bytes_atomic(path / "posterior.nc", _netcdf_bytes(self.idata, path))
+        import io
+
+        buf = io.BytesIO()
+        np.savez(buf, length_m=self.length_m, **self.thinned())
+        write_bytes_atomic(path / "samples.npz", buf.getvalue())
+        write_json(path / "summary.json", self.to_dict())
+        if figures:
+            pngs = self.figures()
+            for name, data in pngs.items():
+                write_bytes_atomic(path / "figures" / f"{name}.png", data)
+            from ..dataset.io import write_text_atomic
+            from ..report.html import fit_report
+
+            prov = self.dataset.extra.get("provenance") if self.dataset is not None else None
+            write_text_atomic(
+                path / "report.html",
+                fit_report(self.to_dict(), pngs, provenance=prov, source=str(self.config.get("dataset"))),
+            )
+        return path
+
+    @classmethod
+    def load(cls, path) -> Posterior:
+        """A run directory written by :meth:`save` (or by ``bayesrod fit`` of any earlier version)."""
+        from ..dataset import read_dataset
+        from ..inference.summary import import_arviz
+
+        path = Path(path)
+        has_nc, has_npz = (path / "posterior.nc").is_file(), (path / "samples.npz").is_file()
+        if not (has_nc or has_npz):
+            raise ValueError(f"{path}: expected a fit run directory holding posterior.nc or samples.npz, found none")
+        doc = {}
+        if (path / "summary.json").is_file():
+            try:
+                doc = json.loads((path / "summary.json").read_text())
+            except json.JSONDecodeError as e:
+                raise ValueError(
+                    f"{path / 'summary.json'}: expected JSON, got a parse error at line {e.lineno}"
+                ) from None
+        elif has_nc:
+            raise ValueError(f"{path}: expected a fit run directory holding summary.json, found none")
+        config = json.loads((path / "config.json").read_text()) if (path / "config.json").is_file() else {}
+        config["run"] = str(path.resolve())
+        az = import_arviz()
+        if has_nc:
+            idata = az.from_netcdf(str(path / "posterior.nc"))
+            idata.load()
+            samples = {k: _readonly(idata.posterior[k].values.reshape(-1)) for k in idata.posterior.data_vars}
+        else:  # a minimal run: the thinned draws only
+            with np.load(path / "samples.npz") as z:
+                samples = {k: _readonly(z[k]) for k in z.files if k != "length_m"}
+                length = float(z["length_m"])
+            idata = az.from_dict(posterior={k: v[None, :] for k, v in samples.items()})
+            doc = doc or {
+                "specimen": path.name,
+                "length_m": length,
+                "effects": [],
+                "parameters": {
+                    k: {
+                        q: float(v)
+                        for q, v in zip(("q05", "median", "q95"), np.quantile(x, [0.05, 0.5, 0.95]), strict=True)
+                    }
+                    for k, x in samples.items()
+                },
+            }
+        effects = tuple(doc.get("effects", ()))
+        spec = lik = None
+        ds = config.get("dataset")
+        if ds and Path(ds).is_dir():
+            try:
+                spec = read_dataset(ds)
+                lik = build_likelihood(
+                    spec,
+                    load_prior(config.get("prior")),
+                    effects,
+                    use_forces=config.get("use_forces", True),
+                    use_shapes=config.get("use_shapes", True),
+                )
+                if "shape_weight" in doc.get("data", {}):
+                    lik.shape_weight = doc["data"]["shape_weight"]
+            except ValueError:
+                spec = lik = None
+        return cls(
+            samples=MappingProxyType(samples),
+            idata=idata,
+            length_m=float(doc.get("length_m", idata.posterior.attrs.get("length_m"))),
+            specimen=str(doc["specimen"]),
+            effects=effects,
+            config=MappingProxyType(config),
+            doc=MappingProxyType(doc),
+            dataset=spec,
+            likelihood=lik,
+            draws_are_thinned=not has_nc,
+        )
+
+
+def _netcdf_bytes(idata, near: Path) -> bytes:
+    """posterior.nc as bytes (netCDF writers want a file name: a temporary one beside the target)."""
+    import os
+    import tempfile
+
+    fd, tmp = tempfile.mkstemp(prefix=".posterior.", suffix=".nc", dir=near)
+    os.close(fd)
+    try:
+        idata.to_netcdf(tmp)
+        return Path(tmp).read_bytes()
+    finally:
+        os.unlink(tmp)
+
+
+def _check_level(level) -> float:
+    try:
+        lv = float(level)
+    except (TypeError, ValueError):
+        lv = float("nan")
+    if not 0 < lv < 1:
+        raise ValueError(f"level: expected a credible level in (0, 1), got {level!r}")
+    return lv
+
+
+def _q_names(level: float) -> tuple[str, str]:
+    def name(q):
+        txt = f"{100 * q:.10g}".replace(".", "")
+        return "q" + (txt.zfill(2) if q < 0.1 else txt)
+
+    return name((1 - level) / 2), name((1 + level) / 2)
+
+
+def _grid(x, name: str, low: float, high: float, closed: bool = False) -> NDArray:
+    arr = np.atleast_1d(np.asarray(x, dtype=float))
+    if arr.ndim != 1:
+        raise ValueError(f"{name}: expected a number or a 1-d array, got shape {arr.shape}")
+    bad = ~np.isfinite(arr) | (arr < low) | (arr > high) | (((arr == low) | (arr == high)) & (not closed))
+    if np.any(bad):
+        op = "<=" if closed else "<"
+        raise ValueError(f"{name}: expected {low:g} {op} value {op} L = {high:g} m, got {arr[bad][0]:g}")
+    return arr
+
+
+def unseen_height(heights_m, length_m: float) -> float:
+    """A height never pushed, for the posterior-predictive panel: midway in the widest gap between pushes."""
+    hs = np.sort(np.unique(heights_m))
+    if hs.size < 2:
+        return round(float(min(1.15 * hs[0], 0.5 * (hs[0] + length_m))), 3)
+    k = int(np.argmax(np.diff(hs)))
+    return round(float(0.5 * (hs[k] + hs[k + 1])), 3)
+
+
+def _lumped_points(lik) -> list:
+    """Per-height k_theta from the torque balance on the linear region (the seed's lumped branch)."""
+    from ..physics.lumped import fit_torque_balance, link_angle
+
+    pts = []
+    for d in getattr(lik, "data", ()):
+        if d.D_m.size >= 3:
+            try:
+                pts.append(
+                    (d.height_m, fit_torque_balance(link_angle(d.D_m, d.height_m), d.F_N, d.height_m)["k_theta"])
+                )
+            except ValueError:
+                continue
+    return pts
+
+
+def _assumptions(spec) -> list[str]:
+    a = [
+        "A1 planar bending in one vertical plane",
+        "A2 quasi-static loading",
+        "A3 inextensible, unshearable rod",
+        "A4 linear elastic, EI(s) = EI0 (1 - s/L)^(4p)",
+        "A5 single horizontal point force at the sensor height",
+        "A6 base clamped and vertical, tip free",
+        f"stem length L = {spec.length_m:g} m",
+    ]
+    prov = spec.extra.get("provenance", {})
+    for k, v in (prov.get("assumptions") or {}).items():
+        a.append(f"{k}: {v}")
+    return a
+
+
+def _two_stage(spec, use_shapes: bool) -> tuple[dict | None, object]:
+    """The seed's deterministic estimate, when the data allow it (shapes with enough points)."""
+    from ..inference.direct import two_stage_fit
+
+    if not use_shapes or not any(p.shapes for p in spec.pushes):
+        return None, None
+    try:
+        ts = two_stage_fit(spec)
+    except ValueError as e:
+        log.info("two-stage estimate skipped: %s", e)
+        return None, None
+    log.info("two-stage (seed) estimate: EI0 = %.4g N m^2, p = %.4g (R^2 %.3f)", ts.EI0, ts.p, ts.r2)
+    return ts.to_dict(), ts.direct
+
+
+def _check_checkpoint(checkpoint: Path, config: dict) -> None:
+    """A checkpoint resumes only the run that made it: same data, prior, effects, seed, weighting."""
+    import h5py
+
+    key = json.dumps({k: config[k] for k in _RESUME_KEYS}, sort_keys=True)
+    if checkpoint.is_file():
+        with h5py.File(checkpoint, "r") as f:
+            old = f.attrs.get("bayesrod_config")
+        if old is not None:
+            old = json.loads(old)
+            for k in _RESUME_KEYS:
+                if old.get(k) != config[k]:
+                    raise ValueError(
+                        f"checkpoint: expected the same {k} as the interrupted run in {checkpoint}, got "
+                        f"{config[k]!r} instead of {old.get(k)!r}"
+                    )
+            return
+    checkpoint.parent.mkdir(parents=True, exist_ok=True)
+    with h5py.File(checkpoint, "a") as f:
+        f.attrs["bayesrod_config"] = key
+
+
+def fit(
+    dataset,
+    prior=None,
+    effects: Sequence[str] = (),
+    seed: int = 0,
+    progress: bool = True,
+    *,
+    use_forces: bool = True,
+    use_shapes: bool = True,
+    shape_weight: str | float = "auto",
+    max_steps: int = 8000,
+    target_ess: float = 1000.0,
+    checkpoint=None,
+) -> Posterior:
+    """Posterior of EI0, p, the noise and the fitted effects for one dataset (emcee).
+
+    Parameters
+    ----------
+    dataset : path or Dataset
+        A dataset directory (docs/format.md) or a :class:`bayesrod.Dataset` in memory.
+    prior : str, path or None
+        Prior name (``default``, ``grass``, ``woody``) or a prior JSON file (docs/priors.md).
+    effects : sequence of str
+        Model effects to fit (docs/model.md): ``force_offset`` and at most one of ``base_compliance``,
+        ``rest_curvature``, ``base_tilt``, ``contact_friction``; ``yield`` with forces only.
+    seed : int
+        Random seed: the same seed gives the same draws.
+    progress : bool
+        Progress bars, shown only on a terminal or in a notebook.
+    use_forces, use_shapes : bool
+        Which observations enter the likelihood.
+    shape_weight : "auto" or float in (0, 1]
+        Power on the centerline likelihood: ``"auto"`` = n_eff/n measured from the residual correlation.
+    max_steps, target_ess : int, float
+        Sampling budget per ensemble and the bulk-ESS target for EI0 and p.
+    checkpoint : path or None
+        An HDF5 file the chains are checkpointed to; an interrupted fit called again with the same
+        arguments and checkpoint resumes from it. None (default): nothing is written.
+
+    Returns
+    -------
+    Posterior
+    """
+    t0 = time.perf_counter()
+    spec = as_dataset(dataset)
+    effects = tuple(effects)
+    if isinstance(shape_weight, str):
+        if shape_weight != "auto":
+            raise ValueError(f"shape_weight: expected 'auto' or a number in (0, 1], got {shape_weight!r}")
+    elif not (isinstance(shape_weight, (int, float)) and 0 < shape_weight <= 1):
+        raise ValueError(f"shape_weight: expected 'auto' or a number in (0, 1], got {shape_weight!r}")
+    pr = load_prior(prior)
+    config = {
+        "dataset": str(Path(spec.root).resolve()) if spec.root is not None else None,
+        "prior": pr.source,
+        "effects": list(effects),
+        "seed": seed,
+        "use_forces": use_forces,
+        "use_shapes": use_shapes,
+        "shape_weight": shape_weight,
+        "bayesrod": __version__,
+    }
+    # the likelihood first: bad effects or data without engaged samples fail before anything is written
+    lik = build_likelihood(spec, pr, effects, use_forces=use_forces, use_shapes=use_shapes)
+    if checkpoint is not None:
+        checkpoint = Path(checkpoint)
+        _check_checkpoint(checkpoint, config)
+    post = LogPosterior(lik, pr)
+    log.info(
+        "%s: %d engaged force samples, %d centerline points, %d pushes; parameters %s",
+        spec.specimen,
+        lik.n_force,
+        lik.n_points,
+        len(spec.pushes),
+        ", ".join(post.names),
+    )
+    two_stage, direct = _two_stage(spec, use_shapes)
+    rng = np.random.default_rng(seed)
+    theta0 = find_start(post, rng, init=two_stage)
+    weight_info = None
+    if lik.n_points:
+        if shape_weight == "auto":
+            mode = {k: float(v[0]) for k, v in post.to_natural(theta0[None]).items()}
+            weight_info = effective_shape_weight(lik, mode)
+            lik.shape_weight = weight_info["weight"]
+            log.info(
+                "centerline errors correlated: %.3g points along the stem x %.3g frames per independent residual; "
+                "shape likelihood weighted %.3g (n_eff %.0f of %d)",
+                weight_info["tau_along"],
+                weight_info["tau_frames"],
+                lik.shape_weight,
+                weight_info["n_eff"],
+                lik.n_points,
+            )
+            if lik.shape_weight < 1:
+                theta0 = find_start(post, rng, init=two_stage)
+        else:
+            lik.shape_weight = float(shape_weight)
+    res = run_ensembles(
+        post,
+        theta0,
+        seed=seed,
+        backend_path=checkpoint,
+        progress=progress_enabled(progress),
+        max_steps=max_steps,
+        target_ess=target_ess,
+    )
+    flat = res.chain.reshape(-1, post.ndim)
+    samples = {k: _readonly(v) for k, v in post.to_natural(flat).items()}
+    median = {k: float(np.median(v)) for k, v in samples.items()}
+    truth = spec.extra.get("truth")
+    extra = {
+        "prior": pr.name,
+        "level": 0.9,
+        "data": {
+            "n_force": lik.n_force,
+            "n_shape_points": lik.n_points,
+            "heights_m": list(spec.heights_m),
+            **({"shape_weight": lik.shape_weight} if lik.n_points else {}),
+            **({"shape_correlation": weight_info} if weight_info else {}),
+        },
+        "sampler": {
+            "ensembles": res.n_ensembles,
+            "walkers_per_ensemble": res.chain.shape[0] // res.n_ensembles,
+            "steps": res.n_steps,
+            "burn_in": res.burn,
+            "autocorr_time": [float(t) for t in res.tau],
+            "acceptance": res.acceptance,
+            "seconds": round(time.perf_counter() - t0, 1),
+        },
+        "assumptions": _assumptions(spec),
+    }
+    if truth:
+        extra["truth"] = truth
+    if two_stage:
+        extra["two_stage"] = two_stage
+    doc = build_summary(spec, post, samples, res.diagnostics, lik.fit_error(median), effects, extra)
+    idata = to_inference_data(
+        res.chain,
+        res.log_prob,
+        post,
+        spec,
+        {
+            "specimen": spec.specimen,
+            "length_m": spec.length_m,
+            "prior": pr.name,
+            "effects": ",".join(effects),
+            "bayesrod": __version__,
+        },
+    )
+    return Posterior(
+        samples=MappingProxyType(samples),
+        idata=idata,
+        length_m=float(spec.length_m),
+        specimen=spec.specimen,
+        effects=effects,
+        config=MappingProxyType(config),
+        doc=MappingProxyType(json.loads(json.dumps(doc, default=_json_default))),
+        dataset=spec,
+        likelihood=lik,
+        direct=direct,
+    )
+
+
+def _json_default(obj):
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")

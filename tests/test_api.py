@@ -1,0 +1,287 @@
+"""The public API: fit returns an immutable Posterior, computing never writes, the CLI is a thin shell."""
+
+import ast
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import bayesrod
+from bayesrod.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+PKG = REPO / "bayesrod"
+
+
+@pytest.fixture(scope="module")
+def post(twig_noisy):
+    return bayesrod.fit(twig_noisy, use_shapes=False, progress=False, target_ess=300, seed=3)
+
+
+def test_public_names_resolve_and_are_documented():
+    doc = (REPO / "docs" / "api.md").read_text()
+    for name in bayesrod.__all__:
+        assert hasattr(bayesrod, name), name
+        if not name.startswith("__"):
+            assert f"`{name}" in doc or f"{name}(" in doc or f".{name}" in doc, f"{name} missing from docs/api.md"
+
+
+def test_posterior_is_immutable(post):
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        post.length_m = 1.0
+    with pytest.raises(ValueError):
+        post.samples["EI0"][0] = 1.0
+    with pytest.raises(TypeError):
+        post.samples["EI0"] = np.zeros(3)
+    d = post.to_dict()
+    d["parameters"]["EI0"]["median"] = -1
+    assert post.to_dict()["parameters"]["EI0"]["median"] > 0
+
+
+def test_summary_frame_matches_summary_json(post):
+    df = post.summary()
+    doc = post.to_dict()["parameters"]
+    assert list(df.index) == list(doc)
+    for name, q in doc.items():
+        assert df.loc[name, "median"] == pytest.approx(q["median"], rel=1e-12)
+        assert df.loc[name, "q05"] == pytest.approx(q["q05"], rel=1e-12)
+        assert df.loc[name, "q95"] == pytest.approx(q["q95"], rel=1e-12)
+    wide = post.summary(level=0.5)
+    assert {"q25", "q75"} <= set(wide.columns) and wide.attrs["level"] == 0.5
+
+
+@pytest.mark.parametrize("level", [0.5, 0.9, 0.99])
+def test_bands_use_the_level_they_state(post, level):
+    """Every band's lower/upper are the (1 -/+ level)/2 quantiles of the quantity over the draws."""
+    EI0, p, L = post.samples["EI0"], post.samples["p"], post.length_m
+    lo_q, hi_q = (1 - level) / 2, (1 + level) / 2
+    s = np.array([0.0, 0.3, 0.6])
+    b = post.ei_band(s, level=level)
+    assert b.level == level
+    EI = bayesrod.flexural_rigidity(s[None], EI0[:, None], p[:, None], L)
+    np.testing.assert_allclose(b.lower, np.quantile(EI, lo_q, axis=0), rtol=1e-12)
+    np.testing.assert_allclose(b.upper, np.quantile(EI, hi_q, axis=0), rtol=1e-12)
+    h = np.array([0.3, 0.5])
+    k = post.k_theta_band(h, level=level)
+    kt = bayesrod.k_theta(h[None], EI0[:, None], p[:, None], L)
+    np.testing.assert_allclose(k.lower, np.quantile(kt, lo_q, axis=0), rtol=1e-12)
+    np.testing.assert_allclose(k.median, np.median(kt, axis=0), rtol=1e-12)
+    np.testing.assert_allclose(k.upper, np.quantile(kt, hi_q, axis=0), rtol=1e-12)
+    rec = k.to_records()
+    assert rec.dtype.names == ("height_m", "lower", "median", "upper")
+
+
+def test_force_band_covers_truth_at_an_unseen_height(post):
+    fb = post.predict_force(0.6, [0.02, 0.05], level=0.9)
+    true_f = bayesrod.force_from_displacement(np.array([0.02, 0.05]), 0.6, 2.63, 0.43, 0.8).force_N
+    assert np.all(fb.lower <= true_f) and np.all(true_f <= fb.upper)
+    assert np.all(fb.slip_probability == 0) and fb.height_m == 0.6
+    narrow = post.predict_force(0.6, [0.02, 0.05], level=0.5)
+    assert np.all(narrow.upper - narrow.lower < fb.upper - fb.lower)
+
+
+def test_band_inputs_are_checked(post):
+    with pytest.raises(ValueError, match="height_m: expected 0 < value < L"):
+        post.k_theta_band([0.9])
+    with pytest.raises(ValueError, match="level: expected"):
+        post.ei_band([0.1], level=90)
+    with pytest.raises(ValueError, match="displacement_m"):
+        post.predict_force(0.5, [-0.01])
+
+
+def test_save_load_round_trip_is_identical(post, tmp_path):
+    run = post.save(tmp_path / "run")
+    again = bayesrod.Posterior.load(run)
+    for k, v in post.samples.items():
+        np.testing.assert_array_equal(again.samples[k], v)
+    assert again.to_dict() == post.to_dict()
+    h = [0.3, 0.55]
+    np.testing.assert_array_equal(again.k_theta_band(h).upper, post.k_theta_band(h).upper)
+    np.testing.assert_array_equal(again.predict_force(0.6, [0.03]).median, post.predict_force(0.6, [0.03]).median)
+    assert {"summary.json", "posterior.nc", "samples.npz", "config.json", "report.html"} <= {
+        p.name for p in run.iterdir()
+    }
+    with pytest.raises(ValueError, match="not empty"):
+        post.save(run)
+
+
+def test_api_and_cli_give_identical_summaries(post, twig_noisy, tmp_path):
+    run = tmp_path / "cli"
+    assert main(["fit", str(twig_noisy), "--out", str(run), "--forces-only", "--seed", "3", "--quiet"]) == 0
+    cli = json.loads((run / "summary.json").read_text())
+    api = bayesrod.fit(twig_noisy, use_shapes=False, progress=False, seed=3)
+    assert cli["parameters"] == api.to_dict()["parameters"]
+    assert cli["k_theta"] == api.to_dict()["k_theta"]
+
+
+def test_api_calls_leave_the_matplotlib_backend_alone(post, tmp_path):
+    import matplotlib
+
+    before = matplotlib.get_backend()
+    post.figures()
+    post.save(tmp_path / "r")
+    post.report(tmp_path / "r.html")
+    assert matplotlib.get_backend() == before
+    offenders = [p for p in PKG.rglob("*.py") if "matplotlib.use(" in p.read_text()]
+    assert not offenders
+
+
+def test_plot_methods_take_an_axes_and_return_what_they_drew(post):
+    from matplotlib.figure import Figure
+
+    ax = Figure().subplots()
+    art = post.plot_k_theta(ax=ax)
+    assert art["band"] in ax.collections
+    axes = Figure().subplots(1, 2)
+    assert post.plot_residuals(axes=axes)["force"]
+
+
+def test_computing_writes_nothing(twig_noisy, tmp_path):
+    """fit, bands, design and predict run in an empty working directory and leave it empty."""
+    code = (
+        "import bayesrod, numpy as np\n"
+        f"post = bayesrod.fit({str(twig_noisy)!r}, use_shapes=False, progress=True, target_ess=150, max_steps=1500)\n"
+        "post.ei_band(np.linspace(0, 0.7, 5)); post.k_theta_band([0.5]); post.predict_force(0.6, [0.02])\n"
+        "post.figures(); post.report_html()\n"
+        "bayesrod.predict(0.6, [0.02], posterior=post)\n"
+        "print('ok')\n"
+    )
+    cwd = tmp_path / "empty"
+    cwd.mkdir()
+    res = subprocess.run([sys.executable, "-c", code], cwd=cwd, capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    assert list(cwd.iterdir()) == []
+    assert "\r" not in res.stderr and "it/s" not in res.stderr  # no progress bar when nobody watches
+
+
+def test_dataset_from_arrays_and_frame():
+    D = [np.linspace(0, 0.05, 5), np.linspace(0, 0.06, 6)]
+    F = [2 * d for d in D]
+    ds = bayesrod.Dataset.from_arrays(length_m=0.8, height_m=[0.4, 0.6], displacement_m=D, force_N=F)
+    assert [p.id for p in ds.pushes] == ["h400", "h600"] and ds.validate() == []
+    rows = {
+        "h": np.repeat([0.4, 0.6], [5, 6]),
+        "x": np.concatenate(D),
+        "f": np.concatenate(F),
+        "t": np.concatenate([np.arange(5.0), np.arange(6.0)]),
+    }
+    ds2 = bayesrod.Dataset.from_frame(rows, length_m=0.8, height="h", displacement="x", force="f", time="t")
+    np.testing.assert_array_equal(ds2.pushes[1].force.force_N, F[1])
+    with pytest.raises(ValueError, match="force: expected a column named 'F'"):
+        bayesrod.Dataset.from_frame(rows, length_m=0.8, height="h", displacement="x", force="F", time="t")
+    with pytest.raises(ValueError, match=r"force_N\[0\]: expected as many samples"):
+        bayesrod.Dataset.from_arrays(length_m=0.8, height_m=[0.4], displacement_m=[[0, 1]], force_N=[[0, 1, 2]])
+    bad = bayesrod.Dataset.from_arrays(length_m=0.8, height_m=[0.9], displacement_m=[[0, 0.1]], force_N=[[0, np.nan]])
+    probs = [str(p) for p in bad.validate()]
+    assert any("height_m" in p for p in probs) and any("force_N" in p and "row 2" in p for p in probs), probs
+
+
+def test_dataset_save_round_trips(tmp_path):
+    ds = bayesrod.simulate("twig", seed=3, heights_m=[0.5], config_overrides={"n_frames_engaged": 2})
+    ds.save(tmp_path / "ds")
+    back = bayesrod.load(tmp_path / "ds")
+    np.testing.assert_allclose(back.pushes[0].force.force_N, ds.pushes[0].force.force_N, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(back.pushes[0].force.contact_x_m, ds.pushes[0].force.contact_x_m, atol=1e-9)
+    plain = bayesrod.Dataset.from_arrays(length_m=0.8, height_m=[0.4], displacement_m=[[0, 0.01]], force_N=[[0, 1.0]])
+    plain.save(tmp_path / "plain")
+    assert bayesrod.load(tmp_path / "plain").pushes[0].height_m == 0.4
+
+
+# ----------------------------------------------------------------------------- layering
+LAYER = {"_version": 0, "physics": 0, "dataset": 1, "vision": 1, "inference": 2, "report": 3, "api": 4, "cli": 5}
+
+
+def _layer(mod: str) -> int:
+    parts = mod.split(".")
+    if len(parts) == 1 or parts[1] in ("__init__", "__main__"):
+        return 6  # the package face and `python -m bayesrod`
+    return LAYER[parts[1]]
+
+
+def _imports(path: Path):
+    mod = ".".join(path.relative_to(REPO).with_suffix("").parts)
+    pkg = mod if path.name == "__init__.py" else mod.rsplit(".", 1)[0]
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = pkg.split(".")[: len(pkg.split(".")) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+                names = [target] if node.module else [f"{target}.{a.name}" for a in node.names]
+            else:
+                names = [node.module or ""]
+        elif isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        else:
+            continue
+        for n in names:
+            if n == "bayesrod" or n.startswith("bayesrod."):
+                yield mod, n
+
+
+def test_layers_import_only_downward():
+    """physics -> dataset, vision -> inference -> report -> api -> cli; lazy imports count too."""
+    bad = []
+    for path in PKG.rglob("*.py"):
+        for mod, target in _imports(path):
+            if target.split(".")[1:2] in (["__init__"], []):
+                if _layer(mod) < 6:
+                    bad.append((mod, target))
+                continue
+            if _layer(target) > _layer(mod):
+                bad.append((mod, target))
+    assert not bad, bad
+
+
+def test_the_import_graph_check_can_fail(tmp_path):
+    fake = PKG / "physics" / "_layer_probe.py"
+    fake.write_text("from ..api import fit\n")
+    try:
+        with pytest.raises(AssertionError):
+            test_layers_import_only_downward()
+    finally:
+        fake.unlink()
+
+
+def test_no_module_below_the_cli_knows_a_flag():
+    from bayesrod.cli import build_parser
+
+    flags = set()
+    for action in build_parser()._subparsers._group_actions[0].choices.values():
+        flags |= {o for a in action._actions for o in a.option_strings if o.startswith("--")}
+    flags -= {"--help"}
+    bad = []
+    for path in PKG.rglob("*.py"):
+        if "cli" in path.relative_to(PKG).parts:
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str):
+                bad += [(path.name, f) for f in flags if f"{f}:" in node.value or f"{f} " in node.value]
+    assert not bad, bad
+
+
+def test_progress_only_on_a_terminal(monkeypatch):
+    from bayesrod.api._common import progress_enabled
+
+    class Tty:
+        def isatty(self):
+            return True
+
+    monkeypatch.setattr(sys, "stderr", Tty())
+    assert progress_enabled(True) and not progress_enabled(False)
+    monkeypatch.setattr(sys, "stderr", open(os.devnull, "w"))
+    assert not progress_enabled(True)
+
+
+@pytest.mark.parametrize("script", sorted(p.name for p in (REPO / "examples").glob("*.py")))
+def test_examples_run(script, tmp_path):
+    """Every example runs as a user would start it, from an empty directory, and writes nothing there."""
+    res = subprocess.run(
+        [sys.executable, str(REPO / "examples" / script)], cwd=tmp_path, capture_output=True, text=True, timeout=900
+    )
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.stdout.strip() and list(tmp_path.iterdir()) == []
