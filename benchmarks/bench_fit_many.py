@@ -15,7 +15,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from bayesrod.api.survey import fit_many
+from bayesrod import fit_many
 from bayesrod.dataset.simulate import SimConfig, simulate, write_simulated
 
 
@@ -33,17 +33,10 @@ def main():
         rate = {}
         for w in (1, 2):
             t0 = time.perf_counter()
-            res = fit_many(
-                root,
-                Path(tmp) / f"out{w}",
-                n_workers=w,
-                options={"use_shapes": False},
-                progress=False,
-                log=lambda *x: None,
-            )
+            res = fit_many(root, Path(tmp) / f"out{w}", n_workers=w, use_shapes=False, progress=False)
             dt = time.perf_counter() - t0
-            rate[w] = res["fitted"] / dt * 60
-            print(f"{w} worker(s): {res['fitted']} specimens in {dt:.1f} s = {rate[w]:.2f} specimens/min")
+            rate[w] = len(res.rows) / dt * 60
+            print(f"{w} worker(s): {len(res.rows)} specimens in {dt:.1f} s = {rate[w]:.2f} specimens/min")
         print(f"ratio 2 workers / 1 worker: x{rate[2] / rate[1]:.2f}")
 
 

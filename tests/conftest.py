@@ -1,9 +1,17 @@
+import os
 import shutil
 from pathlib import Path
 
 import pytest
+from threadpoolctl import threadpool_limits
 
 from bayesrod.dataset.simulate import SimConfig, simulate, write_simulated
+
+# two xdist workers on two cores: one BLAS thread each (two each oversubscribe the machine), also in
+# the subprocesses the tests start
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+threadpool_limits(1)
 
 REPO = Path(__file__).resolve().parents[1]
 BLUEBERRY = REPO.parent / "shared" / "data" / "blueberry-canes"

@@ -3,12 +3,14 @@
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from bayesrod.api.calibration import sbc_replicate
 
 PRIOR = str(Path(__file__).resolve().parents[1] / "scripts" / "sbc_prior.json")
 
 
+@pytest.mark.slow  # 3 minutes: run with `pytest -m slow`; the full study is scripts/sbc.py
 def test_small_sbc_forces_only():
     """4 replicates drawn from the prior: 90% intervals of EI0 and p cover the truth.
 

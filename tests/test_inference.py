@@ -126,7 +126,7 @@ def _check_fit(run, truth, effects=()):
     return summary
 
 
-@pytest.mark.parametrize("preset,seed", [("twig", 11), ("grass", 12)])
+@pytest.mark.parametrize("preset,seed", [pytest.param("twig", 11, marks=pytest.mark.slow), ("grass", 12)])
 def test_fit_recovers_truth(tmp_path, preset, seed):
     ds = make_dataset(tmp_path / "ds", preset, seed=seed)
     run = tmp_path / "run"
@@ -144,7 +144,8 @@ def test_fit_recovers_truth(tmp_path, preset, seed):
 
 def test_predict_posterior_json(tmp_path, capsys, twig_noisy):
     run = tmp_path / "run"
-    assert main(["fit", str(twig_noisy), "--out", str(run), "--quiet", "--forces-only"]) == 0
+    budget = ["--max-steps", "1500", "--target-ess", "300"]
+    assert main(["fit", str(twig_noisy), "--out", str(run), "--quiet", "--forces-only", *budget]) == 0
     capsys.readouterr()
     assert main(["predict", "--posterior", str(run), "--height", "0.5", "--displacement", "0.02,0.1", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
@@ -185,6 +186,7 @@ def _fit_effect(tmp_path, name, value, use_shapes, n_effect=None, prior="woody")
     return {k: np.quantile(v, [0.005, 0.5, 0.995]) for k, v in nat.items()}, res
 
 
+@pytest.mark.slow  # 85 s
 def test_fit_recovers_an_undeclared_base_compliance(tmp_path):
     """Forces only, compliance 20 N m/rad on the twig (base rotation ~14% of the deflection)."""
     q, res = _fit_effect(tmp_path, "base_compliance", 20.0, use_shapes=False, n_effect=9)

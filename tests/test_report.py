@@ -19,7 +19,9 @@ def run_dir(tmp_path_factory):
     import bayesrod
 
     out = tmp_path_factory.mktemp("run") / "run"
-    bayesrod.fit(REPO / "bayesrod" / "data" / "default", progress=False, target_ess=200).save(out)
+    bayesrod.fit(
+        REPO / "bayesrod" / "data" / "default", use_shapes=False, progress=False, target_ess=450, max_steps=3000
+    ).save(out)
     return out
 
 

@@ -26,6 +26,7 @@ def survey_root(tmp_path_factory):
     return root
 
 
+@pytest.mark.slow  # 2.5 minutes (two Dask runs); the restart logic
 def test_fit_many_matches_sequential_and_restarts(survey_root, tmp_path):
     import bayesrod
 

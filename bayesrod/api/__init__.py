@@ -6,7 +6,7 @@ objects' ``save()`` / ``report()`` write files. See docs/api.md.
 
 from .bands import Band, ForceBand
 from .compare import Comparison, compare
-from .data import DEMO_DATASET, SimulatedDataset, load, simulate
+from .data import DEMO_DATASET, SimulatedDataset, import_table, load, simulate
 from .design import Design, design
 from .diagnose import Diagnosis, diagnose
 from .extract import Extraction, extract
@@ -32,6 +32,7 @@ __all__ = [
     "extract",
     "fit",
     "fit_many",
+    "import_table",
     "load",
     "predict",
     "simulate",

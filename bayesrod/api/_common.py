@@ -13,9 +13,13 @@ from ..dataset.model import Specimen
 
 def as_dataset(dataset) -> Specimen:
     """A :class:`~bayesrod.Dataset` from itself or from a dataset directory (read and validated)."""
-    from ..dataset import read_dataset
+    from ..dataset import DatasetError, read_dataset, validate_in_memory
 
     if isinstance(dataset, Specimen):
+        if dataset.root is None:  # built in memory: the reader's checks, array by array
+            problems = validate_in_memory(dataset)
+            if any(p.severity == "error" for p in problems):
+                raise DatasetError(problems)
         return dataset
     if isinstance(dataset, (str, os.PathLike)):
         return read_dataset(dataset)

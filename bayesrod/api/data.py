@@ -75,6 +75,7 @@ def simulate(
     progress: bool = False,
     noise_model=None,
     config_overrides: Mapping | None = None,
+    noise_rho: float = 0.0,
 ) -> SimulatedDataset:
     """A synthetic dataset from the forward elastica with measurement noise (docs/data.md).
 
@@ -91,6 +92,8 @@ def simulate(
         Model effects switched on (docs/model.md), e.g. ``{"base_compliance": 40.0}``.
     heights_m : sequence of float or None
         Contact heights [m]; default the preset's.
+    noise_rho : float
+        Lag-1 correlation of AR(1) force noise (marginal sd as the preset's), in (-1, 1); 0 is independent.
     noise_model : bayesrod.dataset.simulate.NoiseModel or None
         Explicit noise (overrides ``noise``), e.g. for calibration studies.
     config_overrides : mapping or None
@@ -126,6 +129,12 @@ def simulate(
     if heights_m is not None:
         overrides["heights_m"] = tuple(float(h) for h in heights_m)
     cfg = SimConfig.from_preset(base, seed=seed, noise=noise, effects=eff, **overrides)
+    if noise_rho:
+        if not (isinstance(noise_rho, (int, float)) and -1 < noise_rho < 1):
+            raise ValueError(f"noise_rho: expected a correlation in (-1, 1), got {noise_rho!r}")
+        from dataclasses import replace as _replace
+
+        noise_model = _replace(noise_model or cfg.noise, force_rho=float(noise_rho))
     if noise_model is not None or config_overrides:
         from dataclasses import replace
 
@@ -169,3 +178,36 @@ def simulate(
         extra={"truth": truth},
         simulation=(cfg, tuple(sim)),
     )
+
+
+def import_table(files, *, metadata=None, **options):
+    """Raw rig tables to datasets (docs/data.md, "Raw rig tables"); nothing written until ``.save(out)``.
+
+    Parameters
+    ----------
+    files : path or sequence of paths
+        Table files (CSV, TSV, semicolon with decimal comma; metadata lines above the header are fine) or
+        folders of them.
+    metadata : path, mapping or None
+        Per-file options: a CSV with a column ``file`` (or ``{file name: {option: value}}``).
+    **options
+        As :class:`bayesrod.dataset.importers.TableOptions`: ``time``, ``force`` (column names), either
+        ``displacement`` or ``angle`` with ``arm_height_m``; units ``time_unit`` (s, ms), ``force_unit``
+        (N, kN, gf), ``displacement_unit`` (m, cm, mm), ``angle_unit`` (deg, rad); ``height_m``,
+        ``length_m``, ``length_unknown``, ``specimen``, ``species``, ``header_row``, ``cycles``
+        (``all``: every loading ramp a push; ``first``), ``force_sign``, ``tare`` (auto, none).
+
+    Returns
+    -------
+    bayesrod.dataset.importers.TableImport
+        ``.specimens``, ``.report`` and ``.save(out)``.
+    """
+    from ..dataset.importers import TableOptions, import_tables
+
+    if isinstance(files, (str, Path)):
+        files = [files]
+    try:
+        opt = TableOptions(**options)
+    except TypeError as e:
+        raise TypeError(f"options: {e}") from None
+    return import_tables(files, opt, metadata)

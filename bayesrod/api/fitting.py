@@ -37,7 +37,17 @@ from .bands import Band, ForceBand
 log = logging.getLogger("bayesrod")
 
 #: the fit options a checkpoint must share with the run it resumes
-_RESUME_KEYS = ("dataset", "prior", "effects", "seed", "use_forces", "use_shapes", "shape_weight")
+_RESUME_KEYS = (
+    "dataset",
+    "prior",
+    "effects",
+    "seed",
+    "use_forces",
+    "use_shapes",
+    "shape_weight",
+    "force_noise",
+    "preload",
+)
 
 
 def _readonly(a) -> NDArray:
@@ -244,13 +254,35 @@ class Posterior:
     def _median(self) -> dict:
         return {k: float(np.median(v)) for k, v in self.samples.items()}
 
+    def _lik(self):
+        """The likelihood of the fitted data: kept from the fit, or rebuilt once for a loaded run (None if the
+        run's dataset is no longer readable)."""
+        if self.likelihood is None and self.dataset is not None:
+            try:
+                lik = build_likelihood(
+                    self.dataset,
+                    load_prior(self.config.get("prior")),
+                    self.effects,
+                    use_forces=self.config.get("use_forces", True),
+                    use_shapes=self.config.get("use_shapes", True),
+                    force_noise=self.config.get("force_noise", "iid"),
+                    preload=self.config.get("preload", False),
+                )
+            except ValueError:
+                return None
+            if "shape_weight" in self.doc.get("data", {}):
+                lik.shape_weight = self.doc["data"]["shape_weight"]
+            object.__setattr__(self, "likelihood", lik)  # a cache: the fit's numbers do not change
+        return self.likelihood
+
     def _require_likelihood(self, what: str):
-        if self.likelihood is None:
+        lik = self._lik()
+        if lik is None:
             raise ValueError(
                 f"{what}: expected the fitted dataset, got a saved run whose dataset "
                 f"{self.config.get('dataset')!r} is not on disk"
             )
-        return self.likelihood
+        return lik
 
     # ------------------------------------------------------------------ files
     def figures(self) -> dict[str, bytes]:
@@ -260,6 +292,7 @@ class Posterior:
         sub = {k: v[:: max(1, len(v) // 2000)] for k, v in self.samples.items()}
         truth = self.doc.get("truth")
         heights = self.doc.get("data", {}).get("heights_m", [])
+        lik = self._lik()
         from ..report.plots import plot_ei_band, plot_force_fit, plot_k_theta_band, plot_rank
 
         out = {
@@ -267,18 +300,16 @@ class Posterior:
                 lambda ax: plot_ei_band(sub, self.length_m, ax=ax, truth=truth, direct=self.direct), 6.4, 4.2, dpi=110
             ),
             "k_theta_band": render(
-                lambda ax: plot_k_theta_band(
-                    sub, self.length_m, heights, ax=ax, lumped=_lumped_points(self.likelihood)
-                ),
+                lambda ax: plot_k_theta_band(sub, self.length_m, heights, ax=ax, lumped=_lumped_points(lik)),
                 6.4,
                 4.2,
                 dpi=110,
             ),
         }
-        if self.likelihood is not None:
+        if lik is not None:
             out["force_fit"] = render(
                 lambda ax: plot_force_fit(
-                    self.dataset, self.likelihood, sub, ax=ax, unseen_height=unseen_height(heights, self.length_m)
+                    self.dataset, lik, sub, ax=ax, unseen_height=unseen_height(heights, self.length_m)
                 ),
                 6.4,
                 4.2,
@@ -287,11 +318,11 @@ class Posterior:
         from ..report.figures import png_bytes
 
         out["corner"] = png_bytes(self._corner_figure(sub, truth), dpi=90)
-        if self.likelihood is not None:
+        if lik is not None:
             from ..report.plots import plot_residuals
 
             med = self._median()
-            out["residuals"] = render(lambda axes: plot_residuals(self.likelihood, med, axes=axes), 10, 3.6, ncols=2)
+            out["residuals"] = render(lambda axes: plot_residuals(lik, med, axes=axes), 10, 3.6, ncols=2)
         n_ens = self.doc.get("sampler", {}).get("ensembles", 4)
         out["rank"] = render(lambda axes: plot_rank(self.idata, n_ens, axes=axes), 10, 3.4, ncols=2)
         return out
@@ -400,22 +431,13 @@ class Posterior:
                 },
             }
         effects = tuple(doc.get("effects", ()))
-        spec = lik = None
+        spec = None
         ds = config.get("dataset")
         if ds and Path(ds).is_dir():
             try:
                 spec = read_dataset(ds)
-                lik = build_likelihood(
-                    spec,
-                    load_prior(config.get("prior")),
-                    effects,
-                    use_forces=config.get("use_forces", True),
-                    use_shapes=config.get("use_shapes", True),
-                )
-                if "shape_weight" in doc.get("data", {}):
-                    lik.shape_weight = doc["data"]["shape_weight"]
             except ValueError:
-                spec = lik = None
+                spec = None
         return cls(
             samples=MappingProxyType(samples),
             idata=idata,
@@ -425,7 +447,6 @@ class Posterior:
             config=MappingProxyType(config),
             doc=MappingProxyType(doc),
             dataset=spec,
-            likelihood=lik,
             draws_are_thinned=not has_nc,
         )
 
@@ -540,7 +561,7 @@ def _check_checkpoint(checkpoint: Path, config: dict) -> None:
         if old is not None:
             old = json.loads(old)
             for k in _RESUME_KEYS:
-                if old.get(k) != config[k]:
+                if old.get(k, {"force_noise": "iid", "preload": False}.get(k)) != config[k]:
                     raise ValueError(
                         f"checkpoint: expected the same {k} as the interrupted run in {checkpoint}, got "
                         f"{config[k]!r} instead of {old.get(k)!r}"
@@ -564,6 +585,8 @@ def fit(
     max_steps: int = 8000,
     target_ess: float = 1000.0,
     checkpoint=None,
+    force_noise: str = "iid",
+    preload: bool = False,
 ) -> Posterior:
     """Posterior of EI0, p, the noise and the fitted effects for one dataset (emcee).
 
@@ -586,6 +609,12 @@ def fit(
         Power on the centerline likelihood: ``"auto"`` = n_eff/n measured from the residual correlation.
     max_steps, target_ess : int, float
         Sampling budget per ensemble and the bulk-ESS target for EI0 and p.
+    force_noise : {"iid", "ar1"}
+        Force noise model: independent, or stationary AR(1) within each push with its lag-1 correlation
+        ``rho_force`` sampled beside ``sigma_force_N`` (docs/inference.md).
+    preload : bool
+        Fit each push's preload: the contact displacement already made when recording began (m, prior
+        uniform on [0, 0.1 L]); forces only (docs/inference.md).
     checkpoint : path or None
         An HDF5 file the chains are checkpointed to; an interrupted fit called again with the same
         arguments and checkpoint resumes from it. None (default): nothing is written.
@@ -602,6 +631,10 @@ def fit(
             raise ValueError(f"shape_weight: expected 'auto' or a number in (0, 1], got {shape_weight!r}")
     elif not (isinstance(shape_weight, (int, float)) and 0 < shape_weight <= 1):
         raise ValueError(f"shape_weight: expected 'auto' or a number in (0, 1], got {shape_weight!r}")
+    if not (isinstance(max_steps, (int, np.integer)) and max_steps >= 100):
+        raise ValueError(f"max_steps: expected an integer >= 100, got {max_steps!r}")
+    if not (isinstance(target_ess, (int, float)) and target_ess > 0):
+        raise ValueError(f"target_ess: expected a number > 0, got {target_ess!r}")
     pr = load_prior(prior)
     config = {
         "dataset": str(Path(spec.root).resolve()) if spec.root is not None else None,
@@ -611,10 +644,14 @@ def fit(
         "use_forces": use_forces,
         "use_shapes": use_shapes,
         "shape_weight": shape_weight,
+        "force_noise": force_noise,
+        "preload": bool(preload),
         "bayesrod": __version__,
     }
     # the likelihood first: bad effects or data without engaged samples fail before anything is written
-    lik = build_likelihood(spec, pr, effects, use_forces=use_forces, use_shapes=use_shapes)
+    lik = build_likelihood(
+        spec, pr, effects, use_forces=use_forces, use_shapes=use_shapes, force_noise=force_noise, preload=preload
+    )
     if checkpoint is not None:
         checkpoint = Path(checkpoint)
         _check_checkpoint(checkpoint, config)
@@ -629,7 +666,15 @@ def fit(
     )
     two_stage, direct = _two_stage(spec, use_shapes)
     rng = np.random.default_rng(seed)
-    theta0 = find_start(post, rng, init=two_stage)
+    try:
+        theta0 = find_start(post, rng, init=two_stage)
+    except ValueError:
+        raise ValueError(
+            f"{spec.specimen}: expected data the tapered rod can describe, got none of the taper exponents "
+            f"{lik.p_grid[0]:g}-{lik.p_grid[-1]:g} giving the data a finite probability under prior "
+            f"{pr.name!r}; check units and signs (bayesrod validate), the prior, or what the model misses "
+            "(bayesrod diagnose)"
+        ) from None
     weight_info = None
     if lik.n_points:
         if shape_weight == "auto":
@@ -687,6 +732,11 @@ def fit(
         extra["truth"] = truth
     if two_stage:
         extra["two_stage"] = two_stage
+    from ..inference.checks import model_check
+
+    extra["model_check"] = model_check(lik, samples, seed=seed)
+    if extra["model_check"]["verdict"] == "misfit":
+        log.warning("warning: %s: %s", spec.specimen, extra["model_check"]["message"])
     doc = build_summary(spec, post, samples, res.diagnostics, lik.fit_error(median), effects, extra)
     idata = to_inference_data(
         res.chain,

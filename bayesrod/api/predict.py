@@ -122,16 +122,12 @@ def _predict_posterior(posterior, height_m, displacement_m, effects: Effects, n_
 
     if isinstance(posterior, (str, Path)):
         run = str(posterior)
-        if not (Path(posterior) / "samples.npz").is_file():
-            raise ValueError(f"posterior: expected a fit run directory holding samples.npz, got {posterior}")
-        with np.load(Path(posterior) / "samples.npz") as z:
-            samples = {k: z[k] for k in z.files}
-        L = float(samples.pop("length_m"))
+        posterior = Posterior.load(posterior)
     elif isinstance(posterior, Posterior):
         run = posterior.config.get("run") or posterior.specimen
-        samples, L = posterior.thinned(), posterior.length_m
     else:
         raise TypeError(f"posterior: expected a bayesrod.Posterior or a run directory, got {type(posterior).__name__}")
+    samples, L = posterior.thinned(), posterior.length_m
     h, D = _check_inputs(float(height_m), displacement_m, L)
     rng = np.random.default_rng(0)
     n = samples["EI0"].size

@@ -80,6 +80,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --frames: the bar holding the probe leads the push, hiding the stem the push bends "
         "forward (default), or trails it",
     )
+    sm.add_argument(
+        "--noise-rho", type=float, default=0.0, help="lag-1 correlation of AR(1) force noise (default 0: independent)"
+    )
     sm.add_argument("--effect", action="append", metavar="NAME=VALUE", help="add a model effect (repeatable)")
     sm.add_argument("--heights", help="override the preset's heights [m]: X,Y,Z or start:stop:num")
     sm.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
@@ -102,16 +105,89 @@ def build_parser() -> argparse.ArgumentParser:
     cp.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     cp.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
     im = sub.add_parser("import", help="turn raw force-displacement tables into datasets")
-    im.add_argument("kind", choices=["blueberry"], help="table layout (see docs/data.md)")
-    im.add_argument("src", help="folder of raw tables")
-    im.add_argument("--out", required=True, help="output folder (one dataset per specimen)")
     im.add_argument(
-        "--length-m",
-        type=float,
-        required=True,
-        help="assumed stem length [m]: the blueberry tables hold none (an explicit assumption)",
+        "kind",
+        choices=["blueberry", "table"],
+        help="blueberry: the blueberry-cane tables; "
+        "table: any delimited rig table with the columns named by flags (docs/data.md)",
     )
-    im.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
+    im.add_argument(
+        "src",
+        nargs="+",
+        metavar="SRC",
+        help="folder of raw tables (blueberry), or table files and folders of them (table)",
+    )
+    im.add_argument("--out", required=True, help="output folder (one dataset per specimen)")
+    im.add_argument("--length-m", type=float, help="stem length [m] (blueberry: required, an explicit assumption)")
+    im.add_argument(
+        "--length-unknown",
+        action="store_true",
+        help="table: the length is a rough guess (marked length_m_approximate in specimen.json)",
+    )
+    im.add_argument("--time", metavar="COL", help="table: the time column's header name")
+    im.add_argument(
+        "--force",
+        nargs="?",
+        const=True,
+        default=False,
+        metavar="COL",
+        help="table: the force column's header name (--force COL); alone, as for every command: replace a "
+        "non-empty --out directory",
+    )
+    im.add_argument("--force-column", metavar="COL", help="table: the force column (same as --force COL)")
+    im.add_argument(
+        "--replace", action="store_true", help="replace a non-empty --out directory (same as a bare --force)"
+    )
+    im.add_argument("--displacement", metavar="COL", help="table: the sensor's displacement column")
+    im.add_argument("--angle", metavar="COL", help="table: a rotating arm's angle column (with --arm-height)")
+    im.add_argument(
+        "--arm-height",
+        type=float,
+        metavar="H",
+        help="table: the rotating arm's length from its pivot "
+        "to the probe [m]: the contact advances by H sin(angle - angle at the start)",
+    )
+    im.add_argument("--time-unit", default="s", choices=["s", "ms"], help="table: time unit (default s)")
+    im.add_argument("--force-unit", default="N", choices=["N", "kN", "gf"], help="table: force unit (default N)")
+    im.add_argument("--displacement-unit", default="m", choices=["m", "cm", "mm"], help="table: default m")
+    im.add_argument("--angle-unit", default="deg", choices=["deg", "rad"], help="table: default deg")
+    im.add_argument("--height-m", type=float, help="table: contact height on the stem [m]")
+    im.add_argument(
+        "--specimen", help="table: specimen name (default: the file name); files sharing it form one dataset"
+    )
+    im.add_argument("--species", help="table: species")
+    im.add_argument(
+        "--metadata",
+        metavar="CSV",
+        help="table: a CSV with a column file and any of height_m, "
+        "length_m, specimen, species, arm_height_m, force_sign, per file",
+    )
+    im.add_argument(
+        "--header-row",
+        type=int,
+        metavar="N",
+        help="table: 1-based line of the header (default: the first line naming the columns)",
+    )
+    im.add_argument(
+        "--cycles",
+        default="all",
+        choices=["first", "all"],
+        help="table: every loading ramp of a load/unload recording as a push (default), or the first only",
+    )
+    im.add_argument(
+        "--force-sign",
+        type=int,
+        default=1,
+        choices=[1, -1],
+        help="table: -1 when the load cell reads the push as negative",
+    )
+    im.add_argument(
+        "--tare",
+        default="auto",
+        choices=["auto", "none"],
+        help="table: subtract the force baseline "
+        "before contact when the recording shows it (auto, default) or keep the readings",
+    )
     ft = sub.add_parser("fit", help="posterior of EI0, p and noise for a dataset (emcee)")
     ft.add_argument("dataset", help="dataset directory")
     ft.add_argument("--out", required=True, help="run directory to write")
@@ -131,6 +207,22 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="auto|W",
         help="power on the centerline likelihood: auto (default) = n_eff/n measured from the residuals' "
         "correlation along the stem and between frames; 1 treats every point as independent",
+    )
+    ft.add_argument(
+        "--force-noise",
+        default="iid",
+        choices=["iid", "ar1"],
+        help="force noise model: independent (iid, default) or AR(1) per push with its lag-1 correlation "
+        "rho_force fitted (real pushes: drift, stick-slip, vibration)",
+    )
+    ft.add_argument(
+        "--preload",
+        action="store_true",
+        help="fit each push's preload (the displacement already made when recording began); forces only",
+    )
+    ft.add_argument("--max-steps", type=int, default=8000, help="sampling budget per ensemble (default 8000)")
+    ft.add_argument(
+        "--target-ess", type=float, default=1000.0, help="stop once EI0 and p have this bulk ESS (default 1000)"
     )
     ft.add_argument("--resume", action="store_true", help="continue an interrupted run in --out")
     ft.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
@@ -211,17 +303,34 @@ FLAGS = {
     "n_workers": "--workers",
     "checkpoint": "--resume",
     "arm": "--arm",
+    "max_steps": "--max-steps",
+    "force_noise": "--force-noise",
+    "preload": "--preload",
+    "noise_rho": "--noise-rho",
+    "target_ess": "--target-ess",
+    "time_unit": "--time-unit",
+    "force_unit": "--force-unit",
+    "displacement_unit": "--displacement-unit",
+    "angle_unit": "--angle-unit",
+    "arm_height_m": "--arm-height",
+    "header_row": "--header-row",
+    "cycles": "--cycles",
+    "force_sign": "--force-sign",
+    "tare": "--tare",
+    "metadata": "--metadata",
 }
+
+
+#: where one command spells a parameter's flag differently
+_COMMAND_FLAGS = {"predict": {"length_m": "--length"}, "import": {"height_m": "--height-m"}}
 
 
 def _flag_message(message: str, command: str) -> str:
     """A library error ``name: ...`` shown with the flag that sets ``name``; output-exists hints."""
     name, sep, rest = message.partition(":")
-    if sep and name in FLAGS:
-        flag = FLAGS[name]
-        if command == "predict" and name == "length_m":
-            flag = "--length"
-        return f"{flag}:{rest}"
+    flags = {**FLAGS, **_COMMAND_FLAGS.get(command, {})}
+    if sep and name in flags:
+        return f"{flags[name]}:{rest}"
     return message
 
 
@@ -373,7 +482,13 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     _prepare_out(args)
     heights = tuple(parse_values(args.heights, "--heights")) if args.heights else None
     ds = simulate(
-        args.preset, seed=args.seed, noise=args.noise, effects=effects, heights_m=heights, progress=_progress(args)
+        args.preset,
+        noise_rho=args.noise_rho,
+        seed=args.seed,
+        noise=args.noise,
+        effects=effects,
+        heights_m=heights,
+        progress=_progress(args),
     )
     ds.save(args.out, overwrite=args.force, frames=args.frames, arm=args.arm)
     eff = ", ".join(f"{k}={v:g}" for k, v in effects.to_mapping().items()) or "none"
@@ -413,13 +528,22 @@ def cmd_extract(args: argparse.Namespace) -> int:
 
 @_command("import")
 def cmd_import(args: argparse.Namespace) -> int:
+    # --force is both the force column (--force COL) and, bare, the contract's "replace --out"
+    args.force_col = args.force if isinstance(args.force, str) else args.force_column
+    args.force = args.force is True or args.replace
+    if args.kind == "table":
+        return _import_table(args)
     from ..dataset import validate_dataset
     from ..dataset.importers import import_blueberry
     from ..dataset.io import atomic_dir
 
+    if len(args.src) != 1:
+        raise ValueError(f"SRC: expected one blueberry-canes folder, got {len(args.src)} paths")
+    if args.length_m is None:
+        raise ValueError("--length-m: expected an assumed cane length [m] (the blueberry tables hold none), got none")
     _prepare_out(args)
     with atomic_dir(args.out, args.force) as tmp:
-        report = import_blueberry(args.src, tmp, args.length_m)
+        report = import_blueberry(args.src[0], tmp, args.length_m)
         for cane in report["canes"]:
             if cane["status"] == "imported":
                 errors = [p for p in validate_dataset(tmp / cane["dataset"]) if p.severity == "error"]
@@ -443,6 +567,63 @@ def cmd_import(args: argparse.Namespace) -> int:
             print(f"  {cane['cane']} rejected: {cane['reason']}")
     print(f"details: {Path(args.out) / 'import_report.json'}")
     return 0
+
+
+def _import_table(args: argparse.Namespace) -> int:
+    from ..api import import_table
+    from ..dataset import validate_dataset
+
+    for flag, val in (("--time", args.time), ("--force", args.force_col)):
+        if not val:
+            raise ValueError(f"{flag}: expected the column's header name, got none")
+    out = _prepare_out(args)
+    res = import_table(
+        args.src,
+        time=args.time,
+        force=args.force_col,
+        displacement=args.displacement,
+        angle=args.angle,
+        arm_height_m=args.arm_height,
+        time_unit=args.time_unit,
+        force_unit=args.force_unit,
+        displacement_unit=args.displacement_unit,
+        angle_unit=args.angle_unit,
+        height_m=args.height_m,
+        length_m=args.length_m,
+        length_unknown=args.length_unknown,
+        specimen=args.specimen,
+        species=args.species,
+        metadata=args.metadata,
+        header_row=args.header_row,
+        cycles=args.cycles,
+        force_sign=args.force_sign,
+        tare=args.tare,
+    )
+    res.save(out, overwrite=args.force)
+    problems = {name: validate_dataset(out / name) for name in res.specimens}
+    if args.json:
+        _emit_json({**res.report, "problems": {k: [dict(vars(p)) for p in v] for k, v in problems.items()}})
+    else:
+        for f in res.report["files"]:
+            pushes = ", ".join(
+                f"cycle {p['cycle']} (rows {p['rows'][0]}-{p['rows'][1]}, peak {p['peak_force_N']:.3g} N"
+                + (f", preload {p['preload_N']:.3g} N" if p["preload_N"] else "")
+                + ")"
+                for p in f["pushes"]
+            )
+            skipped = f"; {len(f['rows_skipped'])} lines skipped" if f["rows_skipped"] else ""
+            print(
+                f"{f['file']}: header at line {f['header_line']} ({f['delimiter']}-separated, decimal "
+                f"{f['decimal']!r}){skipped} -> {f['specimen']}: {pushes}"
+            )
+        for name, probs in problems.items():
+            for prob in probs:
+                print(f"  {name}: {prob}", file=sys.stderr if prob.severity == "error" else sys.stdout)
+        print(
+            f"wrote {len(res.specimens)} dataset{'s' * (len(res.specimens) > 1)} into {args.out} "
+            f"(details: {out / 'import_report.json'})"
+        )
+    return 1 if any(p.severity == "error" for v in problems.values() for p in v) else 0
 
 
 # --------------------------------------------------------------------------- #
@@ -471,6 +652,10 @@ def _fit_and_save(
     prior=None,
     effects=(),
     shape_weight="auto",
+    max_steps=8000,
+    target_ess=1000.0,
+    force_noise="iid",
+    preload=False,
 ):
     """Fit with the API, checkpointing into ``out/chains.h5``, then save the run into ``out``."""
     from ..api import fit
@@ -485,6 +670,10 @@ def _fit_and_save(
         use_shapes=use_shapes,
         shape_weight=shape_weight,
         checkpoint=out / "chains.h5",
+        max_steps=max_steps,
+        target_ess=target_ess,
+        force_noise=force_noise,
+        preload=preload,
     )
     post.save(out, overwrite=True)
     return post
@@ -514,6 +703,10 @@ def cmd_fit(args: argparse.Namespace) -> int:
         prior=args.prior,
         effects=effects,
         shape_weight=_shape_weight(args.shape_weight),
+        max_steps=args.max_steps,
+        target_ess=args.target_ess,
+        force_noise=args.force_noise,
+        preload=args.preload,
     )
     _print_fit(post.to_dict(), out, args)
     return 0

@@ -39,6 +39,7 @@ class Onset:
     baseline: float  # force reading with nothing touching (same units as the input)
     slope: float  # initial stiffness (force per unit x)
     observed: bool  # False if contact began at or before the first sample
+    position: float | None = None  # the hinge's x (between samples), when refined
 
 
 def hinge_onset(x, force, window_fraction: float = 0.5, min_window: int = 6) -> Onset:
@@ -67,6 +68,50 @@ def hinge_onset(x, force, window_fraction: float = 0.5, min_window: int = 6) -> 
             best = (sse, j, float(coef[0]), float(coef[1]))
     _, j, b, k = best
     return Onset(int(j), b, k, observed=j > 0)
+
+
+def contact_onset(x, force, min_free: int = 3, f_crit: float = 10.0) -> Onset:
+    """Contact onset of a ramp that may start before contact, or already loaded.
+
+    :func:`hinge_onset`, accepted only when the recording really shows the stem free first: at least
+    ``min_free`` samples before the hinge and a hinge that fits significantly better than one straight
+    line through the same window (F statistic > ``f_crit``). Otherwise the ramp started in contact
+    (``observed`` False, index 0, no baseline to tare by).
+    """
+    x = np.asarray(x, float)
+    F = np.asarray(force, float)
+    on = hinge_onset(x, F)
+    if not on.observed or on.index < min_free:
+        return Onset(0, float(F[0]) if F.size else 0.0, on.slope, False)
+    f0 = np.median(F[:3])
+    above = np.flatnonzero(F > f0 + 0.5 * (F.max() - f0))
+    w = int(min(F.size, max(6, above[0] + 1 if above.size else F.size)))
+    xs, Fs = x[:w], F[:w]
+    A = np.stack([np.ones(w), xs], axis=1)
+    line = np.linalg.lstsq(A, Fs, rcond=None)[0]
+    sse_line = float(np.sum((A @ line - Fs) ** 2))
+    hinge = on.baseline + on.slope * np.clip(xs - xs[on.index], 0, None)
+    sse_hinge = float(np.sum((hinge - Fs) ** 2))
+    if w <= 4 or sse_hinge <= 0:
+        return on
+    stat = (sse_line - sse_hinge) / (sse_hinge / (w - 3))
+    if stat <= f_crit:
+        return Onset(0, float(F[0]), on.slope, False)
+    # the contact point lies between samples: refine the hinge's x continuously around the best sample
+    from scipy.optimize import minimize_scalar
+
+    def sse(x_on):
+        a = np.clip(xs - x_on, 0, None)
+        M = np.stack([np.ones(w), a], axis=1)
+        c = np.linalg.lstsq(M, Fs, rcond=None)[0]
+        return float(np.sum((M @ c - Fs) ** 2)), c
+
+    lo, hi = xs[max(on.index - 1, 0)], xs[min(on.index + 1, w - 1)]
+    res = minimize_scalar(lambda v: sse(v)[0], bounds=(min(lo, hi), max(lo, hi)), method="bounded")
+    x_on = float(res.x) if res.success and sse(res.x)[0] <= sse_hinge else float(xs[on.index])
+    c = sse(x_on)[1]
+    first = int(np.searchsorted(xs, x_on, side="left")) if np.all(np.diff(xs) >= 0) else on.index
+    return Onset(first, float(c[0]), float(c[1]), True, x_on)
 
 
 @dataclass
@@ -238,3 +283,372 @@ def import_blueberry(src: Path, out: Path, length_m: float) -> dict:
         report["canes"].append(entry)
     write_json(out / "import_report.json", report)
     return report
+
+
+# --------------------------------------------------------------------------- #
+# generic rig tables (docs/data.md, "Raw rig tables")
+# --------------------------------------------------------------------------- #
+TIME_UNITS = {"s": 1.0, "ms": 1e-3}
+FORCE_UNITS = {"N": 1.0, "kN": 1e3, "gf": GF_TO_N}
+DISPLACEMENT_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
+ANGLE_UNITS = {"deg": np.pi / 180.0, "rad": 1.0}
+#: per-file fields a metadata table may set (the same names as the options)
+METADATA_FIELDS = ("height_m", "length_m", "specimen", "species", "arm_height_m", "force_sign")
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One monotone stretch of a recording: samples ``start`` to ``stop`` (exclusive), loading or unloading."""
+
+    start: int
+    stop: int
+    loading: bool
+
+
+def split_cycles(x, tol: float | None = None) -> list[Segment]:
+    """Split a displacement series into loading (advancing) and unloading (retreating) stretches.
+
+    A reversal is a turn by more than ``tol`` (default: the series' noise, see
+    :func:`bayesrod.dataset.plausibility.reversal_tolerance`) from the running extreme; the turning
+    sample belongs to both neighbours, so each stretch starts where the previous one turned.
+    """
+    from .plausibility import reversal_tolerance
+
+    x = np.asarray(x, float)
+    n = x.size
+    if n < 2:
+        return [Segment(0, n, True)]
+    tol = reversal_tolerance(x) if tol is None else tol
+    turns, up = [0], None
+    ext_i = 0
+    for i in range(1, n):
+        if up is None:
+            if abs(x[i] - x[0]) > tol:
+                up = x[i] > x[0]
+                ext_i = i
+            continue
+        if (up and x[i] > x[ext_i]) or (not up and x[i] < x[ext_i]):
+            ext_i = i
+        elif abs(x[i] - x[ext_i]) > tol:
+            turns.append(ext_i)
+            up = not up
+            ext_i = i
+    turns.append(n - 1)
+    segs = []
+    first_up = True if up is None else (x[turns[1]] >= x[turns[0]])
+    for k in range(len(turns) - 1):
+        a, b = turns[k], turns[k + 1]
+        loading = first_up if k % 2 == 0 else not first_up
+        segs.append(Segment(a, b + 1, loading))
+    return segs
+
+
+@dataclass(frozen=True)
+class TableOptions:
+    """How to read one kind of rig table (the flags of ``bayesrod import table``)."""
+
+    time: str
+    force: str
+    displacement: str | None = None
+    angle: str | None = None
+    arm_height_m: float | None = None
+    time_unit: str = "s"
+    force_unit: str = "N"
+    displacement_unit: str = "m"
+    angle_unit: str = "deg"
+    height_m: float | None = None
+    length_m: float | None = None
+    length_unknown: bool = False
+    specimen: str | None = None
+    species: str | None = None
+    header_row: int | None = None
+    cycles: str = "all"
+    force_sign: int = 1
+    tare: str = "auto"
+
+    def __post_init__(self) -> None:
+        for fld, val, allowed in (
+            ("time_unit", self.time_unit, TIME_UNITS),
+            ("force_unit", self.force_unit, FORCE_UNITS),
+            ("displacement_unit", self.displacement_unit, DISPLACEMENT_UNITS),
+            ("angle_unit", self.angle_unit, ANGLE_UNITS),
+            ("cycles", self.cycles, ("first", "all")),
+            ("tare", self.tare, ("auto", "none")),
+        ):
+            if val not in allowed:
+                raise ValueError(f"{fld}: expected one of {', '.join(allowed)}, got {val!r}")
+        if (self.displacement is None) == (self.angle is None):
+            raise ValueError(
+                "displacement: expected either a displacement column or an angle column with an arm height, "
+                f"got {'both' if self.displacement else 'neither'}"
+            )
+        if self.force_sign not in (1, -1):
+            raise ValueError(f"force_sign: expected +1 or -1, got {self.force_sign!r}")
+
+
+def _file_options(base: TableOptions, meta: dict) -> TableOptions:
+    from dataclasses import replace
+
+    kw = {}
+    for k in METADATA_FIELDS:
+        v = meta.get(k)
+        if v in (None, ""):
+            continue
+        if k in ("height_m", "length_m", "arm_height_m"):
+            try:
+                v = float(v)
+            except ValueError:
+                raise ValueError(f"metadata: column {k}: expected a number, got {v!r}") from None
+        if k == "force_sign":
+            v = int(float(v))
+        kw[k] = v
+    return replace(base, **kw)
+
+
+def _positive(name: str, v) -> float:
+    if v is None or not (np.isfinite(v) and v > 0):
+        raise ValueError(f"{name}: expected a number > 0, got {v!r}")
+    return float(v)
+
+
+def import_recording(path: Path, opt: TableOptions) -> dict:
+    """One recording read, converted to SI, split into loading ramps; in memory.
+
+    Returns a dict: ``pushes`` (list of dicts with ``cycle``, ``force`` columns, ``unloading`` columns or
+    None, ``preload_N``, ``tared_N``, ``rows`` (first and last file line)), ``report`` (what was done).
+    """
+    from .plausibility import reversal_tolerance
+    from .tables import delimiter_name, read_table
+
+    height = _positive("height_m", opt.height_m)
+    if opt.length_m is None:
+        raise ValueError(
+            "length_m: expected the stem length"
+            + (" (a rough guess with length_unknown: it centres the prior on L)" if opt.length_unknown else "")
+            + ", got none"
+        )
+    length = _positive("length_m", opt.length_m)
+    if not height < length:
+        raise ValueError(f"height_m: expected a contact height below the stem length {length:g} m, got {height:g}")
+    cols = [opt.time, opt.force] + ([opt.displacement] if opt.displacement else [opt.angle])
+    tab = read_table(path, cols, header_row=opt.header_row, name=str(path))
+    t = tab.columns[opt.time] * TIME_UNITS[opt.time_unit]
+    F = opt.force_sign * tab.columns[opt.force] * FORCE_UNITS[opt.force_unit]
+    if opt.displacement:
+        x = tab.columns[opt.displacement] * DISPLACEMENT_UNITS[opt.displacement_unit]
+    else:
+        arm = _positive("arm_height_m", opt.arm_height_m)
+        a = tab.columns[opt.angle] * ANGLE_UNITS[opt.angle_unit]
+        x = arm * np.sin(a - a[0])  # the contact advances by H sin(angle - angle at the start)
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        k = int(np.flatnonzero(dt <= 0)[0])
+        raise ValueError(
+            f"{path}, line {tab.lines[k + 1]}: column {opt.time!r}: expected increasing times, got "
+            f"{tab.columns[opt.time][k + 1]:g} after {tab.columns[opt.time][k]:g}"
+        )
+    if tab.n_rows < 5:
+        raise ValueError(f"{path}: expected at least 5 data rows, got {tab.n_rows}")
+    segs = split_cycles(x)
+    loads = [s for s in segs if s.loading and s.stop - s.start >= 5]
+    tol = reversal_tolerance(x)
+    loads = [s for s in loads if x[s.stop - 1] - x[s.start] > 2 * tol]
+    if not loads:
+        raise ValueError(f"{path}: expected at least one loading ramp (displacement advancing), got none")
+    if opt.cycles == "first":
+        loads = loads[:1]
+    pushes = []
+    baseline = None
+    for k, s in enumerate(loads, start=1):
+        sl = slice(s.start, s.stop)
+        xs, Fs, ts = x[sl], F[sl], t[sl]
+        on = contact_onset(xs - xs[0], Fs)
+        tare = 0.0
+        first = 0
+        x_on = xs[0]
+        if on.observed:  # pre-contact samples: contact starts at the hinge, tare to its baseline
+            first = on.index
+            x_on = xs[0] + (on.position if on.position is not None else xs[first] - xs[0])
+            baseline = on.baseline if baseline is None else baseline
+            tare = on.baseline if opt.tare == "auto" else 0.0
+        Fk = Fs[first:] - tare
+        sd = float(np.median(np.abs(np.diff(Fs, 2))) / 0.6745 / np.sqrt(6)) if Fs.size > 4 else 0.0
+        preload = float(Fk[0]) if Fk[0] > max(5 * sd, 0.02 * max(Fk.max(), 1e-12)) else 0.0
+        nxt = next((u for u in segs if not u.loading and u.start == s.stop - 1), None)
+        unload = None
+        if nxt is not None and nxt.stop - nxt.start >= 2:
+            us = slice(nxt.start, nxt.stop)
+            unload = {
+                "time_s": t[us] - t[0],
+                "force_N": F[us] - tare,
+                "robot_x_m": x[us] - x_on,
+            }
+        pushes.append(
+            {
+                "cycle": k,
+                "force": {"time_s": ts[first:] - t[0], "force_N": Fk, "robot_x_m": xs[first:] - x_on},
+                "unloading": unload,
+                "preload_N": preload,
+                "tared_N": float(tare),
+                "rows": [int(tab.lines[s.start + first]), int(tab.lines[s.stop - 1])],
+            }
+        )
+    report = {
+        "file": str(path),
+        "header_line": tab.header_line,
+        "delimiter": delimiter_name(tab.delimiter),
+        "decimal": tab.decimal,
+        "metadata_lines": list(tab.metadata),
+        "rows_read": tab.n_rows,
+        "rows_skipped": [{"line": ln, "reason": why} for ln, why in tab.skipped],
+        "loading_ramps_found": sum(1 for s in segs if s.loading),
+        "pushes": [
+            {
+                "cycle": p["cycle"],
+                "rows": p["rows"],
+                "samples": int(p["force"]["force_N"].size),
+                "peak_force_N": float(p["force"]["force_N"].max()),
+                "preload_N": p["preload_N"],
+                "tared_N": p["tared_N"],
+            }
+            for p in pushes
+        ],
+    }
+    return {"pushes": pushes, "report": report, "height_m": height, "length_m": length}
+
+
+def read_metadata(path) -> dict[str, dict]:
+    """A small CSV mapping each file (column ``file``: its name) to options (columns as the options' names)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except OSError as e:
+        raise ValueError(f"metadata: expected a readable CSV file, got {type(e).__name__}: {e}") from None
+    rows = list(csv.DictReader(text.splitlines()))
+    if not rows or "file" not in rows[0]:
+        raise ValueError(
+            f"{path}: column file: expected a header with a column named file, got "
+            f"{', '.join(rows[0]) if rows else 'an empty file'}"
+        )
+    out = {}
+    for i, r in enumerate(rows, start=2):
+        name = (r.get("file") or "").strip()
+        if not name:
+            raise ValueError(f"{path}, line {i}: column file: expected a file name, got an empty cell")
+        out[name] = {k.strip(): (v or "").strip() for k, v in r.items() if k and k != "file"}
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class TableImport:
+    """Datasets made from raw rig tables (in memory) and what was done to each file; ``save`` writes them."""
+
+    documents: tuple  # (specimen name, specimen.json dict, {relative path: columns dict}) per dataset
+    report: dict
+
+    @property
+    def specimens(self) -> list[str]:
+        return [d[0] for d in self.documents]
+
+    def save(self, out, *, overwrite: bool = False) -> Path:
+        """One dataset directory per specimen under ``out`` and ``out/import_report.json`` (atomically)."""
+        from .io import atomic_dir
+
+        out = Path(out)
+        with atomic_dir(out, overwrite) as tmp:
+            for name, doc, files in self.documents:
+                for rel, cols in files.items():
+                    write_csv(tmp / name / rel, cols)
+                write_json(tmp / name / "specimen.json", doc)
+            write_json(tmp / "import_report.json", self.report)
+        return out
+
+
+def _expand(files) -> list[Path]:
+    out = []
+    for f in files:
+        p = Path(f)
+        if p.is_dir():
+            found = sorted(q for q in p.iterdir() if q.suffix.lower() in (".csv", ".tsv", ".txt", ".dat"))
+            if not found:
+                raise ValueError(f"{p}: expected table files (.csv, .tsv, .txt, .dat) in the folder, got none")
+            out += found
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise ValueError(f"{p}: expected a table file or a folder of them, got no such file or directory")
+    return out
+
+
+def import_tables(files, options: TableOptions, metadata=None) -> TableImport:
+    """Turn raw rig tables into datasets (one per specimen; one push per loading ramp); nothing written.
+
+    ``files``: table files or folders of them. ``metadata``: None, a CSV path or ``{file name: {field: value}}``
+    setting per-file options (:data:`METADATA_FIELDS`). Each dataset records its source files and the
+    options used under ``provenance``.
+    """
+    from dataclasses import asdict
+
+    meta = read_metadata(metadata) if isinstance(metadata, (str, Path)) else dict(metadata or {})
+    paths = _expand(files)
+    specimens: dict[str, dict] = {}
+    report = {"importer": "bayesrod import table", "options": asdict(options), "files": []}
+    for p in paths:
+        fmeta = meta.get(p.name, meta.get(str(p), {}))
+        opt = _file_options(options, fmeta)
+        rec = import_recording(p, opt)
+        name = opt.specimen or p.stem
+        spec = specimens.setdefault(name, {"opt": opt, "pushes": [], "files": {}, "sources": []})
+        if spec["opt"].length_m != opt.length_m:
+            raise ValueError(
+                f"{p}: length_m: expected the same stem length as the other files of {name} "
+                f"({spec['opt'].length_m:g} m), got {opt.length_m:g}"
+            )
+        spec["sources"].append(p.name)
+        multi = len(rec["pushes"]) > 1
+        for push in rec["pushes"]:
+            pid = f"h{round(rec['height_m'] * 1000):d}" + (f"-c{push['cycle']}" if multi else "")
+            taken = {e["id"] for e in spec["pushes"]}
+            base, j = pid, 2
+            while pid in taken:
+                pid, j = f"{base}-{j}", j + 1
+            entry = {
+                "id": pid,
+                "height_m": rec["height_m"],
+                "direction": 1,
+                "force": f"{pid}/force.csv",
+                "cycle": push["cycle"],
+                "source_file": p.name,
+                "source_rows": push["rows"],
+            }
+            spec["files"][f"{pid}/force.csv"] = push["force"]
+            if push["unloading"] is not None:
+                entry["unloading"] = f"{pid}/unloading.csv"
+                spec["files"][f"{pid}/unloading.csv"] = push["unloading"]
+            if push["preload_N"]:
+                entry["preload_N"] = push["preload_N"]
+            spec["pushes"].append(entry)
+        report["files"].append({**rec["report"], "specimen": name})
+    docs = []
+    for name, spec in specimens.items():
+        opt = spec["opt"]
+        doc = {"format": FORMAT, "specimen": name}
+        if opt.species:
+            doc["species"] = opt.species
+        doc["length_m"] = opt.length_m
+        if opt.length_unknown:
+            doc["length_m_approximate"] = True
+        doc["pushes"] = sorted(spec["pushes"], key=lambda e: (e["height_m"], e["cycle"]))
+        doc["provenance"] = {
+            "importer": "bayesrod import table",
+            "source_files": spec["sources"],
+            "options": {k: v for k, v in asdict(opt).items() if v is not None},
+            "assumptions": {
+                "length_m": f"{opt.length_m:g} m"
+                + (" (a rough guess: the length is unknown)" if opt.length_unknown else ""),
+                "displacement": "the sensor's advance since contact onset (or since the first sample of a "
+                "ramp that starts loaded); probe compliance neglected",
+            },
+        }
+        docs.append((name, doc, spec["files"]))
+    return TableImport(tuple(docs), report)

@@ -294,6 +294,16 @@ def _read_force(c: _Collector, path: Path, sensor: Sensor | None, length: float 
     return ForceSeries(t, cols["force_N"], x, wire, contact)
 
 
+def _check_plausible(c: _Collector, name: str, push_id: str, force: ForceSeries, sensor, length) -> None:
+    """The physical checks of :mod:`bayesrod.dataset.plausibility`, named by file and push."""
+    from .plausibility import check_push
+
+    for fld, expected, got, row, severity in check_push(
+        push_id, force.force_N, force.contact_x_m, length_m=length, sensor=sensor
+    ):
+        c.add(f"{name} (push {push_id})", fld, expected, got, row=row, severity=severity)
+
+
 def _read_shapes(c: _Collector, path: Path, length: float | None) -> tuple[ShapeFrame, ...] | None:
     cols = c.read_csv(path, SHAPE_REQUIRED, SHAPE_OPTIONAL)
     if cols is None:
@@ -457,6 +467,8 @@ def _read(path, check_images=True) -> tuple[Specimen | None, list[Problem]]:
             if fp is not None:
                 files["force"] = pdoc["force"]
                 force = _read_force(c, fp, sensor, length)
+                if force is not None and pid:
+                    _check_plausible(c, c.rel(fp), pid, force, sensor, length)
         shapes = None
         if pdoc.get("shapes") is not None:
             sp = _safe_path(c, name, root, pdoc["shapes"], f"{fld}.shapes")
@@ -545,4 +557,10 @@ def validate_in_memory(ds) -> list[Problem]:
                 f"{f.time_s[k + 1]:g} after {f.time_s[k]:g}",
                 row=int(k) + 2,
             )
+        from .plausibility import check_push
+
+        for fld, expected, got, row, severity in check_push(
+            p.id, f.force_N, f.contact_x_m, length_m=L, sensor=ds.sensor
+        ):
+            probs.append(Problem(where, fld, expected, got, row, severity))
     return probs

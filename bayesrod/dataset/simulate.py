@@ -39,6 +39,7 @@ class NoiseModel:
     occlusion_half_height_m: float = 0.02  # centerline hidden within this of the sensor height
     tip_missing_fraction: float = 0.03  # thin tip not seen, as a fraction of L
     shape_sd_reported_m: float | None = None  # sd_m written to shapes.csv (default: shape_sd_m)
+    force_rho: float = 0.0  # lag-1 correlation of stationary AR(1) force noise (marginal sd force_sd_N)
 
     @classmethod
     def none(cls) -> NoiseModel:
@@ -94,6 +95,24 @@ class SimConfig:
         )
         kw.update(overrides)
         return cls(**kw)
+
+
+def ar1_noise(rng: np.random.Generator, sd: float, rho: float, n: int) -> np.ndarray:
+    """Stationary AR(1) noise of marginal sd ``sd`` and lag-1 correlation ``rho``; iid draws when rho = 0.
+
+    With rho = 0 it consumes exactly the draws ``rng.normal(0, sd, n)`` does (seeded datasets unchanged).
+    """
+    z = rng.normal(0.0, sd, n)
+    if rho == 0.0 or n == 0:
+        return z
+    if not -1 < rho < 1:
+        raise ValueError(f"noise_rho: expected a correlation in (-1, 1), got {rho}")
+    out = np.empty(n)
+    out[0] = z[0]
+    c = np.sqrt(1.0 - rho**2)
+    for t in range(1, n):
+        out[t] = rho * out[t - 1] + c * z[t]
+    return out
 
 
 def wire_deflection(
@@ -182,7 +201,7 @@ def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> Simulat
     wire[engaged] = wire_elongation_from_dx(dx, WIRE_LENGTH)
     contact = np.full(robot.size, np.nan)
     contact[engaged] = D
-    force = force + rng.normal(0.0, cfg.noise.force_sd_N, robot.size)
+    force = force + ar1_noise(rng, cfg.noise.force_sd_N, cfg.noise.force_rho, robot.size)
     time = robot / ROBOT_SPEED
     # Frames: a camera clock of its own on the same time base.
     t_slip = robot[engaged][-1] / ROBOT_SPEED
@@ -258,7 +277,11 @@ def write_simulated(
             "EI0": cfg.EI0,
             "p": cfg.p,
             "effects": cfg.effects.to_mapping(),
-            "noise": {"force_sd_N": cfg.noise.force_sd_N, "shape_sd_m": cfg.noise.shape_sd_m},
+            "noise": {
+                "force_sd_N": cfg.noise.force_sd_N,
+                "shape_sd_m": cfg.noise.shape_sd_m,
+                **({"force_rho": cfg.noise.force_rho} if cfg.noise.force_rho else {}),
+            },
             "seed": cfg.seed,
             "generator": f"bayesrod simulate {__version__}",
         },

@@ -256,6 +256,8 @@ class RodLikelihood:
         use_shapes=True,
         n_p: int = 61,
         effect_axis: EffectAxis | None = None,
+        force_noise: str = "iid",
+        preload: bool = False,
     ):
         if "self_weight" in effects:
             raise ValueError(
@@ -281,6 +283,19 @@ class RodLikelihood:
                 "effects: yield expects a force-only fit (centerlines not used): the forces on the plastic "
                 "branch are exact (F = M_y/h) but the shapes there are not modelled"
             )
+        if force_noise not in FORCE_NOISE_MODELS:
+            raise ValueError(f"force_noise: expected one of {', '.join(FORCE_NOISE_MODELS)}, got {force_noise!r}")
+        self.force_noise = force_noise
+        self.preload = bool(preload)
+        if self.preload and effect_axis is not None:
+            raise ValueError(
+                f"preload: expected no tabled effect beside it (one extra table axis at a time), got {effect_axis.name}"
+            )
+        if self.preload and use_shapes and any(p.shapes for p in spec.pushes):
+            raise ValueError(
+                "preload: expected a force-only fit (centerlines not used): the shapes of a "
+                "preloaded push are not modelled yet"
+            )
         self.spec = spec
         self.L = float(spec.length_m)
         self.effects = tuple(effects)
@@ -298,10 +313,19 @@ class RodLikelihood:
         names = ["EI0", "p"]
         if self.n_force:
             names.append("sigma_force_N")
+            if force_noise == "ar1":
+                names.append("rho_force")
         if self.n_points:
             names.append("shape_sd_scale" if self.shape_has_sd else "sigma_shape_m")
+        # per push: the contact displacement already made when recording began (docs/inference.md, preload)
+        self.preload_names = [preload_name(d.id) for d in self.data if d.D_m.size] if self.preload else []
+        names += self.preload_names
         names += list(self.effects)
         self.names = names
+        #: priors of per-dataset nuisances (their scale follows the stem): preload uniform on [0, 0.1 L]
+        self.nuisance_priors = {
+            n: _uniform_prior(n, 0.0, PRELOAD_MAX_L * float(spec.length_m)) for n in self.preload_names
+        }
         self._build_tables()
 
     # ------------------------------------------------------------------ tables
@@ -322,12 +346,18 @@ class RodLikelihood:
 
     def _build_tables_at(self, eff_nd: dict | None) -> None:
         L, pg = self.L, self.p_grid
+        self._preload_tables = []
         fF, fobs, fh, xs, cs, xobs, zobs, sd, pid, fid = [], [], [], [], [], [], [], [], [], []
         for d in self.data:
             eta = d.height_m / L
             curves = ForceCurves(eta, pg, effects_nd=eff_nd)
             if d.D_m.size:
                 fF.append(curves.force(d.D_m / L))
+                if self.preload:
+                    # a dense table in d for this push: the force at D + preload, linear in d between nodes
+                    top = float(d.D_m.max()) / L + PRELOAD_MAX_L
+                    dg = np.linspace(0.0, top, PRELOAD_GRID)
+                    self._preload_tables.append((dg[1] - dg[0], curves.force(dg), d.D_m / L))
                 fobs.append(d.F_N)
                 fh.append(np.full(d.F_N.size, d.height_m))
             if d.x_m.size:
@@ -343,6 +373,9 @@ class RodLikelihood:
         P = pg.size
         self.f_table = np.concatenate(fF, axis=1) if fF else np.zeros((P, 0))  # (P, N); stacked to (E, P, N)
         self.F_obs = np.concatenate(fobs) if fobs else np.zeros(0)
+        # the first force sample of each push: an AR(1) noise chain restarts there
+        self.F_first = np.concatenate([np.arange(f.size) == 0 for f in fobs]) if fobs else np.zeros(0, bool)
+        self.F_push = np.concatenate([np.full(f.size, k) for k, f in enumerate(fobs)]) if fobs else np.zeros(0, int)
         self.F_height = np.concatenate(fh) if fh else np.zeros(0)
         self.x_table = np.concatenate(xs, axis=1) if xs else np.zeros((P, 0))
         self.cos_table = np.concatenate(cs, axis=1) if cs else np.zeros((P, 0))
@@ -405,6 +438,25 @@ class RodLikelihood:
             return np.ones(np.atleast_1d(params["p"]).shape, bool)
         return (u >= self.axis.grid[0]) & (u <= self.axis.grid[-1])
 
+    def predict_nd_force_preloaded(self, p: NDArray, preload_m: NDArray) -> NDArray:
+        """Nondimensional force at every engaged sample with each push's preload added to its displacement.
+
+        ``p`` (W,), ``preload_m`` (W, J) [m]; returns (W, N). Linear interpolation in d on a
+        :data:`PRELOAD_GRID`-node table per push, 4-point Lagrange in p.
+        """
+        p = np.atleast_1d(np.asarray(p, float))
+        ip, wp = _lagrange4(self.p_grid, p)
+        out = []
+        for j, (step, table, d_nd) in enumerate(self._preload_tables):
+            d = d_nd[None, :] + np.asarray(preload_m, float)[:, j : j + 1] / self.L  # (W, N_j)
+            u = np.clip(d / step, 0.0, table.shape[1] - 1.000001)
+            k = np.floor(u).astype(int)
+            t = u - k
+            g0 = table[ip[:, :, None], k[:, None, :]]
+            g1 = table[ip[:, :, None], k[:, None, :] + 1]
+            out.append(np.einsum("wa,wan->wn", wp, g0 + t[:, None, :] * (g1 - g0)))
+        return np.concatenate(out, axis=1)
+
     def predict_nd_force(self, p: NDArray, u: NDArray | None = None) -> NDArray:
         """Nondimensional force at every engaged sample, (W, N).
 
@@ -425,7 +477,12 @@ class RodLikelihood:
         out = {}
         u = self.effect_coordinate(params)
         if self.n_force:
-            F = EI0[:, None] / self.L**2 * self.predict_nd_force(p, u)
+            if self.preload and all(n in params for n in self.preload_names):
+                pre = np.stack([np.atleast_1d(params[n]) for n in self.preload_names], axis=1)
+                f_nd = self.predict_nd_force_preloaded(p, pre * np.ones((p.size, 1)))
+            else:
+                f_nd = self.predict_nd_force(p, u)
+            F = EI0[:, None] / self.L**2 * f_nd
             if "yield" in params:
                 F = np.minimum(F, np.atleast_1d(params["yield"])[:, None] / self.F_height[None, :])
             if "force_offset" in params:
@@ -442,7 +499,10 @@ class RodLikelihood:
         ll = np.zeros(np.atleast_1d(params["p"]).shape)
         if "force" in res:
             s = np.atleast_1d(params["sigma_force_N"])[:, None]
-            ll += np.sum(-0.5 * (res["force"] / s) ** 2 - np.log(s), axis=1) - 0.5 * self.n_force * _LOG_2PI
+            if self.force_noise == "ar1":
+                ll += ar1_loglik(res["force"], s, np.atleast_1d(params["rho_force"])[:, None], self.F_first)
+            else:
+                ll += np.sum(-0.5 * (res["force"] / s) ** 2 - np.log(s), axis=1) - 0.5 * self.n_force * _LOG_2PI
         if "shape" in res:
             if self.shape_has_sd:
                 s = np.atleast_1d(params["shape_sd_scale"])[:, None] * self.sd_obs[None, :]
@@ -462,6 +522,54 @@ class RodLikelihood:
         return out
 
 
+FORCE_NOISE_MODELS = ("iid", "ar1")
+#: a preload is at most this fraction of the stem length (its prior: uniform on [0, PRELOAD_MAX_L L])
+PRELOAD_MAX_L = 0.1
+#: nodes of the per-push force table in d that a preload needs (linear interpolation between them)
+PRELOAD_GRID = 2001
+
+
+def preload_name(push_id: str) -> str:
+    """The parameter name of a push's preload (a displacement offset, m): ``preload_m_<id>``."""
+    import re
+
+    return "preload_m_" + re.sub(r"[^0-9A-Za-z_]", "_", str(push_id))
+
+
+def _uniform_prior(name: str, lo: float, hi: float):
+    from .priors import ParamPrior
+
+    return ParamPrior(name, "uniform", (lo, hi), "m")
+
+
+def ar1_innovations(r: NDArray, rho: NDArray, first: NDArray) -> tuple[NDArray, NDArray]:
+    """Innovations of stationary AR(1) noise and their variance factors, O(n).
+
+    ``r`` (W, N) residuals, ``rho`` (W, 1), ``first`` (N,) True where a chain (a push) starts. Returns
+    ``e`` = r_t - rho r_{t-1} (r_t at a chain's start) and ``v`` = 1 - rho^2 (1 at a start): given the
+    marginal sd sigma, e_t ~ N(0, sigma^2 v_t) independently.
+    """
+    r = np.asarray(r, float)
+    prev = np.concatenate([np.zeros(r.shape[:-1] + (1,)), r[..., :-1]], axis=-1)
+    prev = np.where(first, 0.0, prev)
+    e = r - rho * prev
+    v = np.where(first, 1.0, 1.0 - rho**2)
+    return e, v
+
+
+def ar1_loglik(r: NDArray, sigma: NDArray, rho: NDArray, first: NDArray) -> NDArray:
+    """Exact log density of residuals under stationary AR(1) noise per chain (marginal sd ``sigma``), O(n).
+
+    With e_t = r_t - rho r_{t-1}: log p = sum_t [-log(2 pi)/2 - log sigma - log(v_t)/2 - e_t^2 / (2 sigma^2 v_t)],
+    v_t = 1 - rho^2 (1 at each chain's first sample). Shapes: r (W, N), sigma and rho (W, 1); returns (W,).
+    """
+    e, v = ar1_innovations(r, rho, first)
+    n = r.shape[-1]
+    return (
+        np.sum(-0.5 * e**2 / (sigma**2 * v) - 0.5 * np.log(v), axis=-1) - n * np.log(sigma[..., 0]) - 0.5 * n * _LOG_2PI
+    )
+
+
 class LogPosterior:
     """Prior times likelihood in the sampling space; ``log_prob(theta)`` is what emcee sees.
 
@@ -472,7 +580,8 @@ class LogPosterior:
     def __init__(self, likelihood: RodLikelihood, prior):
         self.likelihood = likelihood
         self.names = likelihood.names
-        self.priors = [prior.get(n) for n in self.names]
+        extra = getattr(likelihood, "nuisance_priors", {})
+        self.priors = [extra[n] if n in extra else prior.get(n) for n in self.names]
         lo, hi = likelihood.p_grid[0], likelihood.p_grid[-1]
         plo, phi = self.priors[1].bounds()
         if plo < lo - 1e-12 or phi > hi + 1e-12:
@@ -537,7 +646,15 @@ def scale_estimate(lik: RodLikelihood) -> float | None:
 
 
 def build_likelihood(
-    spec: Specimen, prior, effects=(), *, use_forces=True, use_shapes=True, n_effect: int | None = None
+    spec: Specimen,
+    prior,
+    effects=(),
+    *,
+    use_forces=True,
+    use_shapes=True,
+    n_effect: int | None = None,
+    force_noise: str = "iid",
+    preload: bool = False,
 ) -> RodLikelihood:
     """The likelihood for ``effects``; a tabled effect gets its axis from the prior and a plain EI0 estimate.
 
@@ -563,7 +680,14 @@ def build_likelihood(
             rng = (EI0_hat / 2.0, EI0_hat * 2.0)
         axis = EffectAxis.from_prior(tabled[0], prior.get(tabled[0]), rng, float(spec.length_m), n=n_effect)
     return RodLikelihood(
-        spec, p_range=p_range, effects=effects, use_forces=use_forces, use_shapes=use_shapes, effect_axis=axis
+        spec,
+        p_range=p_range,
+        effects=effects,
+        use_forces=use_forces,
+        use_shapes=use_shapes,
+        effect_axis=axis,
+        force_noise=force_noise,
+        preload=preload,
     )
 
 

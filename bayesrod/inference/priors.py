@@ -144,10 +144,17 @@ class Prior:
             return self.params[name]
         if name in self.effects:
             return self.effects[name]
+        if name in NUISANCE_DEFAULTS:
+            return NUISANCE_DEFAULTS[name]
         raise ValueError(f"prior {self.name}: expected a prior for {name}, got none in {self.source}")
 
 
 REQUIRED = ("EI0", "p", "sigma_force_N", "sigma_shape_m", "shape_sd_scale")
+
+#: priors of nuisance parameters a prior file may leave out (docs/priors.md): the lag-1 correlation of
+#: AR(1) force noise, uniform over [-0.5, 0.995] (real pushes measured 0.82-0.98; the bound keeps the
+#: noise stationary and away from a random walk, which would absorb any misfit)
+NUISANCE_DEFAULTS = {"rho_force": ParamPrior("rho_force", "uniform", (-0.5, 0.995), "1")}
 
 
 def _priors_dir():

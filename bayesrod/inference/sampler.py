@@ -95,7 +95,11 @@ def find_start(post, rng: np.random.Generator, init: dict | None = None) -> np.n
         candidates.append((float(np.clip(init["p"], lik.p_grid[1], lik.p_grid[-2])), float(init["EI0"])))
     for p, EI0_init in candidates:
         nat = {}
-        if lik.n_force:
+        if lik.n_force and not getattr(lik, "preload", False):
+            EI0, rms = force_scale_fit(lik, p, EI0_init)
+            EI0 = max(EI0, 1e-6) if np.isfinite(EI0) else 1.0
+            nat["sigma_force_N"] = max(rms, 1e-4)
+        elif lik.n_force:  # preloads: the scale fit at zero preload is still a good start for EI0
             EI0, rms = force_scale_fit(lik, p, EI0_init)
             EI0 = max(EI0, 1e-6) if np.isfinite(EI0) else 1.0
             nat["sigma_force_N"] = max(rms, 1e-4)
@@ -112,7 +116,7 @@ def find_start(post, rng: np.random.Generator, init: dict | None = None) -> np.n
         for n, pr in zip(names, post.priors, strict=True):
             if n not in nat:
                 # effects start near their neutral value: a stiff base, a late yield
-                q = {"base_compliance": 0.99, "yield": 0.99}.get(n, 0.5)
+                q = {"base_compliance": 0.99, "yield": 0.99}.get(n, 0.02 if n.startswith("preload_m_") else 0.5)
                 nat[n] = pr.quantile(q)
         theta = post.to_sample(nat)[0]
         lp = post.log_prob(theta)

@@ -104,7 +104,18 @@ def fit_report(summary: dict, pngs: Mapping[str, bytes], provenance: dict | None
     truth_html = f"<p>Simulated dataset; the truth: {esc(json.dumps(truth))}</p>" if truth else ""
     data = summary["data"]
     lo, hi = round(50 * (1 - level), 1), round(50 * (1 + level), 1)
-    body = f"""<h1>bayesrod report: {esc(summary["specimen"])}</h1>
+    mc = summary.get("model_check") or {}
+    check_html = ""
+    if mc.get("verdict") == "misfit":
+        check_html = f'<p class="warn"><b>The model does not fit these data.</b> {esc(mc.get("message", ""))}</p>'
+    elif mc:
+        check_html = (
+            f'<p class="ok">Model check: ok (force residuals show no structure beyond the {esc(mc["noise_model"])} '
+            f"noise model; posterior predictive p = {min(mc['ppc_p_value_lag1'], mc['ppc_p_value_runs']):.2g}).</p>"
+            if mc.get("pushes")
+            else ""
+        )
+    body = f"""<h1>bayesrod report: {esc(summary["specimen"])}</h1>{check_html}
 <p>Species: {esc(str(summary.get("species")))}. Length {summary["length_m"]:g} m. Prior: {esc(summary["prior"])}.
 Effects: {esc(", ".join(summary["effects"]) or "none")}.</p>
 <h2>Posterior (median and {level:.0%} credible interval)</h2>

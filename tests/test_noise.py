@@ -1,0 +1,73 @@
+"""Correlated force noise: the exact AR(1) likelihood, the simulator's AR noise, and fits that check themselves."""
+
+import numpy as np
+import pytest
+from scipy.stats import multivariate_normal
+
+import bayesrod
+from bayesrod.dataset.simulate import ar1_noise
+from bayesrod.inference.likelihood import ar1_loglik
+
+
+def _ar1_cov(n, sigma, rho):
+    k = np.arange(n)
+    return sigma**2 * rho ** np.abs(k[:, None] - k[None, :])
+
+
+@pytest.mark.parametrize("rho", [-0.4, 0.0, 0.5, 0.95])
+def test_ar1_loglik_is_the_exact_gaussian_density(rho):
+    """Two pushes (chains restart at each): the O(n) recursion equals the dense multivariate normal."""
+    rng = np.random.default_rng(1)
+    n1, n2, sigma = 7, 5, 0.3
+    r = rng.normal(0, 1, (3, n1 + n2))
+    first = np.zeros(n1 + n2, bool)
+    first[[0, n1]] = True
+    got = ar1_loglik(r, np.full((3, 1), sigma), np.full((3, 1), rho), first)
+    want = [
+        multivariate_normal(np.zeros(n1), _ar1_cov(n1, sigma, rho)).logpdf(x[:n1])
+        + multivariate_normal(np.zeros(n2), _ar1_cov(n2, sigma, rho)).logpdf(x[n1:])
+        for x in r
+    ]
+    np.testing.assert_allclose(got, want, rtol=1e-10)
+
+
+def test_simulated_ar1_noise_has_its_correlation_and_sd():
+    x = ar1_noise(np.random.default_rng(2), 0.05, 0.9, 200_000)
+    assert np.std(x) == pytest.approx(0.05, rel=0.02)
+    assert np.corrcoef(x[1:], x[:-1])[0, 1] == pytest.approx(0.9, abs=0.005)
+    z = ar1_noise(np.random.default_rng(3), 0.05, 0.0, 10)
+    np.testing.assert_array_equal(z, np.random.default_rng(3).normal(0, 0.05, 10))  # iid stays byte-identical
+
+
+@pytest.fixture(scope="module")
+def ar_data():
+    return bayesrod.simulate("twig", seed=3, noise_rho=0.9, config_overrides={"n_frames_engaged": 2})
+
+
+@pytest.fixture(scope="module")
+def fits(ar_data):
+    kw = dict(use_shapes=False, progress=False, target_ess=200, max_steps=2000, seed=1)
+    return {m: bayesrod.fit(ar_data, force_noise=m, **kw) for m in ("iid", "ar1")}
+
+
+def test_the_plain_fit_says_it_does_not_fit_correlated_noise(fits):
+    mc = fits["iid"].to_dict()["model_check"]
+    assert mc["verdict"] == "misfit" and "diagnose" in mc["message"]
+    assert all(p["residual_lag1"] > 0.5 for p in mc["pushes"])
+
+
+def test_the_ar1_fit_fits_and_widens_the_intervals(fits):
+    d = fits["ar1"].to_dict()
+    assert d["model_check"]["verdict"] == "ok"
+    assert all(abs(p["innovation_lag1"]) < 0.3 for p in d["model_check"]["pushes"])
+    rho = d["parameters"]["rho_force"]
+    assert 0.6 < rho["median"] < 0.97 and rho["q05"] < rho["median"] < rho["q95"]
+    w = {m: f.summary().loc["EI0", "q95"] - f.summary().loc["EI0", "q05"] for m, f in fits.items()}
+    assert w["ar1"] > 1.8 * w["iid"]  # the plain fit's interval is too narrow by the correlation
+    q = fits["ar1"].summary().loc["EI0"]
+    assert q["q05"] <= 2.63 <= q["q95"]
+
+
+def test_clean_iid_data_pass_the_check(twig_noisy):
+    post = bayesrod.fit(twig_noisy, use_shapes=False, progress=False, target_ess=200, max_steps=1500, seed=2)
+    assert post.to_dict()["model_check"]["verdict"] == "ok"

@@ -1,0 +1,307 @@
+"""Raw rig tables in: the table reader, `import table`, load/unload cycles, plausibility before a fit."""
+
+import json
+import shutil
+import string
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import bayesrod
+from bayesrod.cli import main
+from bayesrod.dataset import DatasetError, read_dataset, validate_dataset
+from bayesrod.dataset.importers import split_cycles
+from bayesrod.dataset.tables import read_table
+
+REPO = Path(__file__).resolve().parents[1]
+RIGS = REPO / "examples" / "rigs"
+TRUTH = json.loads((RIGS / "TRUTH.json").read_text())
+
+ARM = [
+    "--time",
+    "Time [ms]",
+    "--time-unit",
+    "ms",
+    "--force",
+    "Load [N]",
+    "--angle",
+    "Arm angle [deg]",
+    "--arm-height",
+    "0.5",
+    "--height-m",
+    "0.5",
+    "--length-m",
+    "0.9",
+    "--specimen",
+    "A-07",
+]
+UTM = [
+    "--time",
+    "Time",
+    "--force",
+    "Load",
+    "--force-unit",
+    "kN",
+    "--displacement",
+    "Extension",
+    "--displacement-unit",
+    "mm",
+    "--height-m",
+    "0.6",
+    "--length-m",
+    "0.9",
+]
+HAND = [
+    "--time",
+    "Zeit [s]",
+    "--force",
+    "Kraft [N]",
+    "--displacement",
+    "Weg [cm]",
+    "--displacement-unit",
+    "cm",
+    "--height-m",
+    "0.4",
+    "--length-m",
+    "0.9",
+    "--specimen",
+    "hh",
+]
+
+
+def _import(tmp_path, name, flags, *extra):
+    out = tmp_path / name
+    code = main(["import", "table", str(RIGS / name), "--out", str(out), *flags, *extra])
+    return code, out
+
+
+def test_rotating_arm_with_three_cycles_and_a_preload_imports_and_fits(tmp_path, capsys):
+    code, out = _import(tmp_path, "darling_arm.txt", ARM)
+    assert code == 0, capsys.readouterr().err
+    ds = read_dataset(out / "A-07")
+    assert [p.id for p in ds.pushes] == ["h500-c1", "h500-c2", "h500-c3"]
+    doc = json.loads((out / "A-07" / "specimen.json").read_text())
+    assert [p["cycle"] for p in doc["pushes"]] == [1, 2, 3]
+    assert all(p["preload_N"] > 0.2 for p in doc["pushes"])  # the recording starts pressed
+    assert all((out / "A-07" / p["unloading"]).is_file() for p in doc["pushes"])
+    assert doc["provenance"]["source_files"] == ["darling_arm.txt"] and doc["provenance"]["options"]["angle"]
+    for p in ds.pushes:  # each push is one loading ramp: the displacement only advances
+        assert np.all(np.diff(p.force.robot_x_m) > -1e-4)
+    warn = [str(p) for p in validate_dataset(out / "A-07")]
+    assert any("preload" in w for w in warn) and not any(p.severity == "error" for p in validate_dataset(out / "A-07"))
+    plain = bayesrod.fit(out / "A-07", use_shapes=False, progress=False, target_ess=150, max_steps=1500)
+    assert plain.to_dict()["model_check"]["verdict"] == "misfit"  # a preloaded push is not the plain model
+    pre = bayesrod.fit(out / "A-07", use_shapes=False, progress=False, target_ess=200, max_steps=2500, preload=True)
+    s = pre.summary()
+    truth = TRUTH["preload_displacement_m"]["darling_arm.txt"]
+    for name in [n for n in s.index if n.startswith("preload_m_")]:
+        assert abs(s.loc[name, "median"] - truth) < 0.001, s
+    assert s.loc["EI0", "q05"] <= TRUTH["EI0"] <= s.loc["EI0", "q95"], s
+    assert pre.to_dict()["model_check"]["verdict"] == "ok"
+    # --cycles first keeps the first ramp only
+    code, first = _import(tmp_path / "f", "darling_arm.txt", ARM, "--cycles", "first")
+    assert code == 0 and len(read_dataset(first / "A-07").pushes) == 1
+
+
+@pytest.mark.parametrize("name,flags", [("utm_instron.csv", UTM), ("handheld_gauge.csv", HAND)])
+def test_device_tables_round_trip_and_recover_EI0(tmp_path, name, flags, capsys):
+    code, out = _import(tmp_path, name, flags)
+    assert code == 0, capsys.readouterr().err
+    ds_dir = next(p for p in out.iterdir() if p.is_dir())
+    ds = read_dataset(ds_dir)
+    assert len(ds.pushes) == 1 and ds.pushes[0].height_m == TRUTH["heights_m"][name]
+    post = bayesrod.fit(ds, use_shapes=False, progress=False, target_ess=200, max_steps=2000)
+    q = post.summary().loc["EI0"]
+    assert q["q05"] <= TRUTH["EI0"] <= q["q95"], q
+    assert q["q95"] / q["q05"] < 3  # an interval that says something
+
+
+def test_instron_units_row_is_skipped_and_reported(tmp_path):
+    code, out = _import(tmp_path, "utm_instron.csv", UTM)
+    rep = json.loads((out / "import_report.json").read_text())["files"][0]
+    assert rep["header_line"] == 4 and rep["delimiter"] == "comma" and len(rep["metadata_lines"]) == 3
+    assert rep["rows_skipped"] == [{"line": 5, "reason": "column 'Time': '(s)' is not a finite number"}]
+
+
+def test_handheld_semicolons_and_decimal_commas(tmp_path):
+    code, out = _import(tmp_path, "handheld_gauge.csv", HAND)
+    rep = json.loads((out / "import_report.json").read_text())["files"][0]
+    assert rep["delimiter"] == "semicolon" and rep["decimal"] == ","
+    ds = read_dataset(out / "hh")
+    assert 0.03 < ds.pushes[0].force.robot_x_m.max() < 0.05  # cm converted to m, onset removed
+
+
+def test_metadata_table_and_folder_make_one_dataset_per_specimen(tmp_path):
+    src = tmp_path / "src"
+    src.mkdir()
+    for k in range(2):
+        shutil.copy(RIGS / "handheld_gauge.csv", src / f"push{k}.csv")
+    meta = tmp_path / "meta.csv"
+    meta.write_text("file,height_m,specimen,species\npush0.csv,0.4,s1,oak\npush1.csv,0.5,s1,oak\n")
+    out = tmp_path / "out"
+    flags = [f for f in HAND if f not in ("--height-m", "0.4", "--specimen", "hh")]
+    assert main(["import", "table", str(src), "--out", str(out), *flags, "--metadata", str(meta)]) == 0
+    ds = read_dataset(out / "s1")
+    assert ds.species == "oak" and sorted(p.height_m for p in ds.pushes) == [0.4, 0.5]
+
+
+def test_bare_force_still_replaces_out(tmp_path):
+    code, out = _import(tmp_path, "handheld_gauge.csv", HAND)
+    assert code == 0
+    code, _ = _import(tmp_path, "handheld_gauge.csv", HAND)
+    assert code == 2  # out not empty
+    code, _ = _import(tmp_path, "handheld_gauge.csv", HAND, "--replace")
+    assert code == 0
+
+
+def test_import_errors_are_one_line(tmp_path, capsys):
+    no_height = [f for f in HAND if f not in ("--height-m", "0.4")]
+    code, _ = _import(tmp_path, "handheld_gauge.csv", no_height)
+    err = capsys.readouterr().err
+    assert code == 2 and "--height-m: expected a number > 0, got None" in err and "Traceback" not in err
+    no_length = [f for f in HAND if f not in ("--length-m", "0.9")]
+    code, _ = _import(tmp_path / "l", "handheld_gauge.csv", no_length)
+    err = capsys.readouterr().err
+    assert code == 2 and "--length-m: expected the stem length, got none" in err
+    bad = [*HAND]
+    bad[bad.index("Kraft [N]")] = "Force"
+    code, _ = _import(tmp_path / "b", "handheld_gauge.csv", bad)
+    err = capsys.readouterr().err
+    assert code == 2 and "expected a header row naming the columns" in err and "'Force'" in err
+
+
+# --------------------------------------------------------------------------- cycles and plausibility
+def _push_dataset(tmp_path, F, x, name="ds"):
+    d = tmp_path / name
+    (d / "p1").mkdir(parents=True)
+    t = np.arange(len(F)) * 0.1
+    lines = ["time_s,force_N,robot_x_m"] + [f"{a:.17g},{b:.17g},{c:.17g}" for a, b, c in zip(t, F, x, strict=True)]
+    (d / "p1" / "force.csv").write_text("\n".join(lines) + "\n")
+    doc = {
+        "format": "bayesrod.dataset/1",
+        "specimen": "s",
+        "length_m": 0.9,
+        "pushes": [{"id": "p1", "height_m": 0.5, "force": "p1/force.csv"}],
+    }
+    (d / "specimen.json").write_text(json.dumps(doc))
+    return d
+
+
+def _ramp(n=60, rng=None):
+    rng = rng or np.random.default_rng(0)
+    x = np.linspace(0, 0.06, n)
+    return bayesrod.force_from_displacement(x, 0.5, 1.8, 0.5, 0.9).force_N + rng.normal(0, 0.01, n), x
+
+
+def test_a_clean_push_is_valid(tmp_path):
+    F, x = _ramp()
+    assert not [p for p in validate_dataset(_push_dataset(tmp_path, F, x)) if p.severity == "error"]
+
+
+def test_an_unsplit_cycled_recording_is_refused_naming_the_row(tmp_path, capsys):
+    F, x = _ramp(40)
+    Fc = np.concatenate([F, F[::-1][1:], F[1:]])
+    xc = np.concatenate([x, x[::-1][1:], x[1:]])
+    d = _push_dataset(tmp_path, Fc, xc)
+    errs = [str(p) for p in validate_dataset(d) if p.severity == "error"]
+    assert len(errs) == 1 and "push p1" in errs[0] and "reverses" in errs[0] and "row 4" in errs[0], errs
+    row = int(errs[0].split("row ")[1].split(":")[0])
+    assert 41 <= row <= 44  # the first samples of the unloading leg
+    assert main(["fit", str(d), "--out", str(tmp_path / "run"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "reverses" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    segs = split_cycles(xc)
+    assert [s.loading for s in segs] == [True, False, True]
+
+
+@pytest.mark.parametrize(
+    "case,needle",
+    [
+        ("zero", "never loaded the stem"),
+        ("flipped", "negative forces"),
+        ("huge", "no stem push is larger"),
+        ("far", "the stem slips long before"),
+    ],
+)
+def test_implausible_pushes_are_refused_naming_the_push(tmp_path, capsys, case, needle):
+    F, x = _ramp()
+    F, x = {"zero": (0 * F, x), "flipped": (-F, x), "huge": (np.full_like(F, 1e308), x), "far": (F, x * 100)}[case]
+    d = _push_dataset(tmp_path, F, x)
+    errs = [str(p) for p in validate_dataset(d) if p.severity == "error"]
+    assert errs and all("(push p1)" in e for e in errs) and any(needle in e for e in errs), errs
+    with pytest.raises(DatasetError, match=needle):
+        bayesrod.fit(d, progress=False)
+    assert main(["validate", str(d)]) == 1
+    assert main(["fit", str(d), "--out", str(tmp_path / "run"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and "p grid" not in err and "Traceback" not in err
+
+
+def test_a_preloaded_start_is_a_warning_not_an_error(tmp_path):
+    F, x = _ramp()
+    d = _push_dataset(tmp_path, F[10:], x[10:] - x[10])
+    probs = validate_dataset(d)
+    assert [p.severity for p in probs] == ["warning"] and "preload" in str(probs[0])
+
+
+def test_in_memory_datasets_get_the_same_checks():
+    F, x = _ramp()
+    ds = bayesrod.Dataset.from_arrays(length_m=0.9, height_m=[0.5], displacement_m=[x], force_N=[-F])
+    assert any("negative forces" in str(p) for p in ds.validate())
+
+
+# --------------------------------------------------------------------------- the reader, fuzzed
+_TEXT = st.text(alphabet=string.ascii_letters + " :=#-_/()", min_size=0, max_size=30)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    delim=st.sampled_from([",", ";", "\t", "|"]),
+    comma_decimal=st.booleans(),
+    n_meta=st.integers(0, 5),
+    meta=st.lists(_TEXT, min_size=5, max_size=5),
+    values=st.lists(
+        st.tuples(
+            st.floats(-1e6, 1e6, allow_nan=False),
+            st.floats(-1e6, 1e6, allow_nan=False),
+            st.floats(-1e6, 1e6, allow_nan=False),
+        ),
+        min_size=1,
+        max_size=30,
+    ),
+    garbage=st.lists(st.tuples(st.integers(0, 40), _TEXT), max_size=4),
+    extra_col_first=st.booleans(),
+)
+def test_table_reader_never_shifts_a_column(delim, comma_decimal, n_meta, meta, values, garbage, extra_col_first):
+    dec = "," if comma_decimal and delim != "," else "."
+
+    def cell(v):
+        s = repr(float(v))
+        return s.replace(".", ",") if dec == "," else s
+
+    names = ["time", "force", "disp"]
+    header = (["note"] if extra_col_first else []) + names
+    rows = [((["x"] if extra_col_first else []) + [cell(a), cell(b), cell(c)]) for a, b, c in values]
+    lines = [m for m in meta[:n_meta] if not any(n in m for n in names)]
+    lines.append(delim.join(header))
+    body = [delim.join(r) for r in rows]
+    for pos, junk in sorted(garbage, reverse=True):
+        body.insert(min(pos, len(body)), junk)
+    text = "\n".join(lines + body) + "\n"
+    try:
+        tab = read_table(text, ["disp", "time", "force"], name="fuzz")
+    except ValueError:
+        return  # a clear error is fine; a traceback of another kind or a shifted column is not
+    got = np.column_stack([tab.columns["time"], tab.columns["force"], tab.columns["disp"]])
+    want = np.array(values, float)
+    # every row read is one of the written rows, in order, with its columns in place
+    j = 0
+    for r in got:
+        while j < len(want) and not np.allclose(want[j], r, rtol=1e-12, atol=0):
+            j += 1
+        assert j < len(want), (r, want)
+        j += 1
+    assert tab.n_rows >= len(values) - len(garbage)
