@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+import json
 import os
 import sys
 
@@ -24,6 +26,21 @@ def as_dataset(dataset) -> Specimen:
     if isinstance(dataset, (str, os.PathLike)):
         return read_dataset(dataset)
     raise TypeError(f"dataset: expected a bayesrod.Dataset or a dataset directory path, got {type(dataset).__name__}")
+
+
+def plain_json(doc):
+    """``doc`` with numpy scalars and arrays turned into JSON numbers and lists (a fresh copy)."""
+    from ..dataset.io import json_default
+
+    return json.loads(json.dumps(doc, default=json_default))
+
+
+class DocResult:
+    """Mixin of the result objects whose content is one JSON document held in ``self.doc``."""
+
+    def to_dict(self) -> dict:
+        """The JSON document the command line writes and prints (docs/format.md), a fresh copy."""
+        return copy.deepcopy(dict(self.doc))
 
 
 def interval(draws: ArrayLike, level: float, axis: int = 0) -> tuple[NDArray, NDArray, NDArray]:

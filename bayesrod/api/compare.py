@@ -8,7 +8,6 @@ between-specimen spread, warnings, convergence) and ``figures/forest.png``.
 from __future__ import annotations
 
 import copy
-import json
 import logging
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -18,6 +17,7 @@ from types import MappingProxyType
 import numpy as np
 
 from ..inference.hierarchical import SpecimenPosterior, check_reduction, contrasts, sample_species
+from ._common import DocResult, plain_json
 
 log = logging.getLogger("bayesrod")
 
@@ -59,7 +59,7 @@ def _as_posterior(x):
 
 
 @dataclass(frozen=True, eq=False)
-class Comparison:
+class Comparison(DocResult):
     """Species contrasts from a hierarchical model over specimens (the content of ``compare.json``)."""
 
     doc: Mapping = field(repr=False)
@@ -69,10 +69,6 @@ class Comparison:
     @property
     def contrasts(self) -> list[dict]:
         return copy.deepcopy(list(self.doc["contrasts"]))
-
-    def to_dict(self) -> dict:
-        """compare.json's content (docs/format.md), a fresh copy."""
-        return copy.deepcopy(dict(self.doc))
 
     def plot(self, ax=None):
         """Forest plot: species-level EI0 with each specimen's median and 90% interval; returns the artists."""
@@ -150,16 +146,8 @@ def compare(posteriors, *, height_m: float | None = None, seed: int = 0) -> Comp
         "method": "normal-normal hierarchical model on per-specimen posteriors (docs/compare.md)",
         "level": 0.9,
     }
-    result = json.loads(json.dumps(result, default=_plain))
+    result = plain_json(result)
     return Comparison(MappingProxyType(result), MappingProxyType(fit), tuple(specimens))
-
-
-def _plain(obj):
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    raise TypeError(type(obj).__name__)
 
 
 def _qd(x) -> dict:

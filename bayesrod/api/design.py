@@ -10,7 +10,6 @@ the median number of engaged force samples per push; the sensor range is
 from __future__ import annotations
 
 import copy
-import json
 import logging
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -20,6 +19,7 @@ from types import MappingProxyType
 import numpy as np
 
 from ..inference.design import PushPlan, design_heights
+from ._common import DocResult, plain_json
 
 log = logging.getLogger("bayesrod")
 
@@ -44,7 +44,7 @@ def default_plan(spec) -> dict:
 
 
 @dataclass(frozen=True, eq=False)
-class Design:
+class Design(DocResult):
     """Candidate contact heights ranked for the next push (the content of ``design.json``).
 
     ``recommended_height_m`` is None when no candidate is feasible; ``candidates`` lists, per height,
@@ -57,10 +57,6 @@ class Design:
     @property
     def candidates(self) -> list[dict]:
         return copy.deepcopy(list(self.doc["candidates"]))
-
-    def to_dict(self) -> dict:
-        """design.json's content (docs/format.md), a fresh copy."""
-        return copy.deepcopy(dict(self.doc))
 
     def plot(self, ax=None):
         """Expected information gain against height, infeasible heights marked; returns the artists."""
@@ -181,13 +177,5 @@ def design(
     res["source"] = posterior.config.get("run") or posterior.config.get("dataset")
     res["length_m"] = L
     res["pushed_heights_m"] = pushed
-    res = json.loads(json.dumps(res, default=_plain))
+    res = plain_json(res)
     return Design(doc=MappingProxyType(res), recommended_height_m=res["recommended_height_m"])
-
-
-def _plain(obj):
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    raise TypeError(type(obj).__name__)

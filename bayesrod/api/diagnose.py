@@ -8,8 +8,6 @@ extensions), ``figures/residuals.png`` (before/after residual structure),
 
 from __future__ import annotations
 
-import copy
-import json
 import logging
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -17,17 +15,16 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-import numpy as np
-
 from ..inference.diagnose import CATALOG, ForwardModel
 from ..inference.diagnose import diagnose as diagnose_model
 from ..inference.likelihood import prepare_data
+from ._common import DocResult, plain_json
 
 log = logging.getLogger("bayesrod")
 
 
 @dataclass(frozen=True, eq=False)
-class Diagnosis:
+class Diagnosis(DocResult):
     """What the plain rod misses on a dataset and what fixes it (the content of ``diagnose.json``).
 
     ``added_effects`` names the effects added; ``before``/``after`` hold the in-sample and held-out errors;
@@ -46,10 +43,6 @@ class Diagnosis:
     @property
     def unexplained_structure(self) -> bool:
         return bool(self.doc["unexplained_structure"])
-
-    def to_dict(self) -> dict:
-        """diagnose.json's content (docs/format.md), a fresh copy."""
-        return copy.deepcopy(dict(self.doc))
 
     def plot_residuals(self, axes=None):
         """Force and shape residual structure before (plain rod) and after; returns the artists."""
@@ -150,13 +143,5 @@ def diagnose(
     truth = spec.extra.get("truth")
     if truth:
         doc["truth"] = truth
-    doc = json.loads(json.dumps(doc, default=_plain))
+    doc = plain_json(doc)
     return Diagnosis(MappingProxyType(doc), model, plain, fit_after)
-
-
-def _plain(obj):
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    raise TypeError(type(obj).__name__)

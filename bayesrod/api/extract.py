@@ -13,7 +13,6 @@ skeleton and centerline on the RGB frame.
 
 from __future__ import annotations
 
-import copy
 import json
 import logging
 import shutil
@@ -26,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..dataset.model import Dataset, ShapeFrame
+from ._common import DocResult, plain_json
 
 log = logging.getLogger("bayesrod")
 
@@ -45,7 +45,7 @@ def _load(rec):
 
 
 @dataclass(frozen=True, eq=False)
-class Extraction:
+class Extraction(DocResult):
     """Centerlines extracted from a dataset's RGB-D frames.
 
     ``columns[push_id]`` holds the points of every extracted frame (``time_s``, ``x_m``, ``z_m``, ``sd_m``
@@ -57,10 +57,6 @@ class Extraction:
     columns: Mapping[str, Mapping[str, NDArray]] = field(repr=False)
     doc: Mapping = field(repr=False)
     examples: Mapping = field(repr=False, default_factory=dict)
-
-    def to_dict(self) -> dict:
-        """extract_report.json's content, a fresh copy."""
-        return copy.deepcopy(dict(self.doc))
 
     @property
     def dataset(self) -> Dataset:
@@ -201,5 +197,5 @@ def extract(dataset, *, progress: bool = True) -> Extraction:
             msg += f"; skipped {', '.join(str(s['frame']) + ' (' + s['reason'] + ')' for s in skipped)}"
         log.info("%s", msg)
     bar.close()
-    report = json.loads(json.dumps(report, default=lambda o: o.item() if isinstance(o, np.generic) else str(o)))
+    report = plain_json(report)
     return Extraction(spec, MappingProxyType(columns), MappingProxyType(report), MappingProxyType(examples))

@@ -31,7 +31,7 @@ from ..inference.priors import load_prior
 from ..inference.sampler import find_start, run_ensembles
 from ..inference.summary import build_summary, predictive_forces, to_inference_data
 from ..physics import flexural_rigidity, k_theta, k_x
-from ._common import as_dataset, interval, progress_enabled
+from ._common import as_dataset, interval, plain_json, progress_enabled
 from .bands import Band, ForceBand
 
 log = logging.getLogger("bayesrod")
@@ -146,21 +146,20 @@ class Posterior:
 
     def k_theta_band(self, height_m: ArrayLike, level: float = 0.9) -> Band:
         """Lumped rotational stiffness k_theta(h) (eq. kdist) over heights ``height_m`` [m], shape (m,) [N m/rad]."""
+        return self._stiffness_band(k_theta, height_m, level, "N m/rad")
+
+    def _stiffness_band(self, fn, height_m, level, unit: str) -> Band:
+        """A lumped stiffness ``fn`` (k_theta or k_x, base spring in series) over heights, as a Band."""
         level = _check_level(level)
         h = _grid(height_m, "height_m", 0.0, self.length_m)
-        k = k_theta(
+        k = fn(
             h[None, :], self.samples["EI0"][:, None], self.samples["p"][:, None], self.length_m, self._base_stiffness()
         )
-        return Band(h, *interval(k, level), level=level, x_name="height_m", unit="N m/rad")
+        return Band(h, *interval(k, level), level=level, x_name="height_m", unit=unit)
 
     def k_x_band(self, height_m: ArrayLike, level: float = 0.9) -> Band:
         """Small-deflection translational stiffness k_x(h) (eq. kx) over ``height_m`` [m], shape (m,) [N/m]."""
-        level = _check_level(level)
-        h = _grid(height_m, "height_m", 0.0, self.length_m)
-        k = k_x(
-            h[None, :], self.samples["EI0"][:, None], self.samples["p"][:, None], self.length_m, self._base_stiffness()
-        )
-        return Band(h, *interval(k, level), level=level, x_name="height_m", unit="N/m")
+        return self._stiffness_band(k_x, height_m, level, "N/m")
 
     def predict_force(
         self, height_m: float, displacement_m: ArrayLike, level: float = 0.9, n_draws: int = 400, seed: int = 0
@@ -758,16 +757,8 @@ def fit(
         specimen=spec.specimen,
         effects=effects,
         config=MappingProxyType(config),
-        doc=MappingProxyType(json.loads(json.dumps(doc, default=_json_default))),
+        doc=MappingProxyType(plain_json(doc)),
         dataset=spec,
         likelihood=lik,
         direct=direct,
     )
-
-
-def _json_default(obj):
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")

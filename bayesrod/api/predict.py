@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -13,10 +12,11 @@ from numpy.typing import ArrayLike
 
 from ..physics import Effects, force_from_displacement, k_theta, k_x
 from ..physics.presets import get_preset
+from ._common import DocResult
 
 
 @dataclass(frozen=True, eq=False)
-class Prediction:
+class Prediction(DocResult):
     """Forces, contact points and slip at the asked displacements, with k_theta and k_x (eqs. kdist, kx).
 
     ``to_dict()`` is the ``predict --json`` document (docs/format.md): plain numbers for one rod,
@@ -24,9 +24,6 @@ class Prediction:
     """
 
     doc: Mapping = field(repr=False)
-
-    def to_dict(self) -> dict:
-        return copy.deepcopy(dict(self.doc))
 
     @property
     def from_posterior(self) -> bool:

@@ -383,9 +383,9 @@ def _progress(args) -> bool:
 
 
 def _emit_json(doc) -> None:
-    from ..dataset.io import _json_default
+    from ..dataset.io import json_default
 
-    print(json.dumps(doc, indent=2, default=_json_default))
+    print(json.dumps(doc, indent=2, default=json_default))
 
 
 def _prepare_out(args) -> Path:
