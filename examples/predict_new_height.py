@@ -20,7 +20,7 @@ for pt in one["points"]:
     print(f"  D = {pt['displacement_m']:.2f} m: {state}")
 
 ds = bayesrod.simulate("twig", seed=5, heights_m=[0.45, 0.65], config_overrides={"n_frames_engaged": 2})
-post = bayesrod.fit(ds, use_shapes=False, progress=False, target_ess=400)
+post = bayesrod.fit(ds, use_shapes=False, progress=False, target_ess=300)
 band = post.predict_force(0.60, D)
 for d, lo, med, hi, ps in zip(band.x, band.lower, band.median, band.upper, band.slip_probability, strict=True):
     print(f"  posterior, D = {d:.2f} m: F = {med:.3f} [{lo:.3f}, {hi:.3f}] N, P(slipped) = {ps:.2f}")

@@ -42,6 +42,7 @@ def _null_hits(n_rep):
     return hits
 
 
+@pytest.mark.slow  # 50 s; the null check at 20 replications is slow too
 def test_same_species_split_in_two_rarely_differs():
     """8 replications of two groups of 4 from one species: P(<= 5 of 8 | 90%) = 3.8%."""
     assert _null_hits(8) >= 6
