@@ -41,7 +41,9 @@ def test_simulated_ar1_noise_has_its_correlation_and_sd():
 
 @pytest.fixture(scope="module")
 def ar_data():
-    return bayesrod.simulate("twig", seed=3, noise_rho=0.9, config_overrides={"n_frames_engaged": 2})
+    return bayesrod.simulate(
+        "twig", seed=3, noise_rho=0.9, heights_m=[0.45, 0.6], config_overrides={"n_frames_engaged": 2}
+    )
 
 
 @pytest.fixture(scope="module")
