@@ -170,7 +170,8 @@ def diagnose_report(doc: dict, pngs: Mapping[str, bytes]) -> str:
 <p>Fitted after: {esc(json.dumps({k: round(v, 5) for k, v in doc["fitted"].items()}))}</p>
 <h2>Error before and after</h2>
 <table><tr><th>error</th><th>plain rod</th><th>after</th></tr>{err}</table>
-<p>Held-out: each height is left out in turn, the model refitted on the others, and its forces predicted.</p>
+<p>Held-out: each height is left out in turn and its forces predicted from the others; the fit without it
+is approximated by three Gauss-Newton steps from the full fit, not a full refit (a known limitation).</p>
 <h2>Effect tests</h2>
 <table><tr><th>round</th><th>effect</th><th>statistic</th><th>p</th><th>LR after fit</th><th>held-out RMSE [N]</th>
 <th>outcome</th></tr>{cand}</table>
