@@ -291,10 +291,8 @@ def test_table_reader_never_shifts_a_column(delim, comma_decimal, n_meta, meta, 
     for pos, junk in sorted(garbage, reverse=True):
         body.insert(min(pos, len(body)), junk)
     text = "\n".join(lines + body) + "\n"
-    try:
-        tab = read_table(text, ["disp", "time", "force"], name="fuzz")
-    except ValueError:
-        return  # a clear error is fine; a traceback of another kind or a shifted column is not
+    # every written row is numeric and the garbage lines hold no digits: the reader must find them all
+    tab = read_table(text, ["disp", "time", "force"], name="fuzz")
     got = np.column_stack([tab.columns["time"], tab.columns["force"], tab.columns["disp"]])
     want = np.array(values, float)
     # every row read is one of the written rows, in order, with its columns in place
@@ -304,4 +302,4 @@ def test_table_reader_never_shifts_a_column(delim, comma_decimal, n_meta, meta, 
             j += 1
         assert j < len(want), (r, want)
         j += 1
-    assert tab.n_rows >= len(values) - len(garbage)
+    assert tab.n_rows == len(values)

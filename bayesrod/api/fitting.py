@@ -334,12 +334,13 @@ class Posterior:
 
         return plot_corner(sub, truth=truth, fig=Figure(figsize=(5, 5)))
 
-    def report_html(self) -> str:
-        """The HTML report as a string (figures embedded)."""
+    def report_html(self, pngs: dict[str, bytes] | None = None) -> str:
+        """The HTML report as a string, figures embedded (``pngs``: figures already rendered, else rendered here)."""
         from ..report.html import fit_report
 
         prov = self.dataset.extra.get("provenance") if self.dataset is not None else None
-        return fit_report(self.to_dict(), self.figures(), provenance=prov, source=str(self.config.get("dataset")))
+        pngs = self.figures() if pngs is None else pngs
+        return fit_report(self.to_dict(), pngs, provenance=prov, source=str(self.config.get("dataset")))
 
     def report(self, path) -> Path:
         """Write the self-contained HTML report to ``path`` (atomically); returns the path."""
@@ -376,13 +377,8 @@ class Posterior:
             for name, data in pngs.items():
                 write_bytes_atomic(path / "figures" / f"{name}.png", data)
             from ..dataset.io import write_text_atomic
-            from ..report.html import fit_report
 
-            prov = self.dataset.extra.get("provenance") if self.dataset is not None else None
-            write_text_atomic(
-                path / "report.html",
-                fit_report(self.to_dict(), pngs, provenance=prov, source=str(self.config.get("dataset"))),
-            )
+            write_text_atomic(path / "report.html", self.report_html(pngs))
         return path
 
     @classmethod

@@ -417,7 +417,7 @@ def import_recording(path: Path, opt: TableOptions) -> dict:
     Returns a dict: ``pushes`` (list of dicts with ``cycle``, ``force`` columns, ``unloading`` columns or
     None, ``preload_N``, ``tared_N``, ``rows`` (first and last file line)), ``report`` (what was done).
     """
-    from .plausibility import reversal_tolerance
+    from .plausibility import noise_sd, reversal_tolerance
     from .tables import delimiter_name, read_table
 
     height = _positive("height_m", opt.height_m)
@@ -458,7 +458,6 @@ def import_recording(path: Path, opt: TableOptions) -> dict:
     if opt.cycles == "first":
         loads = loads[:1]
     pushes = []
-    baseline = None
     for k, s in enumerate(loads, start=1):
         sl = slice(s.start, s.stop)
         xs, Fs, ts = x[sl], F[sl], t[sl]
@@ -469,10 +468,9 @@ def import_recording(path: Path, opt: TableOptions) -> dict:
         if on.observed:  # pre-contact samples: contact starts at the hinge, tare to its baseline
             first = on.index
             x_on = xs[0] + (on.position if on.position is not None else xs[first] - xs[0])
-            baseline = on.baseline if baseline is None else baseline
             tare = on.baseline if opt.tare == "auto" else 0.0
         Fk = Fs[first:] - tare
-        sd = float(np.median(np.abs(np.diff(Fs, 2))) / 0.6745 / np.sqrt(6)) if Fs.size > 4 else 0.0
+        sd = noise_sd(Fs)
         preload = float(Fk[0]) if Fk[0] > max(5 * sd, 0.02 * max(Fk.max(), 1e-12)) else 0.0
         nxt = next((u for u in segs if not u.loading and u.start == s.stop - 1), None)
         unload = None
