@@ -97,6 +97,8 @@ def diagnose(
     use_shapes: bool = True,
     alpha: float = 0.01,
     min_heldout_gain: float = 0.10,
+    heldout_alpha: float = 0.05,
+    force_noise: str = "ar1",
 ) -> Diagnosis:
     """Residual analysis: which missing effect explains the misfit, refit, error before and after.
 
@@ -110,7 +112,14 @@ def diagnose(
     alpha : float
         Family-wise test level per round, in (0, 1).
     min_heldout_gain : float
-        Relative drop of the held-out force error an effect must bring.
+        Relative drop of the held-out force error (true refits without the held-out push, or without
+        the last third of a single push) an effect must bring.
+    heldout_alpha : float
+        Level of the parametric bootstrap test (under the fitted AR(1) noise) that the held-out
+        improvement is not chance.
+    force_noise : {"ar1", "iid"}
+        Force noise of every fit and test: AR(1) per push (default; real pushes are autocorrelated) or
+        independent.
     """
     from ._common import as_dataset
 
@@ -121,14 +130,19 @@ def diagnose(
         raise ValueError(
             f"candidates: expected effects from {', '.join(CATALOG)}, got {', '.join(candidates) or 'none'}"
         )
-    if not (0 < alpha < 1):
-        raise ValueError(f"alpha: expected a level in (0, 1), got {alpha}")
+    for name, v in (("alpha", alpha), ("heldout_alpha", heldout_alpha)):
+        if not (0 < v < 1):
+            raise ValueError(f"{name}: expected a level in (0, 1), got {v}")
+    if force_noise not in ("ar1", "iid"):
+        raise ValueError(f"force_noise: expected 'ar1' or 'iid', got {force_noise!r}")
     model = ForwardModel(prepare_data(spec, use_forces=True, use_shapes=use_shapes), spec.length_m)
     res = diagnose_model(
         model,
         candidates=candidates,
         alpha=alpha,
         min_heldout_gain=min_heldout_gain,
+        heldout_alpha=heldout_alpha,
+        force_noise=force_noise,
         log=lambda msg: log.info("%s", msg),
     )
     fit_after, plain = res.pop("_fit"), res.pop("_plain")
@@ -138,7 +152,13 @@ def diagnose(
         "length_m": spec.length_m,
         "observations": {"n_force": model.n_force, "n_shape_points": model.n_points},
         **res,
-        "settings": {"alpha": alpha, "min_heldout_gain": min_heldout_gain, "candidates": list(candidates)},
+        "settings": {
+            "alpha": alpha,
+            "min_heldout_gain": min_heldout_gain,
+            "heldout_alpha": heldout_alpha,
+            "force_noise": force_noise,
+            "candidates": list(candidates),
+        },
     }
     truth = spec.extra.get("truth")
     if truth:

@@ -263,7 +263,19 @@ def build_parser() -> argparse.ArgumentParser:
         "--min-heldout-gain",
         type=float,
         default=0.10,
-        help="relative drop of the leave-one-height-out force error an effect must bring (default 0.10)",
+        help="relative drop of the held-out force error (true refits) an effect must bring (default 0.10)",
+    )
+    dg.add_argument(
+        "--heldout-alpha",
+        type=float,
+        default=0.05,
+        help="level of the bootstrap test (under the fitted AR noise) of the held-out improvement (default 0.05)",
+    )
+    dg.add_argument(
+        "--force-noise",
+        default="ar1",
+        choices=["ar1", "iid"],
+        help="force noise of every fit and test: AR(1) per push (default) or independent",
     )
     dg.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
 
@@ -300,6 +312,8 @@ FLAGS = {
     "length_m": "--length-m",
     "shape_weight": "--shape-weight",
     "alpha": "--alpha",
+    "heldout_alpha": "--heldout-alpha",
+    "min_heldout_gain": "--min-heldout-gain",
     "n_workers": "--workers",
     "checkpoint": "--resume",
     "arm": "--arm",
@@ -919,6 +933,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         use_shapes=not args.forces_only,
         alpha=args.alpha,
         min_heldout_gain=args.min_heldout_gain,
+        heldout_alpha=args.heldout_alpha,
+        force_noise=args.force_noise,
     )
     res.save(out, overwrite=args.force)
     doc = res.to_dict()
