@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -21,12 +22,15 @@ import bayesrod
 from bayesrod.dataset.io import append_rows, read_rows
 
 FIELDS = ["cane", "heights", "added", "fitted", "force_before", "force_after", "heldout_before", "heldout_after"]
-FIELDS += ["unexplained", "structured_blocks_after", "top_round1"]
+FIELDS += ["unexplained", "structured_blocks_after", "top_round1", "lag1_before", "lag1_after", "rho_after"]
+FIELDS += ["heldout_p", "seconds"]
 
 
 def one(job) -> dict:
     ds, out = job
+    t0 = time.perf_counter()
     res = bayesrod.diagnose(ds, use_shapes=False)
+    seconds = time.perf_counter() - t0
     res.save(out, overwrite=True)
     doc = res.to_dict()
     b, a = doc["before"], doc["after"]
@@ -43,25 +47,33 @@ def one(job) -> dict:
         "unexplained": int(doc["unexplained_structure"]),
         "structured_blocks_after": sum(s["structured"] for s in doc["structure_after"]),
         "top_round1": " ".join(f"{c['effect']}:{c['statistic']:.3g}" for c in r1),
+        "lag1_before": b["residual_lag1"],
+        "lag1_after": a["residual_lag1"],
+        "rho_after": doc["noise"]["rho_force"],
+        "heldout_p": " ".join(f"{c['heldout_p_value']:.3g}" for c in doc["candidates"] if c["selected"]),
+        "seconds": round(seconds, 1),
     }
 
 
 def table(rows) -> str:
     out = [
         "| cane | effects added | force RMSE before -> after [N] | held-out force RMSE before -> after [N] | "
-        "change | unexplained structure |",
-        "|---|---|---|---|---|---|",
+        "change | bootstrap p | residual lag-1 before -> after | EI0 [N m^2], p (MAP) | unexplained structure | s |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     hb, ha, fb, fa = [], [], [], []
     for r in sorted(rows, key=lambda r: r["cane"]):
         b, a = float(r["heldout_before"]), float(r["heldout_after"])
+        fit = json.loads(r["fitted"])
         hb.append(b)
         ha.append(a)
         fb.append(float(r["force_before"]))
         fa.append(float(r["force_after"]))
         out.append(
             f"| {r['cane']} | {r['added'] or 'none'} | {float(r['force_before']):.3f} -> {float(r['force_after']):.3f} "
-            f"| {b:.3f} -> {a:.3f} | {100 * (a - b) / b:+.0f}% | {'yes' if int(r['unexplained']) else 'no'} |"
+            f"| {b:.3f} -> {a:.3f} | {100 * (a - b) / b:+.0f}% | {r['heldout_p'] or '-'} "
+            f"| {float(r['lag1_before']):.2f} -> {float(r['lag1_after']):.2f} "
+            f"| {fit['EI0']:.3g}, {fit['p']:.2f} | {'yes' if int(r['unexplained']) else 'no'} | {r['seconds']} |"
         )
     counts: dict[str, int] = {}
     for r in rows:
@@ -71,8 +83,9 @@ def table(rows) -> str:
         f"| **all {len(rows)} canes** | "
         + (", ".join(f"{e} ({n})" for e, n in sorted(counts.items(), key=lambda x: -x[1])) or "none")
         + f" | median {np.median(fb):.3f} -> {np.median(fa):.3f} | median {np.median(hb):.3f} -> {np.median(ha):.3f} "
-        f"| {100 * (np.median(ha) - np.median(hb)) / np.median(hb):+.0f}% (of medians) | "
-        f"{sum(int(r['unexplained']) for r in rows)}/{len(rows)} |",
+        f"| {100 * (np.median(ha) - np.median(hb)) / np.median(hb):+.0f}% (of medians) | | | | "
+        f"{sum(int(r['unexplained']) for r in rows)}/{len(rows)} "
+        f"| median {np.median([float(r['seconds']) for r in rows]):.0f} |",
     ]
     return "\n".join(out) + "\n"
 

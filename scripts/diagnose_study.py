@@ -2,6 +2,7 @@
 
     python scripts/diagnose_study.py --out diagnose-study [--clean 10] [--workers 1] [--forces-only]
     python scripts/diagnose_study.py --out sw7 --clean 0 --effects "" --size self_weight=7
+    python scripts/diagnose_study.py --out ar --forces-only --noise-rho 0.9 --clean 50 --replicates 50 --workers 2
 
 Simulated twig datasets (three heights, forces and centerlines, default noise):
 one per catalog effect at a material size (EFFECTS below), never declared to
@@ -16,13 +17,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import tempfile
+import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from bayesrod.dataset import read_dataset
+import bayesrod
 from bayesrod.dataset.io import append_rows, read_rows
-from bayesrod.dataset.simulate import SimConfig, simulate, write_simulated
 from bayesrod.inference.diagnose import ForwardModel, diagnose
 from bayesrod.inference.likelihood import prepare_data
 from bayesrod.physics import Effects
@@ -39,18 +39,24 @@ EFFECTS = {
 }
 FIELDS = ["case", "effect", "value", "seed", "added", "fitted", "force_before", "force_after"]
 FIELDS += ["heldout_before", "heldout_after", "shape_before", "shape_after", "unexplained", "top_statistic"]
+FIELDS += ["noise_rho", "rho_fitted", "seconds"]
 
 
 def one(job) -> dict:
-    case, effect, value, seed, forces_only = job
+    case, effect, value, seed, forces_only, rho = job
     eff = Effects.from_mapping({effect: value} if effect else {})
     # 8 frames per push (about 1900 centerline points): the shape signatures, at a third of the cost
-    cfg = SimConfig.from_preset("twig", seed=seed, effects=eff, specimen=f"diag-{case}", n_frames_engaged=8)
-    with tempfile.TemporaryDirectory() as tmp:
-        write_simulated(cfg, simulate(cfg), Path(tmp))
-        spec = read_dataset(tmp)
+    spec = bayesrod.simulate(
+        "twig",
+        seed=seed,
+        effects=eff,
+        noise_rho=rho,
+        config_overrides={"specimen": f"diag-{case}", "n_frames_engaged": 8},
+    )
     model = ForwardModel(prepare_data(spec, use_shapes=not forces_only), spec.length_m)
+    t0 = time.perf_counter()
     r = diagnose(model)
+    seconds = time.perf_counter() - t0
     b, a = r["before"], r["after"]
     first = max((c for c in r["candidates"] if c["round"] == 1), key=lambda c: c["statistic"])
     return {
@@ -68,6 +74,9 @@ def one(job) -> dict:
         "shape_after": a["shape_rmse_mm"],
         "unexplained": int(r["unexplained_structure"]),
         "top_statistic": f"{first['effect']}:{first['statistic']:.3g}",
+        "noise_rho": rho,
+        "rho_fitted": r["noise"].get("rho_force", 0.0),
+        "seconds": round(seconds, 1),
     }
 
 
@@ -88,6 +97,23 @@ def tables(rows) -> str:
             f"| {r['effect']} ({float(r['value']):g}) | {r['added'] or 'none'} | "
             f"{'-' if fitted is None else f'{fitted:.4g}'} | {hb:.4f} -> {ha:.4f} | {100 * (ha - hb) / hb:+.0f}% | "
             f"{sb} -> {sa} | {'yes' if int(r['unexplained']) else 'no'} |"
+        )
+    out += [
+        "",
+        "| effect | replicates | attributed | added exactly it | false attributions | "
+        "median held-out change | unexplained | median s |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for e in sorted({r["effect"] for r in eff}):
+        rr = [r for r in eff if r["effect"] == e]
+        hit = sum(e in r["added"].split(",") for r in rr)
+        exact = sum(r["added"] == e for r in rr)
+        wrong = sorted({x for r in rr for x in r["added"].split(",") if x and x != e})
+        ch = [100 * (float(r["heldout_after"]) / float(r["heldout_before"]) - 1) for r in rr]
+        out.append(
+            f"| {e} | {len(rr)} | {hit}/{len(rr)} | {exact}/{len(rr)} | {', '.join(wrong) or 'none'} | "
+            f"{sorted(ch)[len(ch) // 2]:+.0f}% | {sum(int(r['unexplained']) for r in rr)}/{len(rr)} | "
+            f"{sorted(float(r.get('seconds') or 0) for r in rr)[len(rr) // 2]:.0f} |"
         )
     if clean:
         n_add = sum(bool(r["added"]) for r in clean)
@@ -110,6 +136,8 @@ def main() -> None:
     ap.add_argument("--effects", help='comma list (default: the whole catalog; "" for clean replicates only)')
     ap.add_argument("--effects-first", action="store_true", help="run the effect cases before the clean ones")
     ap.add_argument("--size", action="append", default=[], help="EFFECT=VALUE: another size (case EFFECT@VALUE)")
+    ap.add_argument("--noise-rho", type=float, default=0.0, help="AR(1) correlation of the simulated force noise")
+    ap.add_argument("--replicates", type=int, default=1, help="seeds per effect case (default 1)")
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -122,8 +150,13 @@ def main() -> None:
         if name not in EFFECTS:
             ap.error(f"--size {item}: unknown effect {name!r}; expected one of {sorted(EFFECTS)}")
         sizes[name] = float(value)
-    jobs = [(e if v == EFFECTS[e] else f"{e}@{v:g}", e, v, 11, args.forces_only) for e, v in sizes.items()]
-    clean = [(f"clean-{s}", None, 0.0, 100 + s, args.forces_only) for s in range(args.clean)]
+    rho = args.noise_rho
+    jobs = [
+        (f"{e if v == EFFECTS[e] else f'{e}@{v:g}'}" + (f"-{k}" if k else ""), e, v, 11 + k, args.forces_only, rho)
+        for k in range(args.replicates)
+        for e, v in sizes.items()
+    ]
+    clean = [(f"clean-{s}", None, 0.0, 100 + s, args.forces_only, rho) for s in range(args.clean)]
     jobs = jobs if args.effects_first else clean + jobs
     todo = [j for j in jobs if j[0] not in done]
     with ProcessPoolExecutor(args.workers) as ex:

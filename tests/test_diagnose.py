@@ -231,3 +231,80 @@ def test_spline_forces_match_the_direct_solve_on_long_pushes(coords):
     assert np.all(np.isfinite(ref))
     tol = 1e-5 if "yield" not in coords else 1e-4  # each branch its own spline, the kink's interval solved
     assert np.max(np.abs(F - ref)) < tol * np.max(np.abs(ref))
+
+
+def test_structure_test_holds_its_level_under_ar1_noise_and_fails_without_the_correction():
+    """Pure AR(1) residuals (rho 0.95): the whitened F test flags no block in 95%+ of pushes; without the
+    whitening (the correlated-noise correction dropped) nearly every push is flagged."""
+    from bayesrod.dataset.simulate import ar1_noise
+    from bayesrod.inference.diagnose import MapFit
+    from bayesrod.inference.likelihood import PushData
+
+    rng = np.random.default_rng(5)
+    n, pushes = 120, []
+    for k in range(40):
+        r = ar1_noise(rng, 0.05, 0.95, n)
+        e = np.zeros(0)
+        pushes.append(PushData(f"h{k}", 0.5, np.linspace(0.0, 0.05, n), r, e, e.astype(int), e, e, None))
+    m = ForwardModel(pushes, 0.8)
+    r = m.F_obs
+    sig = 0.05 * np.sqrt(1 - 0.95**2)
+
+    def flagged(rho, sigma):
+        fit = MapFit((), np.zeros(2), sigma, 1.0, r, np.zeros(0), np.zeros((r.size, 2)), 0.0, rho)
+        return sum(b["structured"] for b in Diagnoser(m).structure(fit)["blocks"])
+
+    assert flagged(0.95, sig) <= 2  # 40 pushes at alpha 1e-3 (and a material size): ~0 expected
+    assert flagged(0.0, 0.05) >= 30
+
+
+def test_heldout_bootstrap_p_values_are_uniform_when_the_effect_is_absent():
+    """Linear model, AR(1) noise (rho 0.9), an effect column that is absent: the observed held-out gains come
+    from exact GLS refits (dense covariance, written here independently); the bootstrap p-values are uniform."""
+    from bayesrod.dataset.simulate import ar1_noise
+    from bayesrod.inference.diagnose import MapFit, null_heldout_gain
+    from bayesrod.inference.likelihood import PushData
+
+    rng = np.random.default_rng(11)
+    n, rho, sig = 60, 0.9, 0.02
+    D = np.linspace(0.001, 0.05, n) / 0.05
+    e = np.zeros(0)
+    pushes = [PushData(f"h{k}", 0.4 + 0.1 * k, D, np.zeros(n), e, e.astype(int), e, e, None) for k in range(3)]
+    m = ForwardModel(pushes, 0.8)
+    push = m.force_push
+    scale = 1.0 + 0.3 * push  # the heights differ
+    J0 = np.column_stack([D[np.arange(3 * n) % n] * scale, (D[np.arange(3 * n) % n] ** 2) * scale**2])
+    G = (D[np.arange(3 * n) % n] ** 3) * scale**3
+    lag = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+    Cinv_block = np.linalg.inv(sig**2 / (1 - rho**2) * rho**lag)
+
+    def gls(X, y, rows):
+        A = np.zeros((X.shape[1],) * 2)
+        b = np.zeros(X.shape[1])
+        for k in np.unique(push[rows]):
+            s = rows & (push == k)
+            A += X[s].T @ Cinv_block @ X[s]
+            b += X[s].T @ Cinv_block @ y[s]
+        return np.linalg.solve(A, b)
+
+    dg = Diagnoser(m)
+    pv = []
+    for _ in range(150):
+        y = J0 @ np.array([1.0, -0.3]) + np.concatenate(
+            [ar1_noise(rng, sig / np.sqrt(1 - rho**2), rho, n) for _ in range(3)]
+        )
+        allrows = np.ones(3 * n, bool)
+        X1 = np.column_stack([J0, G])
+        r0 = y - J0 @ gls(J0, y, allrows)
+        r1 = y - X1 @ gls(X1, y, allrows)
+        sq0 = sq1 = 0.0
+        for k in range(3):
+            train, held = push != k, push == k
+            sq0 += np.sum((y[held] - J0[held] @ gls(J0, y, train)) ** 2)
+            sq1 += np.sum((y[held] - X1[held] @ gls(X1, y, train)) ** 2)
+        gain = 1 - np.sqrt(sq1 / sq0)
+        mk = lambda r: MapFit((), np.zeros(2), sig, 1.0, r, np.zeros(0), J0, 0.0, rho, J0)  # noqa: E731
+        pv.append(null_heldout_gain(dg, mk(r0), mk(r1), gain, n_draws=400, seed=len(pv)))
+    pv = np.array(pv)
+    assert 0.01 <= np.mean(pv < 0.05) <= 0.11, np.mean(pv < 0.05)
+    assert 0.38 <= np.mean(pv < 0.5) <= 0.62, np.mean(pv < 0.5)

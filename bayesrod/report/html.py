@@ -142,12 +142,13 @@ the ensembles; the rank plot shows one histogram per ensemble.</p>
 def diagnose_report(doc: dict, pngs: Mapping[str, bytes]) -> str:
     """The diagnose report: error before/after, effect tests, residual structure, figures."""
     b, a = doc["before"], doc["after"]
-    keys = ("force_rmse_N", "shape_rmse_mm", "heldout_force_rmse_N")
-    err = "".join(f"<tr><td>{k}</td><td>{_fmt(b[k])}</td><td>{_fmt(a[k])}</td></tr>" for k in keys)
+    keys = ("force_rmse_N", "shape_rmse_mm", "heldout_force_rmse_N", "residual_lag1")
+    err = "".join(f"<tr><td>{k}</td><td>{_fmt(b.get(k))}</td><td>{_fmt(a.get(k))}</td></tr>" for k in keys)
     cand = "".join(
         f"<tr><td>{r['round']}</td><td>{esc(r['effect'])}</td><td>{r['statistic']:.3g}</td>"
         f"<td>{r['p_value']:.2g}</td><td>{_fmt(r.get('lr_statistic'), '.3g')}</td>"
-        f"<td>{_fmt(r.get('heldout_force_rmse_N'))}</td><td>{'added' if r['selected'] else ''}"
+        f"<td>{_fmt(r.get('heldout_force_rmse_N'))}</td><td>{_fmt(r.get('heldout_p_value'), '.2g')}</td>"
+        f"<td>{'added' if r['selected'] else ''}"
         f"{esc(r.get('rejected_because', ''))}</td></tr>"
         for r in doc["candidates"]
     )
@@ -163,6 +164,12 @@ def diagnose_report(doc: dict, pngs: Mapping[str, bytes]) -> str:
         else "No material residual structure remains."
     )
     added = ", ".join(doc["added_effects"]) or "none"
+    nz = doc.get("noise", {})
+    noise = (
+        f"AR(1) force noise per push, rho = {nz['rho_force']:.3f}, marginal sd {nz['sigma_force_N']:.3g} N"
+        if nz.get("model") == "ar1"
+        else "independent force noise"
+    )
     truth = doc.get("truth")
     truth_html = f"<p>Simulated; the truth: {esc(json.dumps(truth))}</p>" if truth else ""
     body = f"""<h1>Diagnosis: {esc(doc["specimen"])}</h1>
@@ -170,11 +177,13 @@ def diagnose_report(doc: dict, pngs: Mapping[str, bytes]) -> str:
 <p>Fitted after: {esc(json.dumps({k: round(v, 5) for k, v in doc["fitted"].items()}))}</p>
 <h2>Error before and after</h2>
 <table><tr><th>error</th><th>plain rod</th><th>after</th></tr>{err}</table>
-<p>Held-out: each height is left out in turn and its forces predicted from the others; the fit without it
-is approximated by three Gauss-Newton steps from the full fit, not a full refit (a known limitation).</p>
+<p>Held-out ({esc(b.get("heldout") or "none: too few samples")}): each unit is left out in turn, the model is
+refitted to the rest (a full maximum-likelihood fit) and predicts it. Noise: {esc(noise)}.
+An effect is added when its likelihood ratio passes, its held-out error falls by the set gain, and a
+parametric bootstrap under the fitted AR(1) noise (bootstrap p) says the fall is not chance.</p>
 <h2>Effect tests</h2>
 <table><tr><th>round</th><th>effect</th><th>statistic</th><th>p</th><th>LR after fit</th><th>held-out RMSE [N]</th>
-<th>outcome</th></tr>{cand}</table>
+<th>bootstrap p</th><th>outcome</th></tr>{cand}</table>
 <h2>Residual structure after</h2>
 <table><tr><th>push</th><th>kind</th><th>n</th><th>p (F test)</th><th>structured sd / noise sd</th>
 <th>flagged</th></tr>{blocks}</table>
