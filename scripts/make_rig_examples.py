@@ -85,6 +85,23 @@ def handheld(rng) -> str:
     return "\n".join(lines) + "\n"
 
 
+def field_push(rng) -> str:
+    """A field gauge pushed by hand at one height: recording starts pressed 8 mm (a preload), the base
+    yields at 1.1 N m (the push softens: the force levels off), AR(1) noise (rho 0.9: hand tremor)."""
+    from bayesrod.dataset.simulate import ar1_noise
+
+    h, D0 = 0.45, 0.008
+    travel = np.linspace(0, 0.11, 150)
+    D = D0 + travel
+    eff = bayesrod.physics.Effects(yield_moment=1.1)
+    F = bayesrod.force_from_displacement(D, h, TRUTH["EI0"], TRUTH["p"], TRUTH["length_m"], eff).force_N
+    F = F + ar1_noise(rng, 0.04, 0.9, D.size)
+    t = np.arange(D.size) * 0.05
+    lines = ["# field gauge export (synthetic example, bayesrod)", "t_s,force_N,travel_mm"]
+    lines += [f"{a:.2f},{b:.4f},{1000 * c:.3f}" for a, b, c in zip(t, F, travel, strict=True)]
+    return "\n".join(lines) + "\n"
+
+
 def main() -> None:
     out = Path(sys.argv[1] if len(sys.argv) > 1 else Path(__file__).resolve().parents[1] / "examples" / "rigs")
     out.mkdir(parents=True, exist_ok=True)
@@ -92,8 +109,15 @@ def main() -> None:
     (out / "darling_arm.txt").write_text(darling(rng))
     (out / "utm_instron.csv").write_text(instron(rng))
     (out / "handheld_gauge.csv").write_text(handheld(rng))
-    truth = {**TRUTH, "heights_m": {"darling_arm.txt": 0.5, "utm_instron.csv": 0.6, "handheld_gauge.csv": 0.4},
-             "preload_displacement_m": {"darling_arm.txt": 0.012}}
+    (out / "field_push.csv").write_text(field_push(np.random.default_rng(19)))
+    heights = {"darling_arm.txt": 0.5, "utm_instron.csv": 0.6, "handheld_gauge.csv": 0.4, "field_push.csv": 0.45}
+    truth = {
+        **TRUTH,
+        "heights_m": heights,
+        "preload_displacement_m": {"darling_arm.txt": 0.012, "field_push.csv": 0.008},
+        "effects": {"field_push.csv": {"yield": 1.1}},
+        "force_noise_rho": {"field_push.csv": 0.9},
+    }
     (out / "TRUTH.json").write_text(json.dumps(truth, indent=1) + "\n")
     print(f"wrote {out}")
 

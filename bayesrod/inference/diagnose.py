@@ -98,6 +98,7 @@ def _hold(F: NDArray) -> NDArray:
 
 
 MAX_NODES = 32  # force solves per push and parameter set; other samples read off a cubic spline through them
+P_MAX = 3.0  # the taper exponent's upper bound: the priors' (priors/*.json truncate p to [0, 3]) and the tables'
 RHO_MAX = 0.99  # AR(1) correlation of the force noise is estimated in [-0.5, RHO_MAX]
 BLOCK_TRAIN = 2.0 / 3.0  # one push: the first two thirds of its samples fit, the last third is held out
 
@@ -616,7 +617,7 @@ class Diagnoser:
         """
         effects = tuple(effects)
         lo = np.array([-np.inf, 0.0] + [self._bound(e, 2) for e in effects])
-        hi = np.array([np.inf, 4.0] + [self._bound(e, 3) for e in effects])
+        hi = np.array([np.inf, P_MAX] + [self._bound(e, 3) for e in effects])
         x = np.clip(np.array(x0, float), lo + 1e-9 * np.isfinite(lo), hi - 1e-9 * np.isfinite(hi))
         rf, rs = self.raw_residuals(x, effects)
         noise = self.profile_noise(rf, rs)
@@ -657,16 +658,8 @@ class Diagnoser:
         Forces are linear in EI0, so each p of the grid has a least-squares EI0; the best pair starts
         the direct fit.
         """
-        from .likelihood import ForceCurves
 
-        p_grid = np.linspace(0.0, 3.0, 61) if p_grid is None else np.asarray(p_grid, float)
-        L = self.m.length_m
-        g = (
-            np.concatenate(
-                [ForceCurves(d.height_m / L, p_grid).force(d.D_m / L) for d in self.m.data if d.D_m.size], axis=1
-            )
-            / L**2
-        )  # (P, n_force): force per unit EI0
+        g, p_grid = self._unit_forces(p_grid)
         gg = np.einsum("pn,pn->p", g, g)
         a = (g @ self.m.F_obs) / np.where(gg > 0, gg, np.inf)
         rss = np.sum((self.m.F_obs[None, :] - a[:, None] * g) ** 2, axis=1)
@@ -675,6 +668,47 @@ class Diagnoser:
         if not np.isfinite(rss[k]):
             raise ValueError("diagnose: expected forces that rise with displacement, got none the model can fit")
         return np.array([np.log(a[k]), float(p_grid[k])])
+
+    def _unit_forces(self, p_grid: NDArray | None) -> tuple[NDArray, NDArray]:
+        """Plain-model forces per unit EI0 (P, n_force) over a p grid, from the likelihood's force tables."""
+        from .likelihood import ForceCurves
+
+        p_grid = np.linspace(0.0, P_MAX, 61) if p_grid is None else np.asarray(p_grid, float)
+        L = self.m.length_m
+        g = (
+            np.concatenate(
+                [ForceCurves(d.height_m / L, p_grid).force(d.D_m / L) for d in self.m.data if d.D_m.size], axis=1
+            )
+            / L**2
+        )  # (P, n_force): force per unit EI0
+        return g, p_grid
+
+    def yield_start(self) -> NDArray:
+        """(log EI0, p, log M_y) for the yield candidate of the plain model: a grid over p and M_y.
+
+        The plain model's optimum can sit far from the yielding stem's (an extreme taper mimics the
+        softening), out of reach of a local fit; this start caps the table forces at M_y / h and takes
+        EI0 in closed form on the samples below the cap, for every p of the grid and 40 moments.
+        """
+        g, p_grid = self._unit_forces(np.linspace(0.0, P_MAX, 31))
+        F = self.m.F_obs
+        h = np.array([self.m.data[k].height_m for k in self.m.force_push])
+        m_max = float(np.max(F * h))
+        best, out = np.inf, None
+        for frac in np.linspace(0.3, 1.0, 40):
+            cap = frac * m_max / h
+            below = F < 0.98 * cap
+            if below.sum() < 3:
+                continue
+            gb = g[:, below]
+            a = (gb @ F[below]) / np.maximum(np.einsum("pn,pn->p", gb, gb), 1e-300)
+            rss = np.sum((F[None, :] - np.minimum(a[:, None] * g, cap[None, :])) ** 2, axis=1)
+            rss = np.where(a > 0, rss, np.inf)
+            k = int(np.argmin(rss))
+            if rss[k] < best:
+                best, out = rss[k], np.array([np.log(a[k]), p_grid[k], np.log(frac * m_max)])
+        return out
+
 
     # -------------------------------------------------------------- statistics
     def screen_noise(self, fit: MapFit) -> tuple[float, float, float]:
@@ -847,10 +881,15 @@ def _candidate_fit(dg, cur, effects, starts, level, dof, before_errs, before_rms
     x0 = np.concatenate([cur.x, starts])
     slow = any(e in SLOW for e in effects)
     new = dg.fit(cur.effects + tuple(effects), x0, max_nfev=12 if slow else 40)
+    if tuple(effects) == ("yield",) and not cur.effects:  # a second start: the capped-table grid
+        alt = dg.fit(("yield",), dg.yield_start(), max_nfev=40)
+        new = alt if alt.loglik > new.loglik else new
     lr = 2.0 * (new.loglik - cur.loglik)
     row = {"lr_statistic": float(lr), "fitted": new.natural(L)}
     if lr <= stats.chi2.isf(level, dof):
-        row["rejected_because"] = "likelihood ratio below the threshold"
+        row["rejected_because"] = (
+            "likelihood ratio below the threshold" if lr >= 0 else "the fit stayed below the current model"
+        )
         return row, None
     log(f"held-out refits with {'+'.join(effects)}")
     err, errs = dg.errors(new)
