@@ -23,7 +23,7 @@ from pathlib import Path
 
 import bayesrod
 from bayesrod.dataset.io import append_rows, read_rows
-from bayesrod.inference.diagnose import ForwardModel, diagnose
+from bayesrod.inference.diagnose import CATALOG, ForwardModel, diagnose
 from bayesrod.inference.likelihood import prepare_data
 from bayesrod.physics import Effects
 
@@ -55,7 +55,9 @@ def one(job) -> dict:
     )
     model = ForwardModel(prepare_data(spec, use_shapes=not forces_only), spec.length_m)
     t0 = time.perf_counter()
-    r = diagnose(model)
+    # "outside:<effect>": the effect is simulated but not a candidate (outside the catalog the loop knows)
+    outside = case.startswith("outside")
+    r = diagnose(model, candidates=[c for c in CATALOG if not (outside and c == effect)])
     seconds = time.perf_counter() - t0
     b, a = r["before"], r["after"]
     first = max((c for c in r["candidates"] if c["round"] == 1), key=lambda c: c["statistic"])
@@ -81,7 +83,8 @@ def one(job) -> dict:
 
 
 def tables(rows) -> str:
-    eff = [r for r in rows if r["effect"] != "none"]
+    outside = [r for r in rows if r["case"].startswith("outside")]
+    eff = [r for r in rows if r["effect"] != "none" and not r["case"].startswith("outside")]
     clean = [r for r in rows if r["effect"] == "none"]
     out = [
         "| effect (size) | added | fitted | held-out force RMSE before -> after [N] | change | "
@@ -115,6 +118,13 @@ def tables(rows) -> str:
             f"{sorted(ch)[len(ch) // 2]:+.0f}% | {sum(int(r['unexplained']) for r in rr)}/{len(rr)} | "
             f"{sorted(float(r.get('seconds') or 0) for r in rr)[len(rr) // 2]:.0f} |"
         )
+    if outside:
+        out += [
+            "",
+            f"Yield simulated but not a candidate: unexplained structure flagged in "
+            f"{sum(int(r['unexplained']) for r in outside)}/{len(outside)}; added: "
+            f"{', '.join(r['added'] or 'none' for r in outside)}.",
+        ]
     if clean:
         n_add = sum(bool(r["added"]) for r in clean)
         flagged = sum(int(r["unexplained"]) for r in clean)
@@ -138,6 +148,9 @@ def main() -> None:
     ap.add_argument("--size", action="append", default=[], help="EFFECT=VALUE: another size (case EFFECT@VALUE)")
     ap.add_argument("--noise-rho", type=float, default=0.0, help="AR(1) correlation of the simulated force noise")
     ap.add_argument("--replicates", type=int, default=1, help="seeds per effect case (default 1)")
+    ap.add_argument(
+        "--outside", type=int, default=0, help="replicates with yield simulated but not a candidate (default 0)"
+    )
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -157,6 +170,7 @@ def main() -> None:
         for e, v in sizes.items()
     ]
     clean = [(f"clean-{s}", None, 0.0, 100 + s, args.forces_only, rho) for s in range(args.clean)]
+    clean += [(f"outside-{s}", "yield", EFFECTS["yield"], 200 + s, args.forces_only, rho) for s in range(args.outside)]
     jobs = jobs if args.effects_first else clean + jobs
     todo = [j for j in jobs if j[0] not in done]
     with ProcessPoolExecutor(args.workers) as ex:

@@ -73,3 +73,19 @@ def test_the_ar1_fit_fits_and_widens_the_intervals(fits):
 def test_clean_iid_data_pass_the_check(twig_noisy):
     post = bayesrod.fit(twig_noisy, use_shapes=False, progress=False, target_ess=200, max_steps=1500, seed=2)
     assert post.to_dict()["model_check"]["verdict"] == "ok"
+
+
+def test_predictive_forces_of_a_preloaded_push_are_shifted_by_each_draws_preload():
+    """The force figure of a --preload fit draws F(D + d0) per draw, not F(D)."""
+    from bayesrod.inference.summary import predictive_forces
+    from bayesrod.physics import force_from_displacement
+
+    samples = {"EI0": np.array([1.8, 2.0]), "p": np.array([0.5, 0.4])}
+    D = np.linspace(0.0, 0.05, 6)
+    d0 = np.array([0.012, 0.004])
+    F = predictive_forces(samples, np.arange(2), D, 0.5, 0.9, preload_m=d0)["force_N"]
+    for j in range(2):
+        ref = force_from_displacement(D + d0[j], 0.5, samples["EI0"][j], samples["p"][j], 0.9).force_N
+        np.testing.assert_allclose(F[j], ref, rtol=1e-12)
+    plain = predictive_forces(samples, np.arange(2), D, 0.5, 0.9)["force_N"]
+    assert plain[0, 0] == 0.0 and F[0, 0] > 0.1

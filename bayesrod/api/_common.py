@@ -6,6 +6,7 @@ import copy
 import json
 import os
 import sys
+import warnings
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -44,8 +45,13 @@ class DocResult:
 
 
 def interval(draws: ArrayLike, level: float, axis: int = 0) -> tuple[NDArray, NDArray, NDArray]:
-    """Equal-tailed ``level`` interval and median over ``axis``: (lower, median, upper); NaNs ignored."""
-    q = np.nanquantile(np.asarray(draws, float), [(1 - level) / 2, 0.5, (1 + level) / 2], axis=axis)
+    """Equal-tailed ``level`` interval and median over ``axis``: (lower, median, upper); NaNs ignored.
+
+    Where every draw is NaN (e.g. a force beyond every draw's slip) the result is NaN, silently.
+    """
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "All-NaN slice encountered", RuntimeWarning)
+        q = np.nanquantile(np.asarray(draws, float), [(1 - level) / 2, 0.5, (1 + level) / 2], axis=axis)
     return q[0], q[1], q[2]
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from ..physics import flexural_rigidity, k_theta
@@ -9,8 +11,6 @@ from ..physics import flexural_rigidity, k_theta
 
 def import_arviz():
     """ArviZ, imported without its refactor FutureWarning banner (noise for users)."""
-    import warnings
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FutureWarning)
         import arviz
@@ -19,7 +19,9 @@ def import_arviz():
 
 
 def quantiles(x, axis=0) -> dict:
-    q = np.nanquantile(np.asarray(x, float), [0.05, 0.5, 0.95], axis=axis)
+    with warnings.catch_warnings():  # all-NaN columns (beyond every draw's slip) give NaN, silently
+        warnings.filterwarnings("ignore", "All-NaN slice encountered", RuntimeWarning)
+        q = np.nanquantile(np.asarray(x, float), [0.05, 0.5, 0.95], axis=axis)
     return {"median": q[1], "q05": q[0], "q95": q[2]}
 
 
@@ -40,12 +42,13 @@ def k_theta_band(EI0, p, length_m: float, heights_m, base_compliance=None) -> di
     return quantiles(k)
 
 
-def predictive_forces(samples: dict, idx, D, h: float, L: float, effects=None) -> dict:
+def predictive_forces(samples: dict, idx, D, h: float, L: float, effects=None, preload_m=None) -> dict:
     """Force the sensor reads at contact displacements D (m,) for posterior draws ``idx`` (n,).
 
     Fitted effects in ``samples`` (any catalog name) override the same effect in ``effects``
-    draw by draw. Returns ``force_N`` (n, m) with NaN after the slip, ``slipped`` and
-    ``contact_s_m`` (n, m).
+    draw by draw. ``preload_m`` (n,), optional: each draw's preload of this push, the displacement
+    already made when D = 0 (the model is evaluated at D + preload). Returns ``force_N`` (n, m)
+    with NaN after the slip, ``slipped`` and ``contact_s_m`` (n, m).
     """
     from ..physics import Effects, force_from_displacement
     from ..physics.effects import EFFECT_NAMES
@@ -55,14 +58,16 @@ def predictive_forces(samples: dict, idx, D, h: float, L: float, effects=None) -
     D = np.asarray(D, float)
     idx = np.asarray(idx)
     EI0, p = np.asarray(samples["EI0"])[idx], np.asarray(samples["p"])[idx]
+    d0 = np.zeros(idx.size) if preload_m is None else np.asarray(preload_m, float)
     if not fitted:
-        sol = force_from_displacement(D[None, :], h, EI0[:, None], p[:, None], L, Effects.from_mapping(base))
+        DD = D[None, :] + d0[:, None]
+        sol = force_from_displacement(DD, h, EI0[:, None], p[:, None], L, Effects.from_mapping(base))
         F, slipped, s_c = sol.force_N, sol.slipped, sol.contact_s_m
     else:
         rows = []
         for j, i in enumerate(idx):
             eff = Effects.from_mapping({**base, **{k: float(samples[k][i]) for k in fitted}})
-            rows.append(force_from_displacement(D, h, EI0[j], p[j], L, eff))
+            rows.append(force_from_displacement(D + d0[j], h, EI0[j], p[j], L, eff))
         F = np.stack([r.force_N for r in rows])
         slipped = np.stack([r.slipped for r in rows])
         s_c = np.stack([r.contact_s_m for r in rows])

@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..inference.diagnose import CATALOG
+from ..inference.likelihood import preload_name
 from ..inference.summary import ei_band, k_theta_band, predictive_forces, quantiles
 
 if TYPE_CHECKING:
@@ -108,7 +109,9 @@ def plot_force_fit(spec, lik, samples: dict, ax=None, n_draws=100, unseen_height
         col = f"C{k}"
         Dmax = float(d.D_m.max()) if d is not None and d.D_m.size else 0.3 * spec.length_m
         D = np.linspace(0, Dmax, 40)
-        F = predictive_forces(samples, idx, D, h, spec.length_m)["force_N"]
+        pre = samples.get(preload_name(d.id)) if d is not None else None  # a fitted preload: F(D + d0)
+        pre = None if pre is None else np.asarray(pre)[idx]
+        F = predictive_forces(samples, idx, D, h, spec.length_m, preload_m=pre)["force_N"]
         q = quantiles(F)
         label = f"h = {h:g} m" + (" (not pushed)" if d is None else "")
         artists["bands"].append(ax.fill_between(D, q["q05"], q["q95"], color=col, alpha=0.3, label=label))
