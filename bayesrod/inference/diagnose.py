@@ -263,9 +263,29 @@ class ForwardModel:
                     out[kk, sl] = S @ f
                 elif np.all(np.isfinite(f)):  # the yield onset (a kink) between nodes
                     out[kk, sl] = self._yield_branches(j, d, f, y, EI0[kk], X[kk, 1], effs[kk])
-                else:  # the prediction slips: solve at every sample, hold past the slip
+                elif not (y.any() and not y[np.isfinite(f)].all()):  # slips (no yield onset): hold
+                    out[kk, sl] = self._slipped(j, d, f)
+                else:  # slips and yields: solve at every sample, hold past the slip
                     sol = force_from_displacement(d.D_m, d.height_m, EI0[kk], X[kk, 1], L, effs[kk])
                     out[kk, sl] = _hold(sol.force_N)
+        return out
+
+    def _slipped(self, j: int, d: PushData, f: NDArray) -> NDArray:
+        """Forces of a push whose prediction slips between nodes: a spline through the nodes before the
+        slip, and past the last of them the force held (what the measured force does once the stem slips
+        past the sensor is not modelled; the likelihood tables hold it too)."""
+        nodes = self._nodes[j]
+        ok = np.isfinite(f)
+        n_ok = int(np.argmin(ok)) if not ok.all() else ok.size  # the finite prefix
+        if n_ok == 0:
+            return np.zeros(d.D_m.size)
+        D = np.maximum(d.D_m, nodes[0])
+        last = nodes[n_ok - 1]
+        out = np.full(D.size, f[n_ok - 1])
+        sel = D <= last
+        if sel.any() and n_ok >= 2:
+            interp = CubicSpline if n_ok >= 4 else PchipInterpolator
+            out[sel] = interp(nodes[:n_ok], f[:n_ok])(D[sel])
         return out
 
     def _yield_branches(self, j: int, d: PushData, f: NDArray, yielded: NDArray, EI0: float, p: float, eff) -> NDArray:
@@ -708,7 +728,6 @@ class Diagnoser:
             if rss[k] < best:
                 best, out = rss[k], np.array([np.log(a[k]), p_grid[k], np.log(frac * m_max)])
         return out
-
 
     # -------------------------------------------------------------- statistics
     def screen_noise(self, fit: MapFit) -> tuple[float, float, float]:
