@@ -1,0 +1,197 @@
+"""Diagnosis, issue 19: true held-out refits, AR(1) force noise, the bootstrap held-out gate, spline forces.
+
+A file of its own so that the test runner spreads the diagnosis tests over both workers.
+"""
+
+import numpy as np
+import pytest
+
+from bayesrod.inference.diagnose import Diagnoser, ForwardModel, _cut
+from bayesrod.physics import force_from_displacement
+
+from .test_diagnose import _Lazy, _model
+
+
+@pytest.fixture(scope="module")
+def datasets(tmp_path_factory):
+    return _Lazy(tmp_path_factory.mktemp("diag19"))
+
+
+# ---------------------------------------------------------------- issue 19: true refits, AR(1) noise
+def test_heldout_error_is_a_true_refit_without_the_push(datasets):
+    """Each held-out push is predicted by a full fit to the other pushes: no steps from the full fit."""
+    m = _model(datasets["clean"])
+    dg = Diagnoser(m)
+    fit = dg.fit((), dg.start())
+    summary, errs = dg.heldout(fit)
+    assert summary["heldout"] == "leave-one-height-out"
+    for k, (row, e) in list(enumerate(zip(summary["per_push"], errs, strict=True)))[:1]:
+        rest = ForwardModel([d for j, d in enumerate(m.data) if j != k], m.length_m)
+        own = Diagnoser(rest).fit((), fit.x)
+        held = ForwardModel([m.data[k]], m.length_m)
+        expect = held.F_obs - held.forces(own.x[None], ())[0]
+        np.testing.assert_allclose(e.errors_N, expect, rtol=1e-6, atol=1e-9)
+        assert row["force_rmse_N"] == pytest.approx(np.sqrt(np.mean(expect**2)), rel=1e-6)
+        # the full fit's own prediction of the push (no refit, or the in-sample error) is another number
+        assert not np.allclose(e.errors_N, fit.r_force[m.force_push == k], rtol=1e-3, atol=0)
+
+
+def test_one_push_holds_out_the_last_third(datasets):
+    m = _model(datasets["clean"])
+    one = ForwardModel([m.data[0]], m.length_m)
+    dg = Diagnoser(one)
+    fit = dg.fit((), dg.start())
+    summary, errs = dg.heldout(fit)
+    assert summary["heldout"] == "last third of the push"
+    n = m.data[0].D_m.size
+    n_train = int(np.ceil(2 * n / 3))
+    assert errs[0].errors_N.size == n - n_train
+    train = ForwardModel([_cut(m.data[0], np.arange(n_train), np.zeros(0, int))], m.length_m)
+    own = Diagnoser(train).fit((), fit.x)
+    F = one.forces(own.x[None], ())[0][n_train:]
+    np.testing.assert_allclose(errs[0].errors_N, one.F_obs[n_train:] - F, rtol=1e-6, atol=1e-9)
+
+
+def test_ar1_log_likelihood_is_the_exact_gaussian_density():
+    """Diagnoser.loglik with AR(1) forces equals the dense multivariate normal (two pushes)."""
+    from scipy.stats import multivariate_normal
+
+    from bayesrod.inference.likelihood import PushData
+
+    rng = np.random.default_rng(0)
+    pushes = [
+        PushData(
+            f"h{k}",
+            0.5,
+            np.linspace(0.001, 0.02, n),
+            rng.normal(size=n),
+            np.zeros(0),
+            np.zeros(0, int),
+            *(np.zeros(0),) * 2,
+            None,
+        )
+        for k, n in enumerate((7, 5))
+    ]
+    dg = Diagnoser(ForwardModel(pushes, 0.8))
+    rf = np.concatenate([d.F_N for d in pushes])
+    sf, rho = 0.7, 0.85
+    dense = 0.0
+    for d in pushes:
+        n = d.F_N.size
+        lag = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+        cov = sf**2 / (1 - rho**2) * rho**lag
+        dense += multivariate_normal(np.zeros(n), cov).logpdf(d.F_N)
+    const = -0.5 * rf.size * np.log(2 * np.pi)
+    assert dg.loglik(rf, np.zeros(0), (sf, rho, 1.0)) + const == pytest.approx(dense, rel=1e-10)
+    # the profile recovers the correlation of long AR(1) residuals
+    from bayesrod.dataset.simulate import ar1_noise
+
+    r = ar1_noise(rng, 1.0, 0.9, 4000)
+    long = ForwardModel(
+        [
+            PushData(
+                "h", 0.5, np.linspace(0.001, 0.02, 4000), r, np.zeros(0), np.zeros(0, int), *(np.zeros(0),) * 2, None
+            )
+        ],
+        0.8,
+    )
+    assert Diagnoser(long).profile_noise(r, np.zeros(0))[1] == pytest.approx(0.9, abs=0.02)
+    assert Diagnoser(long, "iid").profile_noise(r, np.zeros(0))[1] == 0.0
+
+
+@pytest.mark.parametrize("coords", [{}, {"yield": np.log(2.0)}, {"base_compliance": 0.3}])
+def test_spline_forces_match_the_direct_solve_on_long_pushes(coords):
+    """150 samples per push, read off 32 solves: plain, a yield onset mid-push, a soft base."""
+    from bayesrod.inference.likelihood import PushData
+
+    D = np.linspace(0.0, 0.25, 150)
+    empty = np.zeros(0)
+    pushes = [
+        PushData(f"h{h}", h, D, np.zeros(D.size), empty, empty.astype(int), empty, empty, None) for h in (0.45, 0.6)
+    ]
+    m = ForwardModel(pushes, 0.8)
+    F = m.predict(np.log(2.63), 0.43, coords, shapes=False)[0]
+    from bayesrod.inference.diagnose import effects_from_coords
+
+    eff = effects_from_coords(coords, 2.63, 0.8)
+    ref = np.concatenate([force_from_displacement(D, d.height_m, 2.63, 0.43, 0.8, eff).force_N for d in pushes])
+    assert np.all(np.isfinite(ref))
+    tol = 1e-5 if "yield" not in coords else 1e-4  # each branch its own spline, the kink's interval solved
+    assert np.max(np.abs(F - ref)) < tol * np.max(np.abs(ref))
+
+
+def test_structure_test_holds_its_level_under_ar1_noise_and_fails_without_the_correction():
+    """Pure AR(1) residuals (rho 0.95): the whitened F test flags no block in 95%+ of pushes; without the
+    whitening (the correlated-noise correction dropped) nearly every push is flagged."""
+    from bayesrod.dataset.simulate import ar1_noise
+    from bayesrod.inference.diagnose import MapFit
+    from bayesrod.inference.likelihood import PushData
+
+    rng = np.random.default_rng(5)
+    n, pushes = 120, []
+    for k in range(40):
+        r = ar1_noise(rng, 0.05, 0.95, n)
+        e = np.zeros(0)
+        pushes.append(PushData(f"h{k}", 0.5, np.linspace(0.0, 0.05, n), r, e, e.astype(int), e, e, None))
+    m = ForwardModel(pushes, 0.8)
+    r = m.F_obs
+    sig = 0.05 * np.sqrt(1 - 0.95**2)
+
+    def flagged(rho, sigma):
+        fit = MapFit((), np.zeros(2), sigma, 1.0, r, np.zeros(0), np.zeros((r.size, 2)), 0.0, rho)
+        return sum(b["structured"] for b in Diagnoser(m).structure(fit)["blocks"])
+
+    assert flagged(0.95, sig) <= 2  # 40 pushes at alpha 1e-3 (and a material size): ~0 expected
+    assert flagged(0.0, 0.05) >= 30
+
+
+def test_heldout_bootstrap_p_values_are_uniform_when_the_effect_is_absent():
+    """Linear model, AR(1) noise (rho 0.9), an effect column that is absent: the observed held-out gains come
+    from exact GLS refits (dense covariance, written here independently); the bootstrap p-values are uniform."""
+    from bayesrod.dataset.simulate import ar1_noise
+    from bayesrod.inference.diagnose import MapFit, null_heldout_gain
+    from bayesrod.inference.likelihood import PushData
+
+    rng = np.random.default_rng(11)
+    n, rho, sig = 60, 0.9, 0.02
+    D = np.linspace(0.001, 0.05, n) / 0.05
+    e = np.zeros(0)
+    pushes = [PushData(f"h{k}", 0.4 + 0.1 * k, D, np.zeros(n), e, e.astype(int), e, e, None) for k in range(3)]
+    m = ForwardModel(pushes, 0.8)
+    push = m.force_push
+    scale = 1.0 + 0.3 * push  # the heights differ
+    J0 = np.column_stack([D[np.arange(3 * n) % n] * scale, (D[np.arange(3 * n) % n] ** 2) * scale**2])
+    G = (D[np.arange(3 * n) % n] ** 3) * scale**3
+    lag = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+    Cinv_block = np.linalg.inv(sig**2 / (1 - rho**2) * rho**lag)
+
+    def gls(X, y, rows):
+        A = np.zeros((X.shape[1],) * 2)
+        b = np.zeros(X.shape[1])
+        for k in np.unique(push[rows]):
+            s = rows & (push == k)
+            A += X[s].T @ Cinv_block @ X[s]
+            b += X[s].T @ Cinv_block @ y[s]
+        return np.linalg.solve(A, b)
+
+    dg = Diagnoser(m)
+    pv = []
+    for _ in range(150):
+        y = J0 @ np.array([1.0, -0.3]) + np.concatenate(
+            [ar1_noise(rng, sig / np.sqrt(1 - rho**2), rho, n) for _ in range(3)]
+        )
+        allrows = np.ones(3 * n, bool)
+        X1 = np.column_stack([J0, G])
+        r0 = y - J0 @ gls(J0, y, allrows)
+        r1 = y - X1 @ gls(X1, y, allrows)
+        sq0 = sq1 = 0.0
+        for k in range(3):
+            train, held = push != k, push == k
+            sq0 += np.sum((y[held] - J0[held] @ gls(J0, y, train)) ** 2)
+            sq1 += np.sum((y[held] - X1[held] @ gls(X1, y, train)) ** 2)
+        gain = 1 - np.sqrt(sq1 / sq0)
+        mk = lambda r: MapFit((), np.zeros(2), sig, 1.0, r, np.zeros(0), J0, 0.0, rho, J0)  # noqa: E731
+        pv.append(null_heldout_gain(dg, mk(r0), mk(r1), gain, n_draws=400, seed=len(pv)))
+    pv = np.array(pv)
+    assert 0.01 <= np.mean(pv < 0.05) <= 0.11, np.mean(pv < 0.05)
+    assert 0.38 <= np.mean(pv < 0.5) <= 0.62, np.mean(pv < 0.5)
