@@ -86,6 +86,7 @@ def test_undeclared_effect_is_attributed_and_held_out_error_drops(datasets, case
     assert not r["unexplained_structure"]
 
 
+@pytest.mark.slow
 def test_clean_data_get_no_effect(datasets):
     r = diagnose(_model(datasets["clean"]), candidates=FAST)
     assert r["added_effects"] == []
@@ -101,6 +102,7 @@ def test_structure_no_candidate_explains_is_flagged_not_forced(datasets):
     assert any(b["structured"] and b["kind"] == "force" for b in r["structure_after"])
 
 
+@pytest.mark.slow
 def test_diagnose_cli_writes_contract_json_and_report(datasets, tmp_path, capsys):
     out = tmp_path / "dg"
     args = ["diagnose", str(datasets["offset"]), "--out", str(out), "--forces-only", "--candidates", "force_offset"]
