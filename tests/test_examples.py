@@ -9,7 +9,13 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 
 #: examples of a minute or more (several fits, or shapes): run with ``pytest -m slow``
-SLOW_EXAMPLES = {"choose_next_height.py", "compare_species.py", "diagnose_misfit.py", "quickstart.py"}
+SLOW_EXAMPLES = {
+    "choose_next_height.py",
+    "compare_species.py",
+    "diagnose_misfit.py",
+    "predict_new_height.py",
+    "quickstart.py",
+}
 
 
 @pytest.mark.parametrize(

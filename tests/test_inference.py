@@ -166,7 +166,10 @@ def test_force_only_fit_of_a_blueberry_cane(tmp_path):
     out = tmp_path / "bb"
     assert main(["import", "blueberry", str(BLUEBERRY), "--out", str(out), "--length-m", "1.6"]) == 0
     run = tmp_path / "run"
-    assert main(["fit", str(out / "bush6-cane2"), "--out", str(run), "--quiet", "--prior", "woody"]) == 0
+    assert (
+        main(["fit", str(out / "bush6-cane2"), "--out", str(run), "--quiet", "--prior", "woody", "--target-ess", "200"])
+        == 0
+    )
     s = json.loads((run / "summary.json").read_text())
     assert s["convergence"]["rhat_max"] <= 1.02
     assert len(s["k_theta"]) == 3 and all(r["q05"] < r["median"] < r["q95"] for r in s["k_theta"])

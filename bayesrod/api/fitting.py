@@ -26,10 +26,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._version import __version__
 from ..dataset.model import Specimen
-from ..inference.likelihood import LogPosterior, build_likelihood, effective_shape_weight
+from ..inference.likelihood import LogPosterior, build_likelihood, effective_shape_weight, length_is_approximate
 from ..inference.priors import load_prior
 from ..inference.sampler import find_start, run_ensembles
-from ..inference.summary import build_summary, predictive_forces, to_inference_data
+from ..inference.summary import build_summary, draw_lengths, predictive_forces, to_inference_data
 from ..physics import flexural_rigidity, k_theta, k_x
 from ._common import as_dataset, interval, plain_json, progress_enabled
 from .bands import Band, ForceBand
@@ -47,7 +47,31 @@ _RESUME_KEYS = (
     "shape_weight",
     "force_noise",
     "preload",
+    "length",
+    "height_sd_m",
+    "force_offsets",
 )
+#: what a checkpoint written before an option existed meant by it
+_RESUME_DEFAULTS = {
+    "force_noise": "iid",
+    "preload": False,
+    "length": "known",
+    "height_sd_m": 0.0,
+    "force_offsets": False,
+}
+
+
+def _likelihood_options(config: Mapping) -> dict:
+    """The likelihood keywords of a fit's config (a loaded run's too)."""
+    return {
+        "use_forces": config.get("use_forces", True),
+        "use_shapes": config.get("use_shapes", True),
+        "force_noise": config.get("force_noise", "iid"),
+        "preload": config.get("preload", False),
+        "length": config.get("length", "known"),
+        "height_sd_m": config.get("height_sd_m", 0.0),
+        "force_offsets": config.get("force_offsets", False),
+    }
 
 
 def _readonly(a) -> NDArray:
@@ -141,7 +165,8 @@ class Posterior:
         """EI(s) (eq. EI_taper) over arc lengths ``s_m`` [m], shape (m,): median and equal-tailed band [N m^2]."""
         level = _check_level(level)
         s = _grid(s_m, "s_m", 0.0, self.length_m, closed=True)
-        EI = flexural_rigidity(s[None, :], self.samples["EI0"][:, None], self.samples["p"][:, None], self.length_m)
+        L = draw_lengths(self.samples, self.length_m)
+        EI = flexural_rigidity(s[None, :], self.samples["EI0"][:, None], self.samples["p"][:, None], L)
         return Band(s, *interval(EI, level), level=level, x_name="s_m", unit="N m^2")
 
     def k_theta_band(self, height_m: ArrayLike, level: float = 0.9) -> Band:
@@ -153,7 +178,11 @@ class Posterior:
         level = _check_level(level)
         h = _grid(height_m, "height_m", 0.0, self.length_m)
         k = fn(
-            h[None, :], self.samples["EI0"][:, None], self.samples["p"][:, None], self.length_m, self._base_stiffness()
+            h[None, :],
+            self.samples["EI0"][:, None],
+            self.samples["p"][:, None],
+            draw_lengths(self.samples, self.length_m),
+            self._base_stiffness(),
         )
         return Band(h, *interval(k, level), level=level, x_name="height_m", unit=unit)
 
@@ -259,13 +288,7 @@ class Posterior:
         if self.likelihood is None and self.dataset is not None:
             try:
                 lik = build_likelihood(
-                    self.dataset,
-                    load_prior(self.config.get("prior")),
-                    self.effects,
-                    use_forces=self.config.get("use_forces", True),
-                    use_shapes=self.config.get("use_shapes", True),
-                    force_noise=self.config.get("force_noise", "iid"),
-                    preload=self.config.get("preload", False),
+                    self.dataset, load_prior(self.config.get("prior")), self.effects, **_likelihood_options(self.config)
                 )
             except ValueError:
                 return None
@@ -369,7 +392,10 @@ class Posterior:
         import io
 
         buf = io.BytesIO()
-        np.savez(buf, length_m=self.length_m, **self.thinned())
+        # ``length_m`` stays the given stem length (a scalar, docs/format.md); a sampled length's draws
+        # are stored as ``length_m_sampled``
+        draws = {("length_m_sampled" if k == "length_m" else k): v for k, v in self.thinned().items()}
+        np.savez(buf, length_m=self.length_m, **draws)
         write_bytes_atomic(path / "samples.npz", buf.getvalue())
         write_json(path / "summary.json", self.to_dict())
         if figures:
@@ -410,7 +436,9 @@ class Posterior:
             samples = {k: _readonly(idata.posterior[k].values.reshape(-1)) for k in idata.posterior.data_vars}
         else:  # a minimal run: the thinned draws only
             with np.load(path / "samples.npz") as z:
-                samples = {k: _readonly(z[k]) for k in z.files if k != "length_m"}
+                samples = {
+                    ("length_m" if k == "length_m_sampled" else k): _readonly(z[k]) for k in z.files if k != "length_m"
+                }
                 length = float(z["length_m"])
             idata = az.from_dict(posterior={k: v[None, :] for k, v in samples.items()})
             doc = doc or {
@@ -514,7 +542,21 @@ def _lumped_points(lik) -> list:
     return pts
 
 
-def _assumptions(spec) -> list[str]:
+def _length_stays_fixed(spec, effects, use_forces, use_shapes, preload) -> str | None:
+    """Why an approximate length cannot be sampled in this fit (None: it can)."""
+    from ..inference.likelihood import TABLE_EFFECTS
+
+    if not use_forces:
+        return "a shape-only fit"
+    if use_shapes and any(p.shapes for p in spec.pushes):
+        return "centerlines are used; fit forces only to sample L"
+    tabled = [e for e in effects if e in TABLE_EFFECTS]
+    if tabled or preload:
+        return f"{tabled[0] if tabled else 'preload'} takes the one extra table axis"
+    return None
+
+
+def _assumptions(spec, lik=None) -> list[str]:
     a = [
         "A1 planar bending in one vertical plane",
         "A2 quasi-static loading",
@@ -524,6 +566,16 @@ def _assumptions(spec) -> list[str]:
         "A6 base clamped and vertical, tip free",
         f"stem length L = {spec.length_m:g} m",
     ]
+    if lik is not None and lik.length_prior is not None:
+        lo, hi = lik.length_prior.bounds()
+        prior = f"{lik.length_prior.dist} on [{lo:.3g}, {hi:.3g}] m"
+        a[-1] = f"stem length L sampled: prior {prior} (given {spec.length_m:g} m)"
+    elif length_is_approximate(spec):
+        a[-1] += " (marked approximate, held fixed in this fit)"
+    if lik is not None and lik.height_sd_m > 0:
+        a.append(f"contact height of each push uncertain: error N(0, {1000 * lik.height_sd_m:g} mm) sampled")
+    if lik is not None and lik.force_offsets:
+        a.append("load-cell offset per push sampled: N(0, 5% of the push's peak force)")
     prov = spec.extra.get("provenance", {})
     for k, v in (prov.get("assumptions") or {}).items():
         a.append(f"{k}: {v}")
@@ -556,7 +608,7 @@ def _check_checkpoint(checkpoint: Path, config: dict) -> None:
         if old is not None:
             old = json.loads(old)
             for k in _RESUME_KEYS:
-                if old.get(k, {"force_noise": "iid", "preload": False}.get(k)) != config[k]:
+                if old.get(k, _RESUME_DEFAULTS.get(k)) != config[k]:
                     raise ValueError(
                         f"checkpoint: expected the same {k} as the interrupted run in {checkpoint}, got "
                         f"{config[k]!r} instead of {old.get(k)!r}"
@@ -582,6 +634,9 @@ def fit(
     checkpoint=None,
     force_noise: str = "iid",
     preload: bool = False,
+    length: str = "auto",
+    height_sd_m: float = 0.0,
+    force_offsets: bool = False,
 ) -> Posterior:
     """Posterior of EI0, p, the noise and the fitted effects for one dataset (emcee).
 
@@ -610,6 +665,17 @@ def fit(
     preload : bool
         Fit each push's preload: the contact displacement already made when recording began (m, prior
         uniform on [0, 0.1 L]); forces only (docs/inference.md).
+    length : {"auto", "known", "unknown"}
+        The stem length L: ``"unknown"`` samples it (``length_m``) under the prior file's ``length_m`` entry,
+        else uniform on [L/1.5, 1.5 L] of the dataset's length (above the highest contact); ``"auto"``
+        (default) does so when the dataset marks its length approximate (``length_m_approximate``);
+        ``"known"`` fixes it. Forces only; not with a tabled effect or preload (docs/priors.md).
+    height_sd_m : float
+        Standard deviation of each push's contact-height error [m] (0, default: heights exact); each
+        push's ``height_error_m_<id>`` is sampled under N(0, sd) cut at 4 sd. Forces only.
+    force_offsets : bool
+        Fit a load-cell offset per push (``force_offset_N_<id>`` [N], prior N(0, 5% of the push's peak
+        force)); not together with the dataset-wide ``force_offset`` effect.
     checkpoint : path or None
         An HDF5 file the chains are checkpointed to; an interrupted fit called again with the same
         arguments and checkpoint resumes from it. None (default): nothing is written.
@@ -631,6 +697,21 @@ def fit(
     if not (isinstance(target_ess, (int, float)) and target_ess > 0):
         raise ValueError(f"target_ess: expected a number > 0, got {target_ess!r}")
     pr = load_prior(prior)
+    if length not in ("auto", "known", "unknown"):
+        raise ValueError(f"length: expected 'auto', 'known' or 'unknown', got {length!r}")
+    if length == "auto":  # resolved here, so that the run records what was fitted
+        length = "known"
+        if length_is_approximate(spec):
+            why = _length_stays_fixed(spec, effects, use_forces, use_shapes, preload)
+            if why is None:
+                length = "unknown"
+            else:
+                log.warning(
+                    "warning: %s: length_m %g m is marked approximate but stays fixed (%s); intervals assume it",
+                    spec.specimen,
+                    spec.length_m,
+                    why,
+                )
     config = {
         "dataset": str(Path(spec.root).resolve()) if spec.root is not None else None,
         "prior": pr.source,
@@ -641,12 +722,16 @@ def fit(
         "shape_weight": shape_weight,
         "force_noise": force_noise,
         "preload": bool(preload),
+        "length": length,
+        "height_sd_m": height_sd_m,
+        "force_offsets": bool(force_offsets),
         "bayesrod": __version__,
     }
     # the likelihood first: bad effects or data without engaged samples fail before anything is written
-    lik = build_likelihood(
-        spec, pr, effects, use_forces=use_forces, use_shapes=use_shapes, force_noise=force_noise, preload=preload
-    )
+    lik = build_likelihood(spec, pr, effects, **_likelihood_options(config))
+    if lik.length_prior is not None:
+        lo, hi = lik.length_prior.bounds()
+        log.info("%s: stem length sampled (prior %s on [%.3g, %.3g] m)", spec.specimen, lik.length_prior.dist, lo, hi)
     if checkpoint is not None:
         checkpoint = Path(checkpoint)
         _check_checkpoint(checkpoint, config)
@@ -721,7 +806,7 @@ def fit(
             "acceptance": res.acceptance,
             "seconds": round(time.perf_counter() - t0, 1),
         },
-        "assumptions": _assumptions(spec),
+        "assumptions": _assumptions(spec, lik),
     }
     if truth:
         extra["truth"] = truth

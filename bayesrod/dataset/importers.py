@@ -258,6 +258,7 @@ def import_blueberry(src: Path, out: Path, length_m: float) -> dict:
                     "specimen": name,
                     "species": "blueberry",
                     "length_m": length_m,
+                    "length_m_approximate": True,  # a guess: force-only fits sample L (docs/priors.md)
                     "sensor": {"type": "load_cell", "force_range_N": [0.05, 1000 * GF_TO_N]},
                     "pushes": pushes,
                     "bush": b,
@@ -268,7 +269,7 @@ def import_blueberry(src: Path, out: Path, length_m: float) -> dict:
                         "license": "BSD-3-Clause (see shared/data/blueberry-canes/LICENSE)",
                         "importer": "bayesrod import blueberry",
                         "assumptions": {
-                            "length_m": f"{length_m:g} m, user-given (the data hold no cane length)",
+                            "length_m": f"{length_m:g} m, a user-given guess (no cane length in the data): approximate",
                             "base": "clamped at the ground (Height is measured from the ground)",
                             "displacement": "actuator position since contact onset; probe compliance neglected",
                         },

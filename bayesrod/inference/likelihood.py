@@ -163,18 +163,58 @@ class ForceCurves:
     forward solves at n_f forces clustered toward f_end, and a monotone cubic
     (PCHIP) of f against d. ``force`` clamps d at each node's slip displacement
     ``d_end`` so that tables stay continuous in p; slip is decided separately.
+    :meth:`batch` builds the curves of several heights in one set of solves.
     """
 
     def __init__(self, eta: float, p_grid: NDArray, n_f: int = 160, effects_nd: dict | None = None):
-        P = p_grid.size
-        self.effects_nd = effects_nd
+        (one,) = self.batch(np.array([eta]), p_grid, n_f, effects_nd)
+        self.__dict__.update(one.__dict__)
+
+    @classmethod
+    def batch(cls, etas: NDArray, p_grid: NDArray, n_f: int = 160, effects_nd: dict | None = None) -> list[ForceCurves]:
+        """Curves at every nondimensional height of ``etas`` (Q,): the solves batched over (Q, P).
+
+        ``effects_nd`` values are scalars or one value per row, shape (Q,). Curves already built (same
+        eta, effects, p grid and n_f) are taken from a small in-process cache (:data:`CURVE_CACHE_SIZE`):
+        the conditions of one stem share their heights.
+        """
+        etas = np.asarray(etas, float)
+        Q = etas.size
+        eff = effects_nd or {}
+        rows = [
+            {k: float(np.asarray(v, float).reshape(-1)[q]) if np.ndim(v) else v for k, v in eff.items()}
+            for q in range(Q)
+        ]
+        tag = (np.asarray(p_grid, float).tobytes(), int(n_f))
+        keys = [(float(e), tuple(sorted(r.items())), tag) for e, r in zip(etas, rows, strict=True)]
+        todo = [q for q in range(Q) if keys[q] not in _CURVE_CACHE]
+        out = {}
+        if todo:
+            sub = {k: np.array([rows[q][k] for q in todo]) for k in eff} or None
+            for q, c in zip(todo, cls._solve(etas[todo], p_grid, n_f, sub), strict=True):
+                c.effects_nd = rows[q] or effects_nd
+                out[q] = c
+                _CURVE_CACHE[keys[q]] = c
+                while len(_CURVE_CACHE) > CURVE_CACHE_SIZE:
+                    _CURVE_CACHE.pop(next(iter(_CURVE_CACHE)))
+        return [out[q] if q in out else _CURVE_CACHE[keys[q]] for q in range(Q)]
+
+    @classmethod
+    def _solve(cls, etas: NDArray, p_grid: NDArray, n_f: int, effects_nd: dict | None) -> list[ForceCurves]:
+        """The batched solves behind :meth:`batch`; ``effects_nd`` values scalars or (Q,)."""
+        etas = np.asarray(etas, float)[:, None]
+        Q, P = etas.shape[0], p_grid.size
+        pg = np.broadcast_to(p_grid[None, :], (Q, P))
+        eff = effects_nd or {}
+        eff2 = {k: np.asarray(v, float)[:, None] if np.ndim(v) else v for k, v in eff.items()} or None
+        eff3 = {k: np.asarray(v, float)[:, None, None] if np.ndim(v) else v for k, v in eff.items()} or None
 
         def ok(f):
-            r = contact_from_force_nd(f, eta, p_grid, effects_nd)
+            r = contact_from_force_nd(f, etas, pg, eff2)
             return r["found"] & ~r["yielded"]
 
-        lo = np.zeros(P)
-        hi = np.full(P, 2.0 / eta**2)
+        lo = np.zeros((Q, P))
+        hi = np.broadcast_to(2.0 / etas**2, (Q, P)).copy()
         for _ in range(60):  # expand until no contact
             found = ok(hi)
             if not found.any():
@@ -186,26 +226,39 @@ class ForceCurves:
             found = ok(mid)
             lo, hi = np.where(found, mid, lo), np.where(found, hi, mid)
         u = np.linspace(0.0, 1.0, n_f)
-        f = lo[:, None] * (1.0 - (1.0 - u[None, :]) ** 2)
-        r = contact_from_force_nd(f, eta, p_grid[:, None], effects_nd)
-        d = r["xi_c"] - r["xi_c"][:, :1]
-        self.d_end = d[:, -1]
-        self._interp = []
-        for k in range(P):
-            dk, fk = d[k], f[k]
-            fin = np.where(np.isfinite(dk), dk, -np.inf)
-            prev = np.concatenate([[-np.inf], np.maximum.accumulate(fin)[:-1]])
-            keep = np.isfinite(dk) & (fin > prev)  # strictly increasing, finite
-            if keep.sum() < 2:  # no equilibrium with contact (e.g. a stem curled away): zero force
-                self.d_end[k] = 0.0
-                self._interp.append(PchipInterpolator([0.0, 1.0], [0.0, 0.0], extrapolate=True))
-                continue
-            self._interp.append(PchipInterpolator(dk[keep], fk[keep], extrapolate=True))
+        f = lo[..., None] * (1.0 - (1.0 - u) ** 2)  # (Q, P, n_f)
+        r = contact_from_force_nd(f, etas[..., None], pg[..., None], eff3)
+        d_all = r["xi_c"] - r["xi_c"][..., :1]
+        out = []
+        for q in range(Q):
+            c = cls.__new__(cls)
+            c.effects_nd = effects_nd
+            d = d_all[q]
+            c.d_end = d[:, -1].copy()
+            c._interp = []
+            for k in range(P):
+                dk, fk = d[k], f[q, k]
+                fin = np.where(np.isfinite(dk), dk, -np.inf)
+                prev = np.concatenate([[-np.inf], np.maximum.accumulate(fin)[:-1]])
+                keep = np.isfinite(dk) & (fin > prev)  # strictly increasing, finite
+                if keep.sum() < 2:  # no equilibrium with contact (e.g. a stem curled away): zero force
+                    c.d_end[k] = 0.0
+                    c._interp.append(PchipInterpolator([0.0, 1.0], [0.0, 0.0], extrapolate=True))
+                    continue
+                c._interp.append(PchipInterpolator(dk[keep], fk[keep], extrapolate=True))
+            out.append(c)
+        return out
 
     def force(self, d: NDArray) -> NDArray:
         """f at displacements d (M,) for every p: (P, M), clamped at each node's d_end."""
         d = np.asarray(d, float)
         return np.stack([fn(np.minimum(d, de)) for fn, de in zip(self._interp, self.d_end, strict=True)])
+
+
+#: force curves kept per process (each ~0.3 MB at 61 p nodes x 160 solves): enough for one stem's
+#: heights x effect nodes, so that the conditions of a stem (issue 23) share their solves
+CURVE_CACHE_SIZE = 128
+_CURVE_CACHE: dict = {}
 
 
 def _lagrange4(grid: NDArray, p: NDArray):
@@ -258,6 +311,9 @@ class RodLikelihood:
         effect_axis: EffectAxis | None = None,
         force_noise: str = "iid",
         preload: bool = False,
+        length_prior=None,
+        height_sd_m: float = 0.0,
+        force_offsets: bool = False,
     ):
         if "self_weight" in effects:
             raise ValueError(
@@ -299,6 +355,11 @@ class RodLikelihood:
         self.spec = spec
         self.L = float(spec.length_m)
         self.effects = tuple(effects)
+        self.length_prior = length_prior
+        self.height_sd_m = _check_height_sd(height_sd_m, spec)
+        self.force_offsets = bool(force_offsets)
+        self.geometry = length_prior is not None or self.height_sd_m > 0
+        _check_nuisances(self, effect_axis, use_shapes and any(p.shapes for p in spec.pushes))
         self.data = prepare_data(spec, use_forces, use_shapes)
         self.n_force = int(sum(d.F_N.size for d in self.data))
         self.n_points = int(sum(d.x_m.size for d in self.data))
@@ -320,37 +381,61 @@ class RodLikelihood:
         # per push: the contact displacement already made when recording began (docs/inference.md, preload)
         self.preload_names = [preload_name(d.id) for d in self.data if d.D_m.size] if self.preload else []
         names += self.preload_names
+        forced = [d for d in self.data if d.D_m.size]
+        self.length_names = ["length_m"] if length_prior is not None else []
+        self.height_names = [height_error_name(d.id) for d in forced] if self.height_sd_m > 0 else []
+        self.offset_names = [force_offset_name(d.id) for d in forced] if self.force_offsets else []
+        names += self.length_names + self.height_names + self.offset_names
         names += list(self.effects)
         self.names = names
-        #: priors of per-dataset nuisances (their scale follows the stem): preload uniform on [0, 0.1 L]
+        #: priors of per-dataset nuisances (docs/priors.md, "Nuisances of a real push"): preload uniform on
+        #: [0, 0.1 L]; the stem length as given; a contact-height error N(0, sd) cut at 4 sd; a load-cell
+        #: offset N(0, 5% of the push's peak force)
         self.nuisance_priors = {
             n: _uniform_prior(n, 0.0, PRELOAD_MAX_L * float(spec.length_m)) for n in self.preload_names
         }
+        if length_prior is not None:
+            self.nuisance_priors["length_m"] = length_prior
+        sd = self.height_sd_m
+        for n in self.height_names:
+            self.nuisance_priors[n] = _prior(n, "truncnormal", (0.0, sd, -HEIGHT_CUT_SD * sd, HEIGHT_CUT_SD * sd), "m")
+        for n, d in zip(self.offset_names, forced if self.offset_names else [], strict=True):
+            scale = max(FORCE_OFFSET_SD * float(np.max(np.abs(d.F_N))), 1e-9)
+            self.nuisance_priors[n] = _prior(n, "normal", (0.0, scale), "N")
         self._build_tables()
+        if self.geometry:
+            self._build_geometry_tables()
 
     # ------------------------------------------------------------------ tables
     def _build_tables(self) -> None:
-        """Tables (E, P, N): E = 1 without a tabled effect."""
+        """Tables (E, P, N): E = 1 without a tabled effect. The force curves of every push (and effect
+        node) come from one batched set of solves."""
+        etas = np.array([d.height_m / self.L for d in self.data])
+        J = etas.size
         if self.axis is None:
-            self._build_tables_at(None)
+            curves = ForceCurves.batch(etas, self.p_grid)
+            self._build_tables_at(None, curves)
             for k in ("f_table", "x_table", "cos_table"):
                 setattr(self, k, getattr(self, k)[None])
             return
+        nodes = [self.axis.nondim(u) for u in self.axis.grid]
+        (key,) = nodes[0]
+        vals = np.repeat([float(e[key]) for e in nodes], J)
+        curves = ForceCurves.batch(np.tile(etas, len(nodes)), self.p_grid, effects_nd={key: vals})
         stacks = {"f_table": [], "x_table": [], "cos_table": []}
-        for u in self.axis.grid:
-            self._build_tables_at(self.axis.nondim(u))
+        for i, eff in enumerate(nodes):
+            self._build_tables_at(eff, curves[i * J : (i + 1) * J])
             for k in stacks:
                 stacks[k].append(getattr(self, k))
         for k, v in stacks.items():
             setattr(self, k, np.stack(v))
 
-    def _build_tables_at(self, eff_nd: dict | None) -> None:
+    def _build_tables_at(self, eff_nd: dict | None, all_curves: list) -> None:
         L, pg = self.L, self.p_grid
         self._preload_tables = []
         fF, fobs, fh, xs, cs, xobs, zobs, sd, pid, fid = [], [], [], [], [], [], [], [], [], []
-        for d in self.data:
+        for d, curves in zip(self.data, all_curves, strict=True):
             eta = d.height_m / L
-            curves = ForceCurves(eta, pg, effects_nd=eff_nd)
             if d.D_m.size:
                 fF.append(curves.force(d.D_m / L))
                 if self.preload:
@@ -384,6 +469,57 @@ class RodLikelihood:
         self.sd_obs = np.concatenate(sd) if sd else None
         self.point_push = np.concatenate(pid) if pid else np.zeros(0, int)  # (k,) push of each point
         self.point_frame = np.concatenate(fid) if fid else np.zeros(0, int)  # (k,) frame within its push
+
+    def _build_geometry_tables(self) -> None:
+        """Per push, forces on a grid of stem lengths x contact-height errors: (A, B, P, N_j) each.
+
+        L enters both nondimensional groups (d = D/L, eta = h/L); the length axis is uniform in log L
+        over the prior's support (:data:`LENGTH_NODES` nodes, 4-point Lagrange), the height axis three
+        nodes at 0 and +-:data:`HEIGHT_CUT_SD` sd (quadratic). One batched set of forward solves.
+        """
+        if self.length_prior is not None:
+            lo, hi = self.length_prior.bounds()
+            self.L_grid = np.exp(np.linspace(np.log(lo), np.log(hi), LENGTH_NODES))
+        else:
+            self.L_grid = np.array([self.L])
+        sd = self.height_sd_m
+        self.dh_grid = HEIGHT_CUT_SD * sd * np.array([-1.0, 0.0, 1.0]) if sd > 0 else np.zeros(1)
+        forced = [d for d in self.data if d.D_m.size]
+        etas = np.array([(d.height_m + b) / a for d in forced for a in self.L_grid for b in self.dh_grid])
+        curves = ForceCurves.batch(etas, self.p_grid, n_f=GEOMETRY_N_F)
+        A, B = self.L_grid.size, self.dh_grid.size
+        self._geom_tables = []
+        for j, d in enumerate(forced):
+            T = np.empty((A, B, self.p_grid.size, d.D_m.size))
+            for a, La in enumerate(self.L_grid):
+                for b in range(B):
+                    T[a, b] = curves[(j * A + a) * B + b].force(d.D_m / La)
+            self._geom_tables.append(T)
+
+    def predict_nd_force_geometry(self, p: NDArray, length_m: NDArray, height_error_m: NDArray) -> NDArray:
+        """Nondimensional force F L^2/EI0 at every engaged sample for stem lengths and height errors.
+
+        ``p`` and ``length_m`` (W,), ``height_error_m`` (W, J) [m] (one per push with forces; ignored
+        without a height axis); returns (W, N).
+        """
+        p = np.atleast_1d(np.asarray(p, float))
+        W = p.size
+        ip, wp = _lagrange4(self.p_grid, p)
+        if self.L_grid.size > 1:
+            iL, wL = _lagrange4(np.log(self.L_grid), np.log(np.broadcast_to(np.asarray(length_m, float), (W,))))
+        else:
+            iL, wL = np.zeros((W, 1), int), np.ones((W, 1))
+        out = []
+        for j, T in enumerate(self._geom_tables):
+            if self.dh_grid.size > 1:
+                t = np.asarray(height_error_m, float)[:, j] / self.dh_grid[-1]
+                wB = np.stack([0.5 * t * (t - 1.0), 1.0 - t**2, 0.5 * t * (t + 1.0)], axis=1)
+                iB = np.arange(3)
+            else:
+                wB, iB = np.ones((W, 1)), np.zeros(1, int)
+            g = T[iL[:, :, None, None], iB[None, None, :, None], ip[:, None, None, :]]  # (W, a, b, p, N_j)
+            out.append(np.einsum("wa,wb,wp,wabpn->wn", wL, wB, wp, g))
+        return np.concatenate(out, axis=1)
 
     def _shape_table(self, d: PushData, eta: float, curves: ForceCurves):
         L, pg = self.L, self.p_grid
@@ -477,21 +613,36 @@ class RodLikelihood:
         out = {}
         u = self.effect_coordinate(params)
         if self.n_force:
+            heights = self.F_height[None, :]
             if self.preload and all(n in params for n in self.preload_names):
                 pre = np.stack([np.atleast_1d(params[n]) for n in self.preload_names], axis=1)
                 f_nd = self.predict_nd_force_preloaded(p, pre * np.ones((p.size, 1)))
+                F = EI0[:, None] / self.L**2 * f_nd
+            elif self.geometry:
+                Lw = np.broadcast_to(np.atleast_1d(np.asarray(params.get("length_m", self.L), float)), p.shape)
+                dh = self._per_push(params, self.height_names, p.size)
+                F = EI0[:, None] / Lw[:, None] ** 2 * self.predict_nd_force_geometry(p, Lw, dh)
+                heights = heights + dh[:, self.F_push]
             else:
-                f_nd = self.predict_nd_force(p, u)
-            F = EI0[:, None] / self.L**2 * f_nd
+                F = EI0[:, None] / self.L**2 * self.predict_nd_force(p, u)
             if "yield" in params:
-                F = np.minimum(F, np.atleast_1d(params["yield"])[:, None] / self.F_height[None, :])
+                F = np.minimum(F, np.atleast_1d(params["yield"])[:, None] / heights)
             if "force_offset" in params:
                 F = F + np.atleast_1d(params["force_offset"])[:, None]
+            if self.offset_names:
+                F = F + self._per_push(params, self.offset_names, p.size)[:, self.F_push]
             out["force"] = self.F_obs[None, :] - F
         if self.n_points:
             x, c = self.predict_shape_x(p, u)
             out["shape"] = (self.x_obs[None, :] - x) * c
         return out
+
+    def _per_push(self, params: dict, names: list[str], W: int) -> NDArray:
+        """(W, J) per-push nuisance values (zeros where not fitted or not given)."""
+        J = len(self._geom_tables) if self.geometry else int(self.F_push.max(initial=-1)) + 1
+        if not names or not all(n in params for n in names):
+            return np.zeros((W, J))
+        return np.stack([np.broadcast_to(np.atleast_1d(np.asarray(params[n], float)), (W,)) for n in names], axis=1)
 
     def log_likelihood(self, params: dict) -> NDArray:
         """Sum of Gaussian log densities; parameter arrays of shape (W,), result (W,)."""
@@ -529,17 +680,96 @@ PRELOAD_MAX_L = 0.1
 PRELOAD_GRID = 2001
 
 
-def preload_name(push_id: str) -> str:
-    """The parameter name of a push's preload (a displacement offset, m): ``preload_m_<id>``."""
+#: nuisances of a real push (docs/priors.md): nodes of the log-uniform stem-length table axis; the
+#: default length prior for a length given as approximate: uniform on [L / LENGTH_FACTOR, L LENGTH_FACTOR]
+#: (above the highest contact); the contact-height error's prior is cut at HEIGHT_CUT_SD sd; the per-push
+#: load-cell offset has sd FORCE_OFFSET_SD x the push's peak force
+LENGTH_NODES = 13
+#: forward solves per force curve of the geometry tables (160 for the plain tables): tested within 1e-4 of
+#: the peak force against the plain tables (tests/test_nuisances.py)
+GEOMETRY_N_F = 80
+LENGTH_FACTOR = 1.5
+HEIGHT_CUT_SD = 4.0
+FORCE_OFFSET_SD = 0.05
+
+
+def default_length_prior(spec: Specimen):
+    """Uniform on [L/1.5, 1.5 L] of the given (approximate) length, above 1.05 x the highest contact."""
+    L = float(spec.length_m)
+    lo = max(L / LENGTH_FACTOR, 1.05 * max(p.height_m for p in spec.pushes))
+    return _prior("length_m", "uniform", (lo, L * LENGTH_FACTOR), "m")
+
+
+def _check_height_sd(height_sd_m, spec: Specimen) -> float:
+    if isinstance(height_sd_m, bool) or not isinstance(height_sd_m, (int, float)) or not np.isfinite(height_sd_m):
+        raise ValueError(f"height_sd_m: expected a contact-height sd >= 0 in metres, got {height_sd_m!r}")
+    h_min = min(p.height_m for p in spec.pushes)
+    if not 0 <= height_sd_m <= 0.05 * h_min:
+        raise ValueError(
+            f"height_sd_m: expected a contact-height sd in [0, {0.05 * h_min:g}] m (5% of the lowest contact), "
+            f"got {height_sd_m:g}"
+        )
+    return float(height_sd_m)
+
+
+def _check_nuisances(lik, effect_axis, has_shapes: bool) -> None:
+    """The nuisances' combinations the tables support (one extra table axis, forces only)."""
+    if lik.geometry:
+        what = "length" if lik.length_prior is not None else "height_sd_m"
+        if has_shapes:
+            raise ValueError(
+                f"{what}: expected a force-only fit (use_shapes=False): an unknown length or contact height "
+                "is tabled for forces only"
+            )
+        if effect_axis is not None or lik.preload:
+            raise ValueError(
+                f"{what}: expected no tabled effect or preload beside an unknown length or height error (one "
+                f"extra table axis at a time), got {effect_axis.name if effect_axis is not None else 'preload'}; "
+                "fix the length (length 'known') or drop the other"
+            )
+        if lik.length_prior is not None:
+            lo, hi = lik.length_prior.bounds()
+            h_max = max(p.height_m for p in lik.spec.pushes)
+            if not (np.isfinite(hi) and lo > h_max):
+                raise ValueError(
+                    f"prior length_m: expected a bounded prior above the highest contact ({h_max:g} m), "
+                    f"got support [{lo:g}, {hi:g}] m"
+                )
+    if lik.force_offsets and "force_offset" in lik.effects:
+        raise ValueError(
+            "force_offsets: expected either one offset per push or the dataset-wide force_offset effect, got both"
+        )
+
+
+def height_error_name(push_id: str) -> str:
+    """The parameter name of a push's contact-height error (m): ``height_error_m_<id>``."""
+    return "height_error_m_" + _ident(push_id)
+
+
+def force_offset_name(push_id: str) -> str:
+    """The parameter name of a push's load-cell offset (N): ``force_offset_N_<id>``."""
+    return "force_offset_N_" + _ident(push_id)
+
+
+def _ident(push_id: str) -> str:
     import re
 
-    return "preload_m_" + re.sub(r"[^0-9A-Za-z_]", "_", str(push_id))
+    return re.sub(r"[^0-9A-Za-z_]", "_", str(push_id))
+
+
+def preload_name(push_id: str) -> str:
+    """The parameter name of a push's preload (a displacement offset, m): ``preload_m_<id>``."""
+    return "preload_m_" + _ident(push_id)
+
+
+def _prior(name: str, dist: str, args: tuple, unit: str):
+    from .priors import ParamPrior
+
+    return ParamPrior(name, dist, tuple(float(a) for a in args), unit)
 
 
 def _uniform_prior(name: str, lo: float, hi: float):
-    from .priors import ParamPrior
-
-    return ParamPrior(name, "uniform", (lo, hi), "m")
+    return _prior(name, "uniform", (lo, hi), "m")
 
 
 def ar1_innovations(r: NDArray, rho: NDArray, first: NDArray) -> tuple[NDArray, NDArray]:
@@ -655,13 +885,18 @@ def build_likelihood(
     n_effect: int | None = None,
     force_noise: str = "iid",
     preload: bool = False,
+    length: str = "known",
+    height_sd_m: float = 0.0,
+    force_offsets: bool = False,
 ) -> RodLikelihood:
     """The likelihood for ``effects``; a tabled effect gets its axis from the prior and a plain EI0 estimate.
 
     The effect axis must cover the effect's prior at every plausible EI0 (the axis of compliance,
     self-weight and yield scales with EI0): EI0 is taken within a factor 2 of the plain model's
     least-squares scale on the forces, or over the EI0 prior's central 99.8% without forces.
-    Walkers outside the table get zero density (docs/inference.md). ``n_effect`` nodes on the
+    Walkers outside the table get zero density (docs/inference.md). ``length`` ``"unknown"`` samples the
+    stem length under the prior's ``length_m`` entry or :func:`default_length_prior`; ``"auto"`` does so
+    when the dataset marks its length approximate (``length_m_approximate``). ``n_effect`` nodes on the
     effect axis: 13 for forces only, 25 with shapes (their posteriors are ~10x narrower; with 13
     nodes the interpolation shifted a rest-curvature fit by one posterior sd, with 25 by < 0.1 sd).
     """
@@ -679,6 +914,11 @@ def build_likelihood(
         else:
             rng = (EI0_hat / 2.0, EI0_hat * 2.0)
         axis = EffectAxis.from_prior(tabled[0], prior.get(tabled[0]), rng, float(spec.length_m), n=n_effect)
+    if length not in ("known", "unknown", "auto"):
+        raise ValueError(f"length: expected 'known', 'unknown' or 'auto', got {length!r}")
+    length_prior = None
+    if length == "unknown" or (length == "auto" and length_is_approximate(spec)):
+        length_prior = prior.params.get("length_m") or default_length_prior(spec)
     return RodLikelihood(
         spec,
         p_range=p_range,
@@ -688,7 +928,15 @@ def build_likelihood(
         effect_axis=axis,
         force_noise=force_noise,
         preload=preload,
+        length_prior=length_prior,
+        height_sd_m=height_sd_m,
+        force_offsets=force_offsets,
     )
+
+
+def length_is_approximate(spec: Specimen) -> bool:
+    """True when the dataset says its ``length_m`` is a guess (``length_m_approximate`` in specimen.json)."""
+    return bool((getattr(spec, "extra", None) or {}).get("length_m_approximate", False))
 
 
 def _integrated_autocorr(rho: NDArray) -> float:

@@ -117,7 +117,7 @@ def find_start(post, rng: np.random.Generator, init: dict | None = None) -> np.n
             if n not in nat:
                 # effects start near their neutral value: a stiff base, a late yield
                 q = {"base_compliance": 0.99, "yield": 0.99}.get(n, 0.02 if n.startswith("preload_m_") else 0.5)
-                nat[n] = pr.quantile(q)
+                nat[n] = lik.L if n == "length_m" else pr.quantile(q)  # the given length, else the median
         theta = post.to_sample(nat)[0]
         lp = post.log_prob(theta)
         if lp > best_lp:

@@ -29,8 +29,17 @@ def _scalar_q(x) -> dict:
     return {k: float(v) for k, v in quantiles(x).items()}
 
 
-def ei_band(EI0, p, length_m: float, s_m) -> dict:
-    """90% band and median of EI(s) (eq. EI_taper) over arc lengths ``s_m``: arrays of shape (len(s_m),)."""
+def draw_lengths(samples: dict, length_m: float):
+    """The stem length per draw, (n, 1), where it was sampled (``length_m``), else the given one (scalar)."""
+    L = samples.get("length_m")
+    return float(length_m) if L is None else np.asarray(L, float)[:, None]
+
+
+def ei_band(EI0, p, length_m, s_m) -> dict:
+    """90% band and median of EI(s) (eq. EI_taper) over arc lengths ``s_m``: arrays of shape (len(s_m),).
+
+    ``length_m``: a scalar, or one length per draw, shape (n, 1).
+    """
     EI = flexural_rigidity(np.asarray(s_m)[None, :], np.asarray(EI0)[:, None], np.asarray(p)[:, None], length_m)
     return quantiles(EI)
 
@@ -42,12 +51,17 @@ def k_theta_band(EI0, p, length_m: float, heights_m, base_compliance=None) -> di
     return quantiles(k)
 
 
-def predictive_forces(samples: dict, idx, D, h: float, L: float, effects=None, preload_m=None) -> dict:
+def predictive_forces(
+    samples: dict, idx, D, h: float, L: float, effects=None, preload_m=None, height_error_m=None, force_offset_N=None
+) -> dict:
     """Force the sensor reads at contact displacements D (m,) for posterior draws ``idx`` (n,).
 
     Fitted effects in ``samples`` (any catalog name) override the same effect in ``effects``
     draw by draw. ``preload_m`` (n,), optional: each draw's preload of this push, the displacement
-    already made when D = 0 (the model is evaluated at D + preload). Returns ``force_N`` (n, m)
+    already made when D = 0 (the model is evaluated at D + preload); ``height_error_m`` (n,): each
+    draw's contact-height error (evaluated at h + error); ``force_offset_N`` (n,): each draw's
+    load-cell offset of this push (added to the force). A sampled ``length_m`` in ``samples`` is used
+    draw by draw. Returns ``force_N`` (n, m)
     with NaN after the slip, ``slipped`` and ``contact_s_m`` (n, m).
     """
     from ..physics import Effects, force_from_displacement
@@ -55,11 +69,13 @@ def predictive_forces(samples: dict, idx, D, h: float, L: float, effects=None, p
 
     base = (effects or Effects()).to_mapping()
     fitted = [k for k in EFFECT_NAMES if k in samples]
+    Ls = samples.get("length_m")  # a sampled stem length: one solve per draw
     D = np.asarray(D, float)
     idx = np.asarray(idx)
     EI0, p = np.asarray(samples["EI0"])[idx], np.asarray(samples["p"])[idx]
     d0 = np.zeros(idx.size) if preload_m is None else np.asarray(preload_m, float)
-    if not fitted:
+    dh = None if height_error_m is None else np.asarray(height_error_m, float)
+    if not fitted and Ls is None and dh is None:
         DD = D[None, :] + d0[:, None]
         sol = force_from_displacement(DD, h, EI0[:, None], p[:, None], L, Effects.from_mapping(base))
         F, slipped, s_c = sol.force_N, sol.slipped, sol.contact_s_m
@@ -67,10 +83,14 @@ def predictive_forces(samples: dict, idx, D, h: float, L: float, effects=None, p
         rows = []
         for j, i in enumerate(idx):
             eff = Effects.from_mapping({**base, **{k: float(samples[k][i]) for k in fitted}})
-            rows.append(force_from_displacement(D + d0[j], h, EI0[j], p[j], L, eff))
+            Lj = L if Ls is None else float(np.asarray(Ls)[i])
+            hj = h if dh is None else h + float(dh[j])
+            rows.append(force_from_displacement(D + d0[j], hj, EI0[j], p[j], Lj, eff))
         F = np.stack([r.force_N for r in rows])
         slipped = np.stack([r.slipped for r in rows])
         s_c = np.stack([r.contact_s_m for r in rows])
+    if force_offset_N is not None:
+        F = F + np.asarray(force_offset_N, float)[:, None]
     return {"force_N": np.where(slipped, np.nan, F), "slipped": slipped, "contact_s_m": s_c}
 
 
@@ -98,7 +118,7 @@ def build_summary(spec, post, samples: dict, diag: dict, fit_error: dict, effect
     params = {name: _scalar_q(samples[name]) for name in post.names}
     heights = [p.height_m for p in spec.pushes]
     kb = samples.get("base_compliance")
-    kt = k_theta_band(samples["EI0"], samples["p"], L, heights, kb)
+    kt = k_theta_band(samples["EI0"], samples["p"], draw_lengths(samples, L), heights, kb)
     summary = {
         "specimen": spec.specimen,
         "species": spec.species,

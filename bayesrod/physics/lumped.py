@@ -30,10 +30,10 @@ __all__ = [
 ]
 
 
-def flexural_rigidity(s_m: ArrayLike, EI0: ArrayLike, p: ArrayLike, length_m: float) -> NDArray:
-    """EI(s) = EI0 (1 - s/L)^(4p) [N m^2] (eq. EI_taper); broadcasts."""
+def flexural_rigidity(s_m: ArrayLike, EI0: ArrayLike, p: ArrayLike, length_m: ArrayLike) -> NDArray:
+    """EI(s) = EI0 (1 - s/L)^(4p) [N m^2] (eq. EI_taper); broadcasts over all arguments (L too)."""
     s = np.asarray(s_m, float)
-    one_minus = np.clip(1.0 - s / float(length_m), 0.0, None)
+    one_minus = np.clip(1.0 - s / np.asarray(length_m, float), 0.0, None)
     return np.asarray(EI0, float) * one_minus ** (4.0 * np.asarray(p, float))
 
 
@@ -53,16 +53,16 @@ def k_theta(
     height_m: ArrayLike,
     EI0: ArrayLike,
     p: ArrayLike,
-    length_m: float,
+    length_m: ArrayLike,
     base_stiffness_Nm_per_rad: ArrayLike = np.inf,
 ) -> NDArray:
     """Small-deflection rotational stiffness k_theta(h) [N m/rad] (eq. kdist).
 
     A base spring of stiffness ``base_stiffness_Nm_per_rad`` k_b (the ``base_compliance`` effect's value,
     docs/model.md; inf = a rigid clamp) acts in series: 1/k = 1/k_rod + 1/k_b. For constant EI (p = 0)
-    and a clamp, k_theta = 2 EI/h. Broadcasts over all arguments.
+    and a clamp, k_theta = 2 EI/h. Broadcasts over all arguments (the stem length L too).
     """
-    L = float(length_m)
+    L = np.asarray(length_m, float)
     k_rod = ktheta_nd(np.asarray(height_m, float) / L, p) * np.asarray(EI0, float) / L
     return 1.0 / (1.0 / k_rod + 1.0 / np.asarray(base_stiffness_Nm_per_rad, float))
 
@@ -71,15 +71,15 @@ def k_x(
     height_m: ArrayLike,
     EI0: ArrayLike,
     p: ArrayLike,
-    length_m: float,
+    length_m: ArrayLike,
     base_stiffness_Nm_per_rad: ArrayLike = np.inf,
 ) -> NDArray:
     """Small-deflection translational stiffness k_x(h) [N/m] (eq. kx).
 
     A base spring k_b adds F h^2 / k_b to the contact displacement. For constant
-    EI and a clamp, k_x = 3 EI / h^3.
+    EI and a clamp, k_x = 3 EI / h^3. Broadcasts over all arguments (L too).
     """
-    L = float(length_m)
+    L = np.asarray(length_m, float)
     h = np.asarray(height_m, float)
     k_rod = kx_nd(h / L, p) * np.asarray(EI0, float) / L**3
     return 1.0 / (1.0 / k_rod + h**2 / np.asarray(base_stiffness_Nm_per_rad, float))

@@ -7,8 +7,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..inference.diagnose import CATALOG
-from ..inference.likelihood import preload_name
-from ..inference.summary import ei_band, k_theta_band, predictive_forces, quantiles
+from ..inference.likelihood import force_offset_name, height_error_name, preload_name
+from ..inference.summary import draw_lengths, ei_band, k_theta_band, predictive_forces, quantiles
 
 if TYPE_CHECKING:
     from ..inference.diagnose import ForwardModel
@@ -31,7 +31,7 @@ def plot_ei_band(samples: dict, length_m: float, ax=None, truth: dict | None = N
     """
     ax = _ax(ax)
     s = np.linspace(0, length_m * 0.98, 200)
-    band = ei_band(samples["EI0"], samples["p"], length_m, s)
+    band = ei_band(samples["EI0"], samples["p"], draw_lengths(samples, length_m), s)
     fill = ax.fill_between(s, band["q05"], band["q95"], color=color, alpha=0.3, label="90% credible band")
     (line,) = ax.plot(s, band["median"], color=color, label="posterior median")
     artists = {"band": fill, "median": line}
@@ -67,7 +67,8 @@ def plot_k_theta_band(samples: dict, length_m: float, heights_pushed, ax=None, c
     """
     ax = _ax(ax)
     h = np.linspace(0.05 * length_m, 0.95 * length_m, 120)
-    band = k_theta_band(samples["EI0"], samples["p"], length_m, h, samples.get("base_compliance"))
+    Ld = draw_lengths(samples, length_m)
+    band = k_theta_band(samples["EI0"], samples["p"], Ld, h, samples.get("base_compliance"))
     fill = ax.fill_between(h, band["q05"], band["q95"], color=color, alpha=0.3, label="90% credible band")
     (line,) = ax.plot(h, band["median"], color=color, label="posterior median")
     marks = [ax.axvline(x, color="0.5", ls=":", lw=1) for x in heights_pushed]
@@ -79,7 +80,7 @@ def plot_k_theta_band(samples: dict, length_m: float, heights_pushed, ax=None, c
         kb = np.inf if kb is None else np.asarray(kb)[:, None]
         link = quantiles(
             h[None, :] ** 2
-            * k_x(h[None, :], np.asarray(samples["EI0"])[:, None], np.asarray(samples["p"])[:, None], length_m, kb)
+            * k_x(h[None, :], np.asarray(samples["EI0"])[:, None], np.asarray(samples["p"])[:, None], Ld, kb)
         )
         ax.fill_between(h, link["q05"], link["q95"], color="0.5", alpha=0.25)
         ax.plot(h, link["median"], "--", color="0.3", lw=1, label=r"link-angle stiffness $h^2 k_x$ (posterior)")
@@ -109,9 +110,16 @@ def plot_force_fit(spec, lik, samples: dict, ax=None, n_draws=100, unseen_height
         col = f"C{k}"
         Dmax = float(d.D_m.max()) if d is not None and d.D_m.size else 0.3 * spec.length_m
         D = np.linspace(0, Dmax, 40)
-        pre = samples.get(preload_name(d.id)) if d is not None else None  # a fitted preload: F(D + d0)
-        pre = None if pre is None else np.asarray(pre)[idx]
-        F = predictive_forces(samples, idx, D, h, spec.length_m, preload_m=pre)["force_N"]
+        # the push's fitted nuisances, draw by draw: preload F(D + d0), height error h + dh, load-cell offset
+        nuis = {
+            k: (None if d is None or fn(d.id) not in samples else np.asarray(samples[fn(d.id)])[idx])
+            for k, fn in (
+                ("preload_m", preload_name),
+                ("height_error_m", height_error_name),
+                ("force_offset_N", force_offset_name),
+            )
+        }
+        F = predictive_forces(samples, idx, D, h, spec.length_m, **nuis)["force_N"]
         q = quantiles(F)
         label = f"h = {h:g} m" + (" (not pushed)" if d is None else "")
         artists["bands"].append(ax.fill_between(D, q["q05"], q["q95"], color=col, alpha=0.3, label=label))

@@ -1,0 +1,135 @@
+"""Nuisances of a real push (issue 19): an unknown stem length, contact-height errors, load-cell offsets per push.
+
+The data are made here from the physics (``force_from_displacement``), not by the simulator, so that the
+truth (L, the true heights, the offsets) is set independently of the likelihood's tables.
+"""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import bayesrod
+from bayesrod.inference.likelihood import (
+    RodLikelihood,
+    build_likelihood,
+    default_length_prior,
+    force_offset_name,
+    height_error_name,
+)
+from bayesrod.inference.priors import load_prior
+from bayesrod.physics import force_from_displacement
+
+EI0, P, L_TRUE = 2.63, 0.43, 0.80
+HEIGHTS = (0.40, 0.56)
+
+
+def _pushes(L=L_TRUE, heights=HEIGHTS, offsets=(0.0, 0.0), dh=(0.0, 0.0), sigma=0.004, seed=0, n=60):
+    rng = np.random.default_rng(seed)
+    D, F = [], []
+    for h, b, e in zip(heights, offsets, dh, strict=True):
+        d = np.linspace(0.0, 0.18 * h / 0.4, n)
+        f = force_from_displacement(d, h + e, EI0, P, L).force_N
+        D.append(d)
+        F.append(f + b + rng.normal(0, sigma, n))
+    return D, F
+
+
+def _dataset(L_given, approximate=False, **kw):
+    D, F = _pushes(**kw)
+    ds = bayesrod.Dataset.from_arrays(length_m=L_given, height_m=list(HEIGHTS), displacement_m=D, force_N=F)
+    return dataclasses.replace(ds, extra={"length_m_approximate": True}) if approximate else ds
+
+
+def _geometry(spec, L, dh):
+    """The same pushes with the stem length and contact heights changed (a reference likelihood's geometry)."""
+    pushes = tuple(dataclasses.replace(q, height_m=q.height_m + e) for q, e in zip(spec.pushes, dh, strict=True))
+    return dataclasses.replace(spec, length_m=L, pushes=pushes)
+
+
+def test_geometry_tables_match_tables_built_at_that_geometry():
+    """Length and height axes (off every node) against plain tables built directly at the same L and heights."""
+    spec = _dataset(0.8)
+    grid = {"p_range": (0.0, 1.2), "n_p": 13, "use_shapes": False}  # a coarse p grid: the geometry axes are tested
+    lik = RodLikelihood(spec, length_prior=default_length_prior(spec), height_sd_m=0.003, **grid)
+    assert lik.names[3:] == ["length_m", height_error_name("h400"), height_error_name("h560")]
+    p = np.array([0.3, 0.43, 1.1])
+    for L, dh in [(0.8, (0.0, 0.0)), (0.7133, (0.0041, -0.0072)), (1.093, (-0.0105, 0.0023))]:
+        ref_lik = RodLikelihood(_geometry(spec, L, dh), **grid)
+        ref = ref_lik.predict_nd_force(p)
+        got = lik.predict_nd_force_geometry(p, np.full(3, L), np.tile(dh, (3, 1)))
+        assert np.max(np.abs(got - ref)) < 1e-4 * np.max(np.abs(ref)), (L, dh)
+        # the residuals in newtons: F = EI0 / L^2 f with each walker's own L (and the heights moved)
+        par = {"EI0": np.full(3, 2.63), "p": p, "sigma_force_N": np.full(3, 0.01)}
+        names = {"length_m": np.full(3, L), **{n: np.full(3, e) for n, e in zip(lik.names[4:], dh, strict=True)}}
+        r_ref = ref_lik.residuals(par)["force"]
+        r_got = lik.residuals({**par, **names})["force"]
+        assert np.max(np.abs(r_got - r_ref)) < 1e-4 * np.max(np.abs(ref_lik.F_obs)), (L, dh)
+    # a different geometry gives a different force (the check above can fail)
+    wrong = lik.predict_nd_force_geometry(p, np.full(3, 0.9), np.zeros((3, 2)))
+    ref = RodLikelihood(_geometry(spec, 0.8, (0, 0)), **grid).predict_nd_force(p)
+    assert np.max(np.abs(wrong - ref)) > 1e-2 * np.max(np.abs(ref))
+
+
+def test_force_offsets_per_push_enter_the_residuals_of_their_own_push():
+    spec = _dataset(0.8)
+    lik = build_likelihood(spec, load_prior("default"), use_shapes=False, force_offsets=True)
+    names = [force_offset_name("h400"), force_offset_name("h560")]
+    assert lik.names[-2:] == names
+    base = {"EI0": np.array([2.63]), "p": np.array([0.43]), "sigma_force_N": np.array([0.01])}
+    r0 = lik.residuals(base)["force"][0]
+    r1 = lik.residuals({**base, names[0]: np.array([0.1]), names[1]: np.array([-0.2])})["force"][0]
+    np.testing.assert_allclose(r0 - r1, np.where(lik.F_push == 0, 0.1, -0.2), atol=1e-12)
+    # prior: N(0, 5% of the push's peak force)
+    peak = max(np.max(np.abs(d.F_N)) for d in lik.data if d.id == "h400")
+    assert lik.nuisance_priors[names[0]].args == pytest.approx((0.0, 0.05 * peak))
+
+
+def test_bad_nuisance_options_are_refused_with_the_parameter_named():
+    spec = _dataset(0.8)
+    pr = load_prior("default")
+    with pytest.raises(ValueError, match="^height_sd_m: expected a contact-height sd"):
+        build_likelihood(spec, pr, use_shapes=False, height_sd_m=0.5)
+    with pytest.raises(ValueError, match="^length: expected"):
+        build_likelihood(spec, pr, use_shapes=False, length="maybe")
+    with pytest.raises(ValueError, match="^force_offsets: expected either"):
+        build_likelihood(spec, pr, ("force_offset",), use_shapes=False, force_offsets=True)
+    with pytest.raises(ValueError, match="^length: expected no tabled effect or preload"):
+        build_likelihood(spec, pr, use_shapes=False, length="unknown", preload=True)
+
+
+def _fit(ds, **kw):
+    kw = {"use_shapes": False, "progress": False, "target_ess": 200, "max_steps": 3000, "seed": 1, **kw}
+    return bayesrod.fit(ds, **kw)
+
+
+@pytest.mark.slow  # 60 s
+def test_an_approximate_length_is_sampled_and_the_interval_covers_EI0():
+    """Given L 25% too long and marked approximate: the default fit samples L and covers EI0; fixed L misses it."""
+    ds = _dataset(1.0, approximate=True, heights=HEIGHTS)
+    post = _fit(ds)
+    s = post.summary()
+    assert "length_m" in s.index and post.config["length"] == "unknown"
+    assert s.loc["EI0", "q05"] <= EI0 <= s.loc["EI0", "q95"], s
+    assert s.loc["length_m", "q05"] <= L_TRUE <= s.loc["length_m", "q95"], s
+    assert any("stem length L sampled" in a for a in post.to_dict()["assumptions"])
+    fixed = _fit(ds, length="known").summary()
+    assert not fixed.loc["EI0", "q05"] <= EI0 <= fixed.loc["EI0", "q95"], fixed
+    # bands use each draw's length: EI at s beyond a draw's L is zero for that draw
+    band = post.ei_band([0.0, 0.79])
+    assert band.median[0] == pytest.approx(s.loc["EI0", "median"], rel=0.02)
+
+
+@pytest.mark.slow  # 45 s
+def test_per_push_offsets_are_recovered_and_keep_EI0_honest():
+    offsets = (0.05, -0.04)
+    ds = _dataset(0.8, offsets=offsets)
+    post = _fit(ds, force_offsets=True)
+    s = post.summary()
+    for pid, b in zip(("h400", "h560"), offsets, strict=True):
+        q = s.loc[force_offset_name(pid)]
+        assert q["q05"] <= b <= q["q95"], s
+        assert q["q95"] - q["q05"] < 0.05  # informative: offsets of this size are told apart from zero
+    assert s.loc["EI0", "q05"] <= EI0 <= s.loc["EI0", "q95"], s
+    plain = _fit(ds).summary()
+    assert not plain.loc["EI0", "q05"] <= EI0 <= plain.loc["EI0", "q95"], plain
