@@ -21,6 +21,8 @@ from .api import (
     Diagnosis,
     Extraction,
     ForceBand,
+    GroupFit,
+    GroupStudy,
     Posterior,
     Prediction,
     SimulatedDataset,
@@ -30,11 +32,14 @@ from .api import (
     diagnose,
     extract,
     fit,
+    fit_group,
+    fit_groups,
     fit_many,
     import_table,
     load,
     predict,
     simulate,
+    simulate_group,
 )
 from .dataset import Dataset, DatasetError, Problem
 from .physics import Effects, contact_from_force, flexural_rigidity, force_from_displacement, k_theta, k_x
@@ -52,6 +57,8 @@ __all__ = [
     "Effects",
     "Extraction",
     "ForceBand",
+    "GroupFit",
+    "GroupStudy",
     "Posterior",
     "Prediction",
     "Problem",
@@ -64,6 +71,8 @@ __all__ = [
     "diagnose",
     "extract",
     "fit",
+    "fit_group",
+    "fit_groups",
     "fit_many",
     "import_table",
     "flexural_rigidity",
@@ -73,4 +82,5 @@ __all__ = [
     "load",
     "predict",
     "simulate",
+    "simulate_group",
 ]

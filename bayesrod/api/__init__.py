@@ -6,11 +6,12 @@ objects' ``save()`` / ``report()`` write files. See docs/api.md.
 
 from .bands import Band, ForceBand
 from .compare import Comparison, compare
-from .data import DEMO_DATASET, SimulatedDataset, import_table, load, simulate
+from .data import DEMO_DATASET, SimulatedDataset, import_table, load, simulate, simulate_group
 from .design import Design, design
 from .diagnose import Diagnosis, diagnose
 from .extract import Extraction, extract
 from .fitting import Posterior, fit
+from .group import GroupFit, GroupStudy, fit_group, fit_groups
 from .predict import Prediction, predict
 from .survey import Survey, fit_many
 
@@ -22,6 +23,8 @@ __all__ = [
     "Diagnosis",
     "Extraction",
     "ForceBand",
+    "GroupFit",
+    "GroupStudy",
     "Posterior",
     "Prediction",
     "SimulatedDataset",
@@ -31,9 +34,12 @@ __all__ = [
     "diagnose",
     "extract",
     "fit",
+    "fit_group",
+    "fit_groups",
     "fit_many",
     "import_table",
     "load",
     "predict",
     "simulate",
+    "simulate_group",
 ]

@@ -61,7 +61,8 @@ class SimulatedDataset(Dataset):
 
             camera = default_camera(cfg.length_m)
         with atomic_dir(path, overwrite) as tmp:
-            write_simulated(cfg, list(pushes), tmp, frames=frames, camera=camera, arm=arm)
+            extra = {k: self.extra[k] for k in GROUP_KEYS if k in self.extra}
+            write_simulated(cfg, list(pushes), tmp, frames=frames, camera=camera, arm=arm, extra=extra)
         return Path(path)
 
 
@@ -178,6 +179,78 @@ def simulate(
         extra={"truth": truth},
         simulation=(cfg, tuple(sim)),
     )
+
+
+#: the specimen.json keys that make datasets one stem under several conditions (docs/format.md)
+GROUP_KEYS = ("stem_id", "condition")
+
+
+def simulate_group(
+    preset: str = "twig",
+    *,
+    conditions: Mapping[str, float],
+    stem_id: str = "stem-1",
+    seed: int = 0,
+    heights_m: Sequence[float] | None = None,
+    noise_rho: float = 0.0,
+    stem_change: Mapping[str, float] | None = None,
+    config_overrides: Mapping | None = None,
+) -> tuple[SimulatedDataset, ...]:
+    """One stem pushed under several anchorage conditions (forces; docs/data.md, "A stem under conditions").
+
+    Parameters
+    ----------
+    preset : str
+        The stem (``twig``, ``grass``): EI0, p, L and default heights.
+    conditions : mapping of str to float
+        Condition name -> base spring stiffness k_b [N m/rad] (``math.inf``: a rigid clamp), in order.
+    stem_id : str
+        Written to every dataset's specimen.json with its ``condition``.
+    seed : int
+        Condition i is simulated with seed ``seed + i``.
+    heights_m : sequence of float or None
+        Contact heights of every condition; default the preset's.
+    noise_rho : float
+        Lag-1 correlation of the AR(1) force noise.
+    stem_change : mapping of str to float or None
+        Condition -> factor on EI0 (the stem itself changed: e.g. ``{"dry": 0.7}``); default 1.
+    config_overrides : mapping or None
+        Further SimConfig fields (e.g. ``{"n_frames_engaged": 2}`` to skip most shapes).
+
+    Returns
+    -------
+    tuple of SimulatedDataset
+        One per condition; ``extra`` holds ``stem_id``, ``condition`` and the condition's ``truth``.
+    """
+    import math
+    from dataclasses import replace
+
+    from ..physics.presets import get_preset
+
+    if not conditions:
+        raise ValueError("conditions: expected at least one condition name -> base stiffness, got none")
+    base = get_preset(preset)
+    stem_change = dict(stem_change or {})
+    unknown = sorted(set(stem_change) - set(conditions))
+    if unknown:
+        raise ValueError(f"stem_change: expected condition names from conditions, got {unknown[0]!r}")
+    out = []
+    for i, (cond, kb) in enumerate(conditions.items()):
+        kb = float(kb)
+        if not kb > 0:
+            raise ValueError(f"conditions.{cond}: expected a base stiffness > 0 N m/rad (inf: a clamp), got {kb}")
+        ei0 = float(dict(config_overrides or {}).get("EI0", base["EI0"]))  # a stem of the study's own EI0
+        change = {"EI0": ei0 * float(stem_change.get(cond, 1.0)), "specimen": f"{stem_id}-{cond}"}
+        ds = simulate(
+            preset,
+            seed=seed + i,
+            effects={"base_compliance": kb} if math.isfinite(kb) else None,
+            heights_m=heights_m,
+            noise_rho=noise_rho,
+            config_overrides={**dict(config_overrides or {}), **change},
+        )
+        out.append(replace(ds, extra={**ds.extra, "stem_id": stem_id, "condition": cond}))
+    return tuple(out)
 
 
 def import_table(files, *, metadata=None, **options):

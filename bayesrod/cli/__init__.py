@@ -98,6 +98,22 @@ def build_parser() -> argparse.ArgumentParser:
     fm.add_argument("--prior", default="default", help="prior name or JSON file")
     fm.add_argument("--seed", type=int, default=0, help="random seed of every fit (default 0)")
     fm.add_argument("--forces-only", action="store_true", help="ignore centerlines")
+    fg = sub.add_parser(
+        "fit-group", help="one stem under several conditions: a joint posterior separating stem and anchorage"
+    )
+    fg.add_argument("root", metavar="DIR", help="folder of datasets whose specimen.json name a stem_id and condition")
+    fg.add_argument("--out", required=True, help="output folder (<stem_id>/summary.json, groups.json)")
+    fg.add_argument("--prior", default="default", help="prior name or JSON file of EI0, p and the noise")
+    fg.add_argument(
+        "--shared", default="EI0,p", help="stem parameters shared by the conditions (default EI0,p; '' for none)"
+    )
+    fg.add_argument("--force-noise", default="ar1", choices=["iid", "ar1"], help="force noise per condition")
+    fg.add_argument("--force-offsets", action="store_true", help="a load-cell offset per condition")
+    fg.add_argument("--no-sharing-check", action="store_true", help="skip the held-out check of the sharing")
+    fg.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    fg.add_argument("--max-steps", type=int, default=6000, help="sampling budget per ensemble (default 6000)")
+    fg.add_argument("--target-ess", type=float, default=400.0, help="bulk ESS target of EI0 and p (default 400)")
+    fg.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
     cp = sub.add_parser("compare", help="compare species: hierarchical model over fitted specimens")
     cp.add_argument("inputs", nargs="+", metavar="RUN_OR_DATASET", help="fit run directories or datasets")
     cp.add_argument("--out", required=True, help="output directory (compare.json, figures/)")
@@ -220,6 +236,25 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="fit each push's preload (the displacement already made when recording began); forces only",
     )
+    ft.add_argument(
+        "--length",
+        default="auto",
+        choices=["auto", "known", "unknown"],
+        help="stem length: sample it (unknown; prior uniform on [L/1.5, 1.5 L] or the prior file's length_m), "
+        "fix it (known), or sample it when specimen.json marks it length_m_approximate (auto, default); forces only",
+    )
+    ft.add_argument(
+        "--height-sd",
+        type=float,
+        default=0.0,
+        metavar="M",
+        help="sd of each push's contact-height error [m] (e.g. 0.003); each push's error is sampled; forces only",
+    )
+    ft.add_argument(
+        "--force-offsets",
+        action="store_true",
+        help="fit a load-cell offset per push (prior N(0, 5%% of the push's peak force))",
+    )
     ft.add_argument("--max-steps", type=int, default=8000, help="sampling budget per ensemble (default 8000)")
     ft.add_argument(
         "--target-ess", type=float, default=1000.0, help="stop once EI0 and p have this bulk ESS (default 1000)"
@@ -315,11 +350,15 @@ FLAGS = {
     "heldout_alpha": "--heldout-alpha",
     "min_heldout_gain": "--min-heldout-gain",
     "n_workers": "--workers",
+    "shared": "--shared",
     "checkpoint": "--resume",
     "arm": "--arm",
     "max_steps": "--max-steps",
     "force_noise": "--force-noise",
     "preload": "--preload",
+    "length": "--length",
+    "height_sd_m": "--height-sd",
+    "force_offsets": "--force-offsets",
     "noise_rho": "--noise-rho",
     "target_ess": "--target-ess",
     "time_unit": "--time-unit",
@@ -670,6 +709,7 @@ def _fit_and_save(
     target_ess=1000.0,
     force_noise="iid",
     preload=False,
+    **nuisances,
 ):
     """Fit with the API, checkpointing into ``out/chains.h5``, then save the run into ``out``."""
     from ..api import fit
@@ -688,6 +728,7 @@ def _fit_and_save(
         target_ess=target_ess,
         force_noise=force_noise,
         preload=preload,
+        **nuisances,
     )
     post.save(out, overwrite=True)
     return post
@@ -721,6 +762,9 @@ def cmd_fit(args: argparse.Namespace) -> int:
         target_ess=args.target_ess,
         force_noise=args.force_noise,
         preload=args.preload,
+        length=args.length,
+        height_sd_m=args.height_sd,
+        force_offsets=args.force_offsets,
     )
     _print_fit(post.to_dict(), out, args)
     return 0
@@ -762,6 +806,43 @@ def cmd_fit_many(args: argparse.Namespace) -> int:
             + (f"; {len(res.failures)} failed (failures.json)" if res.failures else "")
         )
     return 1 if res.failures else 0
+
+
+@_command("fit-group")
+def cmd_fit_group(args: argparse.Namespace) -> int:
+    from ..api import fit_groups
+
+    out = _prepare_out(args)
+    shared = tuple(x.strip() for x in args.shared.split(",") if x.strip())
+    study = fit_groups(
+        args.root,
+        args.prior,
+        shared=shared,
+        force_noise=args.force_noise,
+        force_offsets=args.force_offsets,
+        sharing=not args.no_sharing_check,
+        seed=args.seed,
+        max_steps=args.max_steps,
+        target_ess=args.target_ess,
+        progress=_progress(args),
+    )
+    study.save(out, overwrite=True)
+    if args.json:
+        _emit_json({sid: g.to_dict() for sid, g in study.fits.items()} | {"problems": list(study.problems)})
+        return 1 if study.problems else 0
+    for sid, g in study.fits.items():
+        d = g.to_dict()
+        sh = ", ".join(f"{k} {v['median']:.4g} [{v['q05']:.4g}, {v['q95']:.4g}]" for k, v in d["shared"].items())
+        print(f"{sid}: {sh}" + (f"; sharing {d['sharing']['verdict']}" if d["sharing"] else ""))
+        for c, row in d["conditions"].items():
+            q = row["base_compliance_rad_per_Nm"]
+            print(f"  {c:>12}: base compliance {q['median']:.3g} [{q['q05']:.3g}, {q['q95']:.3g}] rad/(N m)")
+        for w in d["warnings"]:
+            print(f"  warning: {w}", file=sys.stderr)
+    for p in study.problems:
+        print(f"  problem: {p}", file=sys.stderr)
+    print(f"wrote {out}/groups.json and one folder per stem")
+    return 1 if study.problems else 0
 
 
 @_command("demo")

@@ -261,10 +261,12 @@ def write_simulated(
     frames: bool = False,
     camera: dict | None = None,
     arm: str = "leading",
+    extra: dict | None = None,
 ) -> None:
     """Write a ``bayesrod.dataset/1`` directory (into ``out``, which must exist).
 
-    ``arm`` places the probe's holder in the rendered frames (``bayesrod.vision.render.render_frame``).
+    ``arm`` places the probe's holder in the rendered frames (``bayesrod.vision.render.render_frame``);
+    ``extra``: further top-level keys of specimen.json (``stem_id``, ``condition``).
     """
     doc = {
         "format": FORMAT,
@@ -286,6 +288,7 @@ def write_simulated(
             "generator": f"bayesrod simulate {__version__}",
         },
     }
+    doc.update(extra or {})
     if frames and camera is not None:
         doc["camera"] = camera
     for sp in pushes:

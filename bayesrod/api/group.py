@@ -1,0 +1,352 @@
+"""``bayesrod.fit_group``: one stem under several conditions, the stem separated from its anchorage (issue 23).
+
+Datasets whose ``specimen.json`` share a ``stem_id`` and differ in ``condition`` are one stem
+under several conditions (docs/format.md). :func:`fit_group` fits one such stem jointly
+(:mod:`bayesrod.inference.group`): EI0 and p shared, a base compliance per condition, noise
+per condition. :func:`fit_groups` finds every stem in a folder and fits each.
+"""
+
+from __future__ import annotations
+
+import copy
+import itertools
+import logging
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .._version import __version__
+from ..inference.group import (
+    STEM_PARAMETERS,
+    GroupLikelihood,
+    GroupPosterior,
+    base_compliance,
+    base_stiffness,
+    sharing_check,
+    start_point,
+)
+from ..inference.priors import load_prior
+from ..inference.sampler import run_ensembles
+from ..physics import k_theta
+from ._common import as_dataset, interval, plain_json, progress_enabled
+
+log = logging.getLogger("bayesrod")
+
+LEVEL = 0.9
+
+
+def _q(x: NDArray) -> dict:
+    lo, med, hi = interval(np.asarray(x, float), LEVEL)
+    return {"median": float(med), "q05": float(lo), "q95": float(hi)}
+
+
+@dataclass(frozen=True, eq=False)
+class GroupFit:
+    """The joint posterior of one stem under several conditions, immutable.
+
+    Attributes
+    ----------
+    stem_id : str
+    conditions : tuple of str
+        Condition names in the order given (e.g. intact, cut1, cut2, cut3).
+    samples : Mapping[str, ndarray]
+        Draws (n,) in natural units: the shared stem parameters (``EI0``, ``p``), per condition
+        ``base_compliance_rad_per_Nm__<condition>`` and the condition's noise terms by their sampled names.
+    doc : Mapping
+        The content of ``summary.json`` (docs/format.md, "fit-group").
+    """
+
+    stem_id: str
+    conditions: tuple[str, ...]
+    samples: Mapping[str, NDArray] = field(repr=False)
+    doc: Mapping = field(repr=False)
+
+    def to_dict(self) -> dict:
+        """summary.json, a fresh copy."""
+        return copy.deepcopy(dict(self.doc))
+
+    def save(self, path, *, overwrite: bool = False) -> Path:
+        """Write ``path/summary.json`` and ``path/samples.npz`` (atomically)."""
+        import io
+
+        from ..dataset.io import OutputExistsError, write_bytes_atomic, write_json
+
+        path = Path(path)
+        if (path / "summary.json").exists() and not overwrite:
+            raise OutputExistsError(path)
+        buf = io.BytesIO()
+        np.savez(buf, **{k: np.asarray(v) for k, v in self.samples.items()})
+        write_bytes_atomic(path / "samples.npz", buf.getvalue())
+        write_json(path / "summary.json", self.to_dict())
+        return path
+
+    def plot_compliance(self, ax=None):
+        """Base compliance per condition: median and 90% interval; returns the error-bar container."""
+        if ax is None:
+            import matplotlib.pyplot as plt
+
+            _, ax = plt.subplots(figsize=(5, 3.5))
+        rows = [self.doc["conditions"][c]["base_compliance_rad_per_Nm"] for c in self.conditions]
+        med = np.array([r["median"] for r in rows])
+        lo = np.array([r["q05"] for r in rows])
+        hi = np.array([r["q95"] for r in rows])
+        x = np.arange(len(rows))
+        bars = ax.errorbar(x, med, yerr=[med - lo, hi - med], fmt="o", capsize=4)
+        ax.set_xticks(x, self.conditions)
+        ax.set(ylabel="base compliance [rad/(N m)]", title=f"{self.stem_id}: anchorage per condition (90%)")
+        return bars
+
+
+@dataclass(frozen=True)
+class GroupStudy:
+    """Every stem found in a folder, fitted: ``fits`` by stem id, ``problems`` (one line each) for the rest."""
+
+    fits: Mapping[str, GroupFit]
+    problems: tuple[str, ...]
+
+    def save(self, path, *, overwrite: bool = False) -> Path:
+        """``path/<stem_id>/summary.json`` (+ samples.npz) per stem and ``path/groups.json`` (index, problems)."""
+        from ..dataset.io import write_json
+
+        path = Path(path)
+        for sid, g in self.fits.items():
+            g.save(path / _safe(sid), overwrite=overwrite)
+        write_json(
+            path / "groups.json",
+            {"stems": {sid: _safe(sid) for sid in self.fits}, "problems": list(self.problems)},
+        )
+        return path
+
+
+def _safe(s: str) -> str:
+    import re
+
+    return re.sub(r"[^0-9A-Za-z_.-]", "_", s)
+
+
+def find_groups(root) -> tuple[dict[str, dict], list[str]]:
+    """Stems under ``root``: ``{stem_id: {condition: Dataset}}`` and the problems (one line each).
+
+    A dataset without ``stem_id`` or ``condition``, a stem with a single condition, and two datasets of
+    one stem with the same condition are reported, not fitted.
+    """
+    from .survey import find_datasets
+
+    groups: dict[str, dict] = {}
+    where: dict[tuple, Path] = {}
+    problems = []
+    for path in find_datasets(root):
+        ds = as_dataset(path)
+        sid, cond = ds.extra.get("stem_id"), ds.extra.get("condition")
+        if not isinstance(sid, str) or not sid or not isinstance(cond, str) or not cond:
+            problems.append(
+                f"{path}/specimen.json: stem_id, condition: expected two non-empty strings, got "
+                f"{sid!r} and {cond!r}; not part of a group"
+            )
+            continue
+        if (sid, cond) in where:
+            problems.append(
+                f"{path}/specimen.json: condition: expected one dataset per condition of stem {sid!r}, got "
+                f"{cond!r} again (also {where[(sid, cond)]}); this one skipped"
+            )
+            continue
+        where[(sid, cond)] = path
+        groups.setdefault(sid, {})[cond] = ds
+    for sid in list(groups):
+        if len(groups[sid]) < 2:
+            (cond,) = groups[sid]
+            problems.append(
+                f"stem {sid}: expected two or more conditions, got only {cond!r} ({where[(sid, cond)]}); "
+                "fit it with bayesrod fit"
+            )
+            del groups[sid]
+    return groups, problems
+
+
+def fit_group(
+    conditions,
+    prior=None,
+    *,
+    shared: Sequence[str] = STEM_PARAMETERS,
+    force_noise: str = "ar1",
+    force_offsets: bool = False,
+    seed: int = 0,
+    progress: bool = True,
+    max_steps: int = 6000,
+    target_ess: float = 400.0,
+    sharing: bool = True,
+    stem_id: str | None = None,
+) -> GroupFit:
+    """Joint posterior of one stem under several conditions (forces only).
+
+    Parameters
+    ----------
+    conditions : mapping of str to (path or Dataset), or sequence of those
+        One dataset per condition. A sequence is keyed by each dataset's ``condition``.
+    prior : str, path or None
+        Prior of EI0, p and the noise (docs/priors.md). Each condition's base compliance has the
+        scale-free prior uniform on u = c/(1+c) in [0, 0.9], c = EI0 C / L (docs/inference.md, "One stem,
+        many conditions"); zero (a rigid clamp) is allowed.
+    shared : sequence of str
+        Stem parameters common to all conditions, a subset of ``("EI0", "p")``; the others get a copy per
+        condition.
+    force_noise : {"ar1", "iid"}
+        Force noise per condition (AR(1): sd and lag-1 correlation per condition).
+    force_offsets : bool
+        A load-cell offset per condition.
+    sharing : bool
+        Run the sharing check (held-out refits of the joint and the separate models; a minute or more).
+    max_steps, target_ess : int, float
+        Sampling budget per ensemble, bulk-ESS target of the stem parameters.
+
+    Returns
+    -------
+    GroupFit
+    """
+    t0 = time.perf_counter()
+    if isinstance(conditions, Mapping):
+        specs = {str(c): as_dataset(d) for c, d in conditions.items()}
+    else:
+        specs = {}
+        for d in conditions:
+            ds = as_dataset(d)
+            c = ds.extra.get("condition")
+            if not isinstance(c, str) or not c:
+                raise ValueError(f"conditions: expected datasets with a condition in specimen.json, got {c!r}")
+            if c in specs:
+                raise ValueError(f"conditions: expected one dataset per condition, got {c!r} twice")
+            specs[c] = ds
+    if len(specs) < 2:
+        raise ValueError(f"conditions: expected two or more conditions of one stem, got {len(specs)}")
+    if not (isinstance(max_steps, (int, np.integer)) and max_steps >= 100):
+        raise ValueError(f"max_steps: expected an integer >= 100, got {max_steps!r}")
+    sid = stem_id or next(iter(specs.values())).extra.get("stem_id") or next(iter(specs.values())).specimen
+    pr = load_prior(prior)
+    lik = GroupLikelihood(specs, pr, shared=tuple(shared), force_noise=force_noise, force_offsets=force_offsets)
+    post = GroupPosterior(lik)
+    log.info("%s: %d conditions, parameters %s", sid, len(specs), ", ".join(post.names))
+    theta0 = start_point(post)
+    res = run_ensembles(
+        post, theta0, seed=seed, progress=progress_enabled(progress), max_steps=max_steps, target_ess=target_ess
+    )
+    nat = post.to_natural(res.chain.reshape(-1, post.ndim))
+    samples = dict(nat)
+    conds = tuple(specs)
+    for c in conds:
+        loc = lik.local[c]
+        EI0 = nat["EI0"] if "EI0" in lik.shared else nat[loc["EI0"]]
+        samples[f"base_compliance_rad_per_Nm__{c}"] = base_compliance(nat[loc["u_base"]], EI0, lik.liks[c].L)
+    check = sharing_check(lik, theta0) if sharing else None
+    doc = _summary(sid, lik, nat, samples, res, pr, check, time.perf_counter() - t0)
+    ro = {}
+    for k, v in samples.items():
+        a = np.array(v, float)
+        a.setflags(write=False)
+        ro[k] = a
+    return GroupFit(sid, conds, MappingProxyType(ro), MappingProxyType(plain_json(doc)))
+
+
+def _summary(sid, lik: GroupLikelihood, nat, samples, res, pr, check, seconds) -> dict:
+    conds = lik.conditions
+    shared = {n: _q(nat[n]) for n in lik.shared}
+    out_conds = {}
+    warnings = []
+    for c in conds:
+        loc = lik.local[c]
+        L = lik.liks[c].L
+        EI0 = nat["EI0"] if "EI0" in lik.shared else nat[loc["EI0"]]
+        p = nat["p"] if "p" in lik.shared else nat[loc["p"]]
+        kb = base_stiffness(nat[loc["u_base"]], EI0, L)
+        heights = sorted({float(d.height_m) for d in lik.liks[c].data if d.D_m.size})
+        kt = k_theta(np.array(heights)[None, :], EI0[:, None], p[:, None], L, kb[:, None])
+        row = {
+            "base_compliance_rad_per_Nm": _q(samples[f"base_compliance_rad_per_Nm__{c}"]),
+            "k_theta": [{"height_m": h, **_q(kt[:, i])} for i, h in enumerate(heights)],
+            "sigma_force_N": _q(nat[loc["sigma_force_N"]]),
+        }
+        for n in STEM_PARAMETERS:
+            if n not in lik.shared:
+                row[n] = _q(nat[loc[n]])
+        if "rho_force" in loc:
+            row["rho_force"] = _q(nat[loc["rho_force"]])
+        if "force_offset" in loc:
+            row["force_offset_N"] = _q(nat[loc["force_offset"]])
+        out_conds[c] = row
+    contrasts = []
+    for a, b in itertools.permutations(conds, 2):
+        Ca = samples[f"base_compliance_rad_per_Nm__{a}"]
+        Cb = samples[f"base_compliance_rad_per_Nm__{b}"]
+        contrasts.append(
+            {
+                "a": a,
+                "b": b,
+                "compliance_difference_rad_per_Nm": _q(Cb - Ca),
+                "prob_b_softer": float(np.mean(Cb > Ca)),
+            }
+        )
+    n_heights = {c: len({d.height_m for d in lik.liks[c].data if d.D_m.size}) for c in conds}
+    ident = {"heights_per_condition": n_heights}
+    if "EI0" in lik.shared:
+        prior = pr.get("EI0")
+        post_sd = float(np.std(np.log(nat["EI0"])))
+        if prior.dist == "lognormal":
+            ident["EI0_posterior_over_prior_sd_log"] = post_sd / prior.args[1]
+        ident["EI0_posterior_sd_log"] = post_sd
+    if all(v == 1 for v in n_heights.values()):
+        warnings.append(
+            "every condition was pushed at one height: stem and anchorage are weakly separable (a softer base and "
+            "a softer stem bend the stem alike); the shared EI0 leans on the prior (identifiability."
+            "EI0_posterior_over_prior_sd_log) and on the stiffest condition being near a clamp; push a second "
+            "height (bayesrod design) to separate them"
+        )
+    if check is not None and check.verdict == "rejected":
+        warnings.append(
+            "sharing rejected: the joint model predicts held-out pushes worse than separate fits; the stem itself "
+            "seems to differ between conditions, so the compliances above are not the whole story"
+        )
+    diag = res.diagnostics
+    return {
+        "stem_id": sid,
+        "conditions_order": list(conds),
+        "shared": shared,
+        "conditions": out_conds,
+        "contrasts": contrasts,
+        "sharing": check.to_dict() if check is not None else None,
+        "identifiability": ident,
+        "warnings": warnings,
+        "level": LEVEL,
+        "prior": pr.name,
+        "force_noise": lik.force_noise,
+        "convergence": {
+            "rhat_max": float(max(diag["rhat"].values())),
+            "ess_bulk_min": float(min(diag["ess_bulk"].values())),
+        },
+        "sampler": {"steps": res.n_steps, "burn_in": res.burn, "seconds": round(seconds, 1)},
+        "bayesrod": __version__,
+    }
+
+
+def fit_groups(root, prior=None, **kwargs) -> GroupStudy:
+    """Every stem under ``root`` (datasets sharing a ``stem_id``) fitted with :func:`fit_group`.
+
+    Problems (ungrouped datasets, a stem with one condition, a repeated condition) and stems whose fit
+    fails are listed in ``GroupStudy.problems``, one line each; the others are fitted.
+    """
+    groups, problems = find_groups(root)
+    if not groups:
+        raise ValueError(
+            f"{root}: expected datasets sharing a stem_id under two or more conditions, got none"
+            + (f" ({problems[0]})" if problems else "")
+        )
+    fits = {}
+    for sid, conds in groups.items():
+        try:
+            fits[sid] = fit_group(conds, prior, stem_id=sid, **kwargs)
+        except ValueError as e:
+            problems.append(f"stem {sid}: {e}")
+    return GroupStudy(MappingProxyType(fits), tuple(problems))

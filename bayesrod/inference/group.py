@@ -1,0 +1,399 @@
+"""One stem under several conditions: a joint posterior that separates the stem from its anchorage (issue 23).
+
+The same stem pushed under several conditions (intact, then brace-root whorls cut; before and
+after a treatment) keeps its own parameters (EI0, p: *shared*) while its anchorage changes: each
+condition c gets a rotational base compliance C_c [rad/(N m)] in series with the rod
+(docs/model.md, ``base_compliance``; C = 1/k_b, zero for a rigid clamp), its own force noise
+(sd, AR(1) correlation) and optionally a load-cell offset.
+
+Parameterisation. The base compliance enters the elastica through c = EI0 C / L (the base's
+rotational compliance relative to the rod's, L/EI0); the likelihood tables it on the bounded
+coordinate u = c / (1 + c) in [0, U_MAX] (u = 0: a clamp) for every p, exactly as the
+``base_compliance`` effect of a single fit (:class:`~bayesrod.inference.likelihood.EffectAxis`).
+The prior of each condition's u is uniform on [0, U_MAX]: scale-free, and zero (a rigid clamp)
+is inside the support, so an intact clamp is not forced to be soft.
+
+Sharing. ``shared`` names the stem parameters common to all conditions (default EI0 and p);
+a parameter not shared gets one copy per condition (``EI0__<condition>``). The *separate*
+model (nothing shared, no base compliance) is what the sharing check compares against:
+:func:`sharing_check` holds out the last third of every push of one condition at a time,
+refits both models (maximum a posteriori) on everything else, and compares the held-out
+force RMSE.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import minimize
+
+from .likelihood import EffectAxis, RodLikelihood, force_scale_fit
+from .priors import ParamPrior
+
+#: upper end of the base-compliance coordinate u = c/(1+c): c = EI0 C / L up to 9
+U_MAX = 0.9
+#: nodes of the u table axis (forces only; 13 as the single-fit base_compliance axis)
+U_NODES = 13
+STEM_PARAMETERS = ("EI0", "p")
+
+
+def _ident(s: str) -> str:
+    return re.sub(r"[^0-9A-Za-z_]", "_", str(s))
+
+
+def condition_name(param: str, condition: str) -> str:
+    """The per-condition copy of a parameter: ``<param>__<condition>``."""
+    return f"{param}__{_ident(condition)}"
+
+
+class GroupLikelihood:
+    """Log-likelihood of several conditions of one stem (forces only), batched over walkers.
+
+    Parameters
+    ----------
+    specs : dict of str to Specimen
+        One dataset per condition, by condition name (the order is kept).
+    prior : Prior
+        Priors of EI0, p, sigma_force_N (and rho_force) (docs/priors.md).
+    shared : sequence of str
+        Stem parameters common to all conditions, a subset of ``("EI0", "p")``.
+    force_noise : {"ar1", "iid"}
+    anchorage : bool
+        Fit a base compliance per condition (True), or none (the *separate* model of the sharing check).
+    force_offsets : bool
+        A load-cell offset per condition (prior N(0, 5% of its peak force)).
+    """
+
+    def __init__(
+        self,
+        specs: dict,
+        prior,
+        shared=STEM_PARAMETERS,
+        force_noise: str = "ar1",
+        anchorage: bool = True,
+        force_offsets: bool = False,
+        _liks: dict | None = None,
+    ):
+        bad = [s for s in shared if s not in STEM_PARAMETERS]
+        if bad:
+            raise ValueError(f"shared: expected a subset of {', '.join(STEM_PARAMETERS)}, got {', '.join(bad)}")
+        if len(specs) < 1:
+            raise ValueError("specs: expected at least one condition, got none")
+        self.conditions = list(specs)
+        self.shared = tuple(s for s in STEM_PARAMETERS if s in shared)
+        self.anchorage = bool(anchorage)
+        self.force_noise = force_noise
+        self.prior = prior
+        lo, hi = prior.get("p").bounds()
+        self.p_range = (lo, min(hi, 3.0))
+        effects = (("force_offset",) if force_offsets else ()) + (("base_compliance",) if anchorage else ())
+        axis = EffectAxis("base_compliance", np.linspace(0.0, U_MAX, U_NODES)) if anchorage else None
+        self.liks = _liks or {
+            c: RodLikelihood(
+                s,
+                p_range=self.p_range,
+                effects=effects,
+                use_shapes=False,
+                effect_axis=axis,
+                force_noise=force_noise,
+            )
+            for c, s in specs.items()
+        }
+        self.specs = specs
+        names = list(self.shared)
+        priors = {n: prior.get(n) for n in self.shared}
+        self.local: dict[str, dict[str, str]] = {}
+        for c in self.conditions:
+            lik = self.liks[c]
+            loc = {}
+            for n in STEM_PARAMETERS:
+                if n not in self.shared:
+                    loc[n] = condition_name(n, c)
+                    priors[loc[n]] = prior.get(n)
+            loc["sigma_force_N"] = condition_name("sigma_force_N", c)
+            priors[loc["sigma_force_N"]] = prior.get("sigma_force_N")
+            if force_noise == "ar1":
+                loc["rho_force"] = condition_name("rho_force", c)
+                priors[loc["rho_force"]] = prior.get("rho_force")
+            if anchorage:
+                loc["u_base"] = condition_name("u_base", c)
+                priors[loc["u_base"]] = ParamPrior(loc["u_base"], "uniform", (0.0, U_MAX), "1")
+            if force_offsets:
+                loc["force_offset"] = condition_name("force_offset_N", c)
+                peak = float(np.max(np.abs(lik.F_obs))) if lik.n_force else 1.0
+                priors[loc["force_offset"]] = ParamPrior(loc["force_offset"], "normal", (0.0, 0.05 * peak), "N")
+            names += list(loc.values())
+            self.local[c] = loc
+        for n in self.shared:
+            names.remove(n)
+        stem = [n for n in STEM_PARAMETERS if n in self.shared] + [
+            self.local[c][n] for n in STEM_PARAMETERS if n not in self.shared for c in self.conditions
+        ]
+        self.names = stem + [n for n in names if n not in stem]
+        self.priors = priors
+        self.n_force = int(sum(lik.n_force for lik in self.liks.values()))
+
+    def condition_params(self, params: dict, c: str) -> dict:
+        """The single-condition parameters (RodLikelihood names) of condition ``c`` from group parameters."""
+        loc = self.local[c]
+        out = {n: params[n] if n in self.shared else params[loc[n]] for n in STEM_PARAMETERS}
+        out["sigma_force_N"] = params[loc["sigma_force_N"]]
+        if "rho_force" in loc:
+            out["rho_force"] = params[loc["rho_force"]]
+        if "force_offset" in loc:
+            out["force_offset"] = params[loc["force_offset"]]
+        if self.anchorage:
+            out["base_compliance"] = base_stiffness(params[loc["u_base"]], out["EI0"], self.liks[c].L)
+        return out
+
+    def log_likelihood(self, params: dict) -> NDArray:
+        return sum(self.liks[c].log_likelihood(self.condition_params(params, c)) for c in self.conditions)
+
+    def residuals(self, params: dict) -> dict[str, NDArray]:
+        """Force residuals (W, N_c) per condition."""
+        return {c: self.liks[c].residuals(self.condition_params(params, c))["force"] for c in self.conditions}
+
+    def restricted(self, masks: dict[str, NDArray]) -> GroupLikelihood:
+        """The same model on a subset of each condition's force samples (``masks[c]`` (N_c,) bool)."""
+        liks = {c: restrict(self.liks[c], masks[c]) for c in self.conditions}
+        return GroupLikelihood(
+            self.specs,
+            self.prior,
+            self.shared,
+            self.force_noise,
+            self.anchorage,
+            any("force_offset" in loc for loc in self.local.values()),
+            _liks=liks,
+        )
+
+
+def base_stiffness(u: NDArray, EI0: NDArray, L: float) -> NDArray:
+    """k_b [N m/rad] from the table coordinate u = c/(1+c), c = EI0 / (k_b L); inf at u = 0 (a clamp)."""
+    u = np.asarray(u, float)
+    with np.errstate(divide="ignore"):
+        return np.where(u > 0, np.asarray(EI0, float) * (1.0 - u) / (np.maximum(u, 1e-300) * L), np.inf)
+
+
+def base_compliance(u: NDArray, EI0: NDArray, L: float) -> NDArray:
+    """C = 1/k_b [rad/(N m)] from u: C = c L / EI0, c = u/(1-u)."""
+    u = np.asarray(u, float)
+    return u / (1.0 - u) * L / np.asarray(EI0, float)
+
+
+def restrict(lik: RodLikelihood, mask: NDArray) -> RodLikelihood:
+    """A forces-only likelihood restricted to the force samples where ``mask`` is True (tables sliced, not rebuilt)."""
+    mask = np.asarray(mask, bool)
+    if mask.shape != lik.F_obs.shape:
+        raise ValueError(f"mask: expected shape {lik.F_obs.shape}, got {mask.shape}")
+    new = object.__new__(type(lik))
+    new.__dict__.update(lik.__dict__)
+    new.f_table = lik.f_table[..., mask]
+    new.F_obs = lik.F_obs[mask]
+    new.F_push = lik.F_push[mask]
+    new.F_height = lik.F_height[mask]
+    new.F_first = np.r_[True, new.F_push[1:] != new.F_push[:-1]] if new.F_push.size else new.F_push.astype(bool)
+    new.n_force = int(mask.sum())
+    return new
+
+
+class GroupPosterior:
+    """Prior times likelihood in the sampling space (log for positive parameters); ``log_prob`` is what emcee sees."""
+
+    def __init__(self, likelihood: GroupLikelihood):
+        self.likelihood = likelihood
+        self.names = likelihood.names
+        self.priors = [likelihood.priors[n] for n in self.names]
+        self._p_idx = [i for i, n in enumerate(self.names) if n == "p" or n.startswith("p__")]
+        self._p_bounds = likelihood.p_range
+
+    @property
+    def ndim(self) -> int:
+        return len(self.names)
+
+    def sample_bounds(self) -> list[tuple[float | None, float | None]]:
+        """Bounds of each sampling-space coordinate (None: unbounded), for a bounded optimiser."""
+        out = []
+        for i, pr in enumerate(self.priors):
+            if pr.log_space:
+                out.append((None, None))
+                continue
+            lo, hi = pr.bounds()
+            if i in self._p_idx:
+                lo, hi = max(lo, self._p_bounds[0]), min(hi, self._p_bounds[1])
+            out.append((lo if np.isfinite(lo) else None, hi if np.isfinite(hi) else None))
+        return out
+
+    def to_natural(self, theta) -> dict:
+        theta = np.atleast_2d(theta)
+        return {n: pr.from_sample(theta[:, i]) for i, (n, pr) in enumerate(zip(self.names, self.priors, strict=True))}
+
+    def to_sample(self, natural: dict) -> NDArray:
+        return np.stack(
+            [pr.to_sample(np.atleast_1d(natural[n])) for n, pr in zip(self.names, self.priors, strict=True)], axis=-1
+        )
+
+    def log_prob(self, theta) -> NDArray | float:
+        theta_arr = np.asarray(theta, float)
+        single = theta_arr.ndim == 1
+        t = np.atleast_2d(theta_arr)
+        lp = sum(pr.logpdf_sample(t[:, i]) for i, pr in enumerate(self.priors))
+        p = t[:, self._p_idx]
+        ok = np.isfinite(lp) & np.all(np.isfinite(t), 1)
+        ok &= np.all((p >= self._p_bounds[0]) & (p <= self._p_bounds[1]), axis=1)
+        out = np.full(t.shape[0], -np.inf)
+        if ok.any():
+            nat = {k: v[ok] for k, v in self.to_natural(t).items()}
+            ll = self.likelihood.log_likelihood(nat)
+            out[ok] = np.where(np.isfinite(ll), lp[ok] + ll, -np.inf)
+        return float(out[0]) if single else out
+
+
+def start_point(post: GroupPosterior) -> NDArray:
+    """A starting point: per condition the plain model's least-squares scale at each p; the stiffest
+    condition sets the shared EI0 (the others start softer at the base), then :func:`map_fit`."""
+    lik = post.likelihood
+    best = None
+    for p in lik.liks[lik.conditions[0]].p_grid[2:-2:3]:
+        nat = {}
+        scales = {}
+        for c in lik.conditions:
+            L1 = lik.liks[c]
+            EI0, rms = force_scale_fit(L1, p)
+            EI0 = EI0 if np.isfinite(EI0) and EI0 > 0 else 1.0
+            scales[c] = EI0
+            loc = lik.local[c]
+            nat[loc["sigma_force_N"]] = max(rms, 1e-4)
+            if "rho_force" in loc:
+                nat[loc["rho_force"]] = 0.5
+            if "force_offset" in loc:
+                nat[loc["force_offset"]] = 0.0
+        top = max(scales.values())
+        for c in lik.conditions:
+            loc = lik.local[c]
+            for n in STEM_PARAMETERS:
+                if n not in lik.shared:
+                    nat[loc[n]] = scales[c] if n == "EI0" else p
+            if "u_base" in loc:
+                # the apparent softening top / EI0_c - 1 ~ c at small deflection (an upper bound at the tip)
+                c_app = top / scales[c] - 1.0 if "EI0" in lik.shared else 0.0
+                nat[loc["u_base"]] = float(np.clip(c_app / (1.0 + c_app), 0.02, 0.8 * U_MAX))
+        if "EI0" in lik.shared:
+            nat["EI0"] = top
+        if "p" in lik.shared:
+            nat["p"] = p
+        theta = post.to_sample(nat)[0]
+        lp = post.log_prob(theta)
+        if best is None or lp > best[1]:
+            best = (theta, lp)
+    if best is None or not np.isfinite(best[1]):
+        raise ValueError("fit_group: expected a starting point with finite posterior density, found none")
+    return map_fit(post, best[0])
+
+
+def map_fit(post: GroupPosterior, theta0: NDArray, maxiter: int = 400) -> NDArray:
+    """Maximum a posteriori in the sampling space: L-BFGS-B with central differences batched in one call."""
+    n = theta0.size
+    h = 1e-5
+
+    def fg(t):
+        pts = np.vstack([t, t + h * np.eye(n), t - h * np.eye(n)])
+        lp = post.log_prob(pts)
+        if not np.isfinite(lp[0]):
+            return 1e300, np.zeros(n)
+        g = (lp[1 : n + 1] - lp[n + 1 :]) / (2 * h)
+        g = np.where(np.isfinite(g), g, 0.0)
+        return -lp[0], -g
+
+    bounds = post.sample_bounds()
+    # a central difference must not leave the support: keep h inside every bound
+    bounds = [(None if lo is None else lo + 2 * h, None if hi is None else hi - 2 * h) for lo, hi in bounds]
+    theta0 = np.clip(
+        theta0, [-np.inf if b[0] is None else b[0] for b in bounds], [np.inf if b[1] is None else b[1] for b in bounds]
+    )
+    res = minimize(fg, theta0, jac=True, method="L-BFGS-B", bounds=bounds, options={"maxiter": maxiter})
+    t = res.x if np.isfinite(res.fun) and res.fun <= -post.log_prob(theta0) else theta0
+    return t
+
+
+@dataclass(frozen=True)
+class SharingCheck:
+    """Held-out comparison of the joint (shared stem) and separate models."""
+
+    verdict: str  # "supported" | "rejected"
+    heldout_force_rmse_joint_N: float
+    heldout_force_rmse_separate_N: float
+    per_condition: dict  # condition -> {"joint": rmse, "separate": rmse}
+    tolerance: float
+
+    def to_dict(self) -> dict:
+        return {
+            "verdict": self.verdict,
+            "heldout_force_rmse_joint_N": self.heldout_force_rmse_joint_N,
+            "heldout_force_rmse_separate_N": self.heldout_force_rmse_separate_N,
+            "per_condition": self.per_condition,
+            "heldout": "the last third of every push of one condition at a time; both models refitted (MAP) "
+            "on everything else",
+            "rule": f"rejected when the joint model's held-out RMSE exceeds the separate fits' by more than "
+            f"{100 * self.tolerance:g}%",
+        }
+
+
+def last_third_masks(lik: RodLikelihood) -> NDArray:
+    """True for the last third of each push's engaged samples (the held-out block: extrapolation)."""
+    out = np.zeros(lik.F_obs.size, bool)
+    for j in np.unique(lik.F_push):
+        idx = np.flatnonzero(lik.F_push == j)
+        out[idx[int(math.ceil(2 * idx.size / 3)) :]] = True
+    return out
+
+
+def sharing_check(joint: GroupLikelihood, theta_joint: NDArray, tolerance: float = 0.10) -> SharingCheck:
+    """Hold out the last third of each push of one condition at a time; refit the joint and the separate
+    models (MAP) on the rest; compare held-out force RMSE pooled over the conditions."""
+    separate = GroupLikelihood(
+        joint.specs,
+        joint.prior,
+        shared=(),
+        force_noise=joint.force_noise,
+        anchorage=False,
+        _liks={c: _plain(joint.liks[c]) for c in joint.conditions},
+    )
+    post_j = GroupPosterior(joint)
+    post_s = GroupPosterior(separate)
+    theta_s = start_point(post_s)
+    sq = {"joint": 0.0, "separate": 0.0}
+    n = 0
+    per = {}
+    for c in joint.conditions:
+        held = last_third_masks(joint.liks[c])
+        masks = {k: (~held if k == c else np.ones(joint.liks[k].F_obs.size, bool)) for k in joint.conditions}
+        row = {}
+        for key, model, post, t0 in (("joint", joint, post_j, theta_joint), ("separate", separate, post_s, theta_s)):
+            sub = GroupPosterior(model.restricted(masks))
+            t = map_fit(sub, t0)
+            nat = {k: v for k, v in post.to_natural(t).items()}
+            r = model.residuals(nat)[c][0][held]
+            sq[key] += float(np.sum(r**2))
+            row[key] = float(np.sqrt(np.mean(r**2)))
+        n += int(held.sum())
+        per[c] = row
+    rj, rs = math.sqrt(sq["joint"] / n), math.sqrt(sq["separate"] / n)
+    verdict = "rejected" if rj > (1.0 + tolerance) * rs else "supported"
+    return SharingCheck(verdict, rj, rs, per, tolerance)
+
+
+def _plain(lik: RodLikelihood) -> RodLikelihood:
+    """The same data without the base-compliance axis: the neutral slice (u = 0) of the tables."""
+    new = object.__new__(type(lik))
+    new.__dict__.update(lik.__dict__)
+    if lik.axis is not None:
+        new.f_table = lik.f_table[:1]
+        new.x_table = lik.x_table[:1]
+        new.cos_table = lik.cos_table[:1]
+        new.axis = None
+    new.effects = tuple(e for e in lik.effects if e != "base_compliance")
+    return new

@@ -1,0 +1,174 @@
+"""One stem under several conditions (issue 23): grouping, the joint posterior, the sharing check, the CLI."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+import bayesrod
+from bayesrod.cli import main
+from bayesrod.inference.group import (
+    GroupLikelihood,
+    GroupPosterior,
+    base_compliance,
+    base_stiffness,
+    restrict,
+    sharing_check,
+    start_point,
+)
+from bayesrod.inference.likelihood import RodLikelihood
+from bayesrod.inference.priors import load_prior
+from bayesrod.physics import k_x
+
+EI0, P, L = 2.63, 0.43, 0.80
+H_REF = 0.55
+QUIET = {"noise_rho": 0.9, "config_overrides": {"n_frames_engaged": 2}}
+
+
+def _kb(ratio: float) -> float:
+    """Base stiffness that leaves ``ratio`` of the clamped k_x at H_REF (a brace-root cut)."""
+    kx = float(k_x(H_REF, EI0, P, L))
+    return kx * H_REF**2 * ratio / (1.0 - ratio)
+
+
+def test_compliance_coordinate_round_trips_and_a_clamp_is_zero():
+    u = np.array([0.0, 0.1, 0.5, 0.85])
+    kb = base_stiffness(u, 2.0, 0.8)
+    assert np.isinf(kb[0])
+    C = base_compliance(u, 2.0, 0.8)
+    np.testing.assert_allclose(C[1:], 1.0 / kb[1:], rtol=1e-12)
+    assert C[0] == 0.0
+
+
+@pytest.fixture(scope="module")
+def cut_pair():
+    """intact and one cut (64% of the clamped stiffness left), one height, AR(0.9) force noise."""
+    return bayesrod.simulate_group(
+        "twig", conditions={"a": math.inf, "b": _kb(0.64)}, heights_m=[0.55], seed=2, stem_id="s1", **QUIET
+    )
+
+
+def test_group_likelihood_is_the_sum_of_the_single_condition_likelihoods(cut_pair):
+    """The joint log-likelihood at shared EI0, p equals the sum of each condition's own likelihood with its
+    base spring (an independently built RodLikelihood of the same data), and restricting samples slices it."""
+    specs = {d.extra["condition"]: d for d in cut_pair}
+    pr = load_prior("woody")
+    lik = GroupLikelihood(specs, pr)
+    params = {
+        "EI0": np.array([2.5, 2.7]),
+        "p": np.array([0.4, 0.45]),
+        "sigma_force_N__a": np.array([0.03, 0.05]),
+        "rho_force__a": np.array([0.8, 0.5]),
+        "u_base__a": np.array([0.0, 0.05]),
+        "sigma_force_N__b": np.array([0.04, 0.02]),
+        "rho_force__b": np.array([0.9, 0.7]),
+        "u_base__b": np.array([0.2, 0.3]),
+    }
+    got = lik.log_likelihood(params)
+    want = np.zeros(2)
+    for c in ("a", "b"):
+        one = lik.liks[c]
+        kb = base_stiffness(params[f"u_base__{c}"], params["EI0"], one.L)
+        want += one.log_likelihood(
+            {
+                "EI0": params["EI0"],
+                "p": params["p"],
+                "sigma_force_N": params[f"sigma_force_N__{c}"],
+                "rho_force": params[f"rho_force__{c}"],
+                "base_compliance": kb,
+            }
+        )
+    np.testing.assert_allclose(got, want, rtol=1e-12)
+    # the per-condition base spring matters: swapping the conditions' compliances changes the likelihood
+    swapped = {**params, "u_base__a": params["u_base__b"], "u_base__b": params["u_base__a"]}
+    assert np.all(np.abs(lik.log_likelihood(swapped) - got) > 1.0)
+    # restricting to a subset of samples equals a likelihood built on that subset's tables
+    one = lik.liks["a"]
+    mask = np.arange(one.F_obs.size) % 3 != 0
+    sub = restrict(one, mask)
+    assert sub.n_force == mask.sum() and np.array_equal(sub.F_obs, one.F_obs[mask])
+    plain = RodLikelihood(specs["a"], use_shapes=False)
+    np.testing.assert_allclose(
+        restrict(plain, mask).predict_nd_force(np.array([0.43]))[0], plain.predict_nd_force(np.array([0.43]))[0][mask]
+    )
+
+
+def test_sharing_is_supported_for_a_cut_base_and_rejected_when_the_stem_changed(cut_pair):
+    """MAP refits on held-out thirds: a softer base keeps the stem (supported); a stem 30% softer with the
+    base unchanged cannot be told as a base compliance (rejected), at one height too."""
+    pr = load_prior("woody")
+    changed = bayesrod.simulate_group(
+        "twig",
+        conditions={"a": math.inf, "b": math.inf},
+        stem_change={"b": 0.7},
+        heights_m=[0.55],
+        seed=2,
+        **QUIET,
+    )
+    for want, dss in (("supported", cut_pair), ("rejected", changed)):
+        lik = GroupLikelihood({d.extra["condition"]: d for d in dss}, pr)
+        post = GroupPosterior(lik)
+        theta = start_point(post)
+        chk = sharing_check(lik, theta)
+        assert chk.verdict == want, chk
+        if want == "supported":  # the MAP finds the stem and the cut base
+            nat = post.to_natural(theta)
+            assert nat["EI0"][0] == pytest.approx(EI0, rel=0.03)
+            assert nat["u_base__a"][0] < 0.02 < nat["u_base__b"][0]
+
+
+def test_find_groups_reports_what_it_cannot_group(tmp_path):
+    import dataclasses
+
+    D = np.linspace(0, 0.1, 30)
+
+    def ds(stem, cond):
+        d = bayesrod.Dataset.from_arrays(length_m=0.8, height_m=[0.5], displacement_m=[D], force_N=[3 * D + 0.01])
+        extra = {k: v for k, v in (("stem_id", stem), ("condition", cond)) if v is not None}
+        return dataclasses.replace(d, specimen=f"{stem}-{cond}", extra=extra)
+
+    for name, stem, cond in [
+        ("s1-intact", "s1", "intact"),
+        ("s1-cut", "s1", "cut"),
+        ("s1-cut-again", "s1", "cut"),  # the same condition twice
+        ("s2-intact", "s2", "intact"),  # a stem with one condition
+        ("loose", None, None),  # no stem_id
+    ]:
+        ds(stem, cond).save(tmp_path / name)
+    from bayesrod.api.group import find_groups
+
+    groups, problems = find_groups(tmp_path)
+    assert list(groups) == ["s1"] and sorted(groups["s1"]) == ["cut", "intact"]
+    text = "\n".join(problems)
+    assert "s1-cut-again" in text and "'cut' again" in text
+    assert "stem s2: expected two or more conditions" in text
+    assert "loose/specimen.json: stem_id, condition" in text
+
+
+@pytest.mark.slow  # about 2 minutes
+def test_fit_group_cli_writes_the_contract_and_recovers_the_stem(tmp_path):
+    """intact + one cut at two heights, AR(0.9) noise: shared EI0 covers the truth, the cut's compliance covers
+    its truth and is softer with high probability; summary.json carries every documented key."""
+    kb = _kb(0.64)
+    dss = bayesrod.simulate_group(
+        "twig", conditions={"intact": math.inf, "cut": kb}, heights_m=[0.45, 0.65], seed=4, stem_id="m7", **QUIET
+    )
+    for d in dss:
+        d.save(tmp_path / "data" / d.specimen)
+    code = main(["fit-group", str(tmp_path / "data"), "--out", str(tmp_path / "run"), "--prior", "woody", "--quiet"])
+    assert code == 0
+    s = json.loads((tmp_path / "run" / "m7" / "summary.json").read_text())
+    assert set(s) >= {"stem_id", "shared", "conditions", "contrasts", "sharing", "identifiability", "convergence"}
+    q = s["shared"]["EI0"]
+    assert q["q05"] <= EI0 <= q["q95"], q
+    assert q["q95"] / q["q05"] < 1.1  # two heights: the stem is pinned down
+    cut = s["conditions"]["cut"]["base_compliance_rad_per_Nm"]
+    assert cut["q05"] <= 1.0 / kb <= cut["q95"], cut
+    assert s["conditions"]["intact"]["base_compliance_rad_per_Nm"]["q05"] >= 0.0
+    (c,) = [c for c in s["contrasts"] if c["a"] == "intact" and c["b"] == "cut"]
+    assert c["prob_b_softer"] > 0.99
+    assert s["sharing"]["verdict"] == "supported"
+    assert [k["height_m"] for k in s["conditions"]["cut"]["k_theta"]] == [0.45, 0.65]
+    index = json.loads((tmp_path / "run" / "groups.json").read_text())
+    assert index["stems"] == {"m7": "m7"} and index["problems"] == []
