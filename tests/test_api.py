@@ -274,3 +274,55 @@ def test_progress_only_on_a_terminal(monkeypatch):
     assert progress_enabled(True) and not progress_enabled(False)
     monkeypatch.setattr(sys, "stderr", open(os.devnull, "w"))
     assert not progress_enabled(True)
+
+
+def test_summary_json_intervals_are_the_stated_quantiles_of_the_draws(post):
+    """summary.json's q05/q95 (parameters and k_theta) are the 5% and 95% quantiles of the draws, by np.quantile."""
+    doc = post.to_dict()
+    assert doc["level"] == 0.9
+    for name, q in doc["parameters"].items():
+        x = post.samples[name]
+        assert q["q05"] == pytest.approx(np.quantile(x, 0.05), rel=1e-12), name
+        assert q["median"] == pytest.approx(np.quantile(x, 0.5), rel=1e-12), name
+        assert q["q95"] == pytest.approx(np.quantile(x, 0.95), rel=1e-12), name
+    EI0, p = post.samples["EI0"], post.samples["p"]
+    for row in doc["k_theta"]:
+        k = bayesrod.k_theta(row["height_m"], EI0, p, post.length_m)
+        assert row["q05"] == pytest.approx(np.quantile(k, 0.05), rel=1e-12)
+        assert row["q95"] == pytest.approx(np.quantile(k, 0.95), rel=1e-12)
+
+
+def test_posterior_width_matches_the_laplace_width_and_the_noise_is_recovered(post, twig_noisy):
+    """A well-identified case (three heights, iid noise, forces): the posterior sd of log EI0 and p is within
+    25% of the Laplace sd (inverse Hessian of the log posterior at its mode, by finite differences), and the
+    fitted force noise covers the simulator's. An interval too wide (or too narrow) fails as surely as an
+    off-centre one."""
+    from scipy.optimize import minimize
+
+    from bayesrod.inference.likelihood import LogPosterior
+    from bayesrod.inference.priors import load_prior
+
+    lp = LogPosterior(post.likelihood, load_prior(post.config["prior"]))
+    theta = lp.to_sample({k: post.samples[k] for k in lp.names})
+    best = theta[np.argmax(lp.log_prob(theta[:: max(1, len(theta) // 4000)]))]
+    mode = minimize(lambda t: -lp.log_prob(t), best, method="Nelder-Mead", options={"xatol": 1e-9, "fatol": 1e-9}).x
+    n = mode.size
+    h = 1e-4 * np.maximum(np.abs(mode), 1.0)
+    H = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            ei, ej = np.eye(n)[i] * h[i], np.eye(n)[j] * h[j]
+            H[i, j] = (
+                lp.log_prob(mode + ei + ej)
+                - lp.log_prob(mode + ei - ej)
+                - lp.log_prob(mode - ei + ej)
+                + lp.log_prob(mode - ei - ej)
+            ) / (4 * h[i] * h[j])
+    laplace_sd = np.sqrt(np.diag(np.linalg.inv(-H)))
+    sd = np.std(theta, axis=0)
+    for i, name in enumerate(lp.names[:2]):  # log EI0 and p in the sampling space
+        assert 0.8 < sd[i] / laplace_sd[i] < 1.25, (name, sd[i], laplace_sd[i])
+    truth = bayesrod.load(twig_noisy).extra["truth"]["noise"]["force_sd_N"]
+    q = post.summary().loc["sigma_force_N"]
+    assert q["q05"] <= truth <= q["q95"], (q, truth)
+    assert q["q95"] / q["q05"] < 1.6  # and the interval says something
