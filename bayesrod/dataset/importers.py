@@ -204,11 +204,12 @@ def import_blueberry_trial(path: Path, length_m: float, min_rise_N: float = 0.5,
     return rep, cols
 
 
-def import_blueberry(src: Path, out: Path, length_m: float) -> dict:
-    """Import every cane under ``src`` (a ``csv_files`` folder or its parent) into ``out``.
+def blueberry_documents(src: Path, length_m: float) -> tuple[dict, dict]:
+    """Every cane under ``src`` (a ``csv_files`` folder or its parent) as documents; nothing written.
 
-    One dataset per cane (``bush{B}-cane{C}``) with one push per trial that made
-    contact. Writes ``out/import_report.json`` and returns it.
+    Returns ``(datasets, report)``: ``datasets`` maps each cane name (``bush{B}-cane{C}``) to
+    ``{"specimen": specimen.json document, "files": {relative path: force columns}}`` with one push
+    per trial that made contact; ``report`` is the import report (every trial, imported or why not).
     """
     src = Path(src)
     if (src / "csv_files").is_dir():
@@ -225,9 +226,10 @@ def import_blueberry(src: Path, out: Path, length_m: float) -> dict:
         b, c, _ = map(int, _NAME.search(p.name).groups())
         canes.setdefault((b, c), []).append(p)
     report = {"source": str(src), "assumed_length_m": length_m, "canes": []}
+    datasets: dict[str, dict] = {}
     for (b, c), paths in sorted(canes.items()):
         name = f"bush{b}-cane{c}"
-        trials, pushes = [], []
+        trials, pushes, files = [], [], {}
         for p in sorted(paths):
             rep, cols = import_blueberry_trial(p, length_m)
             trials.append(vars(rep))
@@ -236,9 +238,7 @@ def import_blueberry(src: Path, out: Path, length_m: float) -> dict:
             pid = f"h{round(rep.height_m * 1000):d}"
             if any(e["id"] == pid for e in pushes):
                 pid += f"-{len(pushes)}"
-            d = out / name / pid
-            d.mkdir(parents=True, exist_ok=True)
-            write_csv(d / "force.csv", cols)
+            files[f"{pid}/force.csv"] = cols
             pushes.append(
                 {
                     "id": pid,
@@ -251,9 +251,9 @@ def import_blueberry(src: Path, out: Path, length_m: float) -> dict:
         entry = {"cane": name, "trials": trials}
         if pushes:
             pushes.sort(key=lambda e: e["height_m"])
-            write_json(
-                out / name / "specimen.json",
-                {
+            datasets[name] = {
+                "files": files,
+                "specimen": {
                     "format": FORMAT,
                     "specimen": name,
                     "species": "blueberry",
@@ -275,13 +275,28 @@ def import_blueberry(src: Path, out: Path, length_m: float) -> dict:
                         },
                     },
                 },
-            )
+            }
             entry["status"] = "imported"
             entry["dataset"] = name
         else:
             entry["status"] = "rejected"
             entry["reason"] = "no trial made usable contact: " + "; ".join(t["reason"] for t in trials)
         report["canes"].append(entry)
+    return datasets, report
+
+
+def import_blueberry(src: Path, out: Path, length_m: float) -> dict:
+    """:func:`blueberry_documents` written into ``out`` (a dataset folder per cane, import_report.json).
+
+    The caller hands an empty folder (the CLI: the temporary folder of an atomic write). Returns the report.
+    """
+    datasets, report = blueberry_documents(src, length_m)
+    out = Path(out)
+    for name, doc in datasets.items():
+        for rel, cols in doc["files"].items():
+            (out / name / rel).parent.mkdir(parents=True, exist_ok=True)
+            write_csv(out / name / rel, cols)
+        write_json(out / name / "specimen.json", doc["specimen"])
     write_json(out / "import_report.json", report)
     return report
 
