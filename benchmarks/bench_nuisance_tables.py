@@ -13,22 +13,13 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import time
 
 import numpy as np
+from bench_forward import _median_time as median_time  # noqa: E402  (benchmarks/ is the script's path)
 
 import bayesrod
 from bayesrod.inference.likelihood import build_likelihood
 from bayesrod.inference.priors import load_prior
-
-
-def median_time(fn, repeat: int) -> float:
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times)
 
 
 def main() -> None:

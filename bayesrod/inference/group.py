@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize
 
 from .likelihood import EffectAxis, RodLikelihood, force_scale_fit
-from .priors import ParamPrior
+from .priors import ParameterSpace, ParamPrior
 
 #: upper end of the base-compliance coordinate u = c/(1+c): c = EI0 C / L up to 9
 U_MAX = 0.9
@@ -201,7 +201,7 @@ def restrict(lik: RodLikelihood, mask: NDArray) -> RodLikelihood:
     return new
 
 
-class GroupPosterior:
+class GroupPosterior(ParameterSpace):
     """Prior times likelihood in the sampling space (log for positive parameters); ``log_prob`` is what emcee sees."""
 
     def __init__(self, likelihood: GroupLikelihood):
@@ -210,10 +210,6 @@ class GroupPosterior:
         self.priors = [likelihood.priors[n] for n in self.names]
         self._p_idx = [i for i, n in enumerate(self.names) if n == "p" or n.startswith("p__")]
         self._p_bounds = likelihood.p_range
-
-    @property
-    def ndim(self) -> int:
-        return len(self.names)
 
     def sample_bounds(self) -> list[tuple[float | None, float | None]]:
         """Bounds of each sampling-space coordinate (None: unbounded), for a bounded optimiser."""
@@ -227,15 +223,6 @@ class GroupPosterior:
                 lo, hi = max(lo, self._p_bounds[0]), min(hi, self._p_bounds[1])
             out.append((lo if np.isfinite(lo) else None, hi if np.isfinite(hi) else None))
         return out
-
-    def to_natural(self, theta) -> dict:
-        theta = np.atleast_2d(theta)
-        return {n: pr.from_sample(theta[:, i]) for i, (n, pr) in enumerate(zip(self.names, self.priors, strict=True))}
-
-    def to_sample(self, natural: dict) -> NDArray:
-        return np.stack(
-            [pr.to_sample(np.atleast_1d(natural[n])) for n, pr in zip(self.names, self.priors, strict=True)], axis=-1
-        )
 
     def log_prob(self, theta) -> NDArray | float:
         theta_arr = np.asarray(theta, float)

@@ -39,6 +39,7 @@ from scipy.interpolate import PchipInterpolator
 from ..dataset.engagement import detect_engagement
 from ..dataset.model import Specimen
 from ..physics.elastica import centerline_at, contact_from_force_nd
+from .priors import ParameterSpace
 
 _LOG_2PI = math.log(2 * math.pi)
 # force_offset is exact (additive); the others enter through a second table axis (at most one of them)
@@ -800,7 +801,7 @@ def ar1_loglik(r: NDArray, sigma: NDArray, rho: NDArray, first: NDArray) -> NDAr
     )
 
 
-class LogPosterior:
+class LogPosterior(ParameterSpace):
     """Prior times likelihood in the sampling space; ``log_prob(theta)`` is what emcee sees.
 
     ``theta`` has shape (ndim,) or (W, ndim): log EI0, p, then the noise terms
@@ -817,19 +818,6 @@ class LogPosterior:
         if plo < lo - 1e-12 or phi > hi + 1e-12:
             raise ValueError(f"prior p: expected support within the table range [{lo}, {hi}], got [{plo}, {phi}]")
         self._p_bounds = (max(lo, plo), min(hi, phi))
-
-    @property
-    def ndim(self) -> int:
-        return len(self.names)
-
-    def to_natural(self, theta) -> dict:
-        theta = np.atleast_2d(theta)
-        return {n: pr.from_sample(theta[:, i]) for i, (n, pr) in enumerate(zip(self.names, self.priors, strict=True))}
-
-    def to_sample(self, natural: dict) -> NDArray:
-        return np.stack(
-            [pr.to_sample(np.atleast_1d(natural[n])) for n, pr in zip(self.names, self.priors, strict=True)], axis=-1
-        )
 
     def log_prior(self, theta) -> NDArray:
         theta = np.atleast_2d(theta)

@@ -14,6 +14,7 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy import special, stats
 
 from ..physics.effects import EFFECT_NAMES
@@ -97,6 +98,27 @@ class ParamPrior:
             mean, sd, lo, hi = a
             return float(stats.truncnorm.ppf(q, (lo - mean) / sd, (hi - mean) / sd, loc=mean, scale=sd))
         return float(a[0] + q * (a[1] - a[0]))
+
+
+class ParameterSpace:
+    """Named parameters with their priors (``names``, ``priors``): maps between natural units and the
+    sampling space (log for positive parameters), shared by the posteriors emcee sees."""
+
+    names: list
+    priors: list
+
+    @property
+    def ndim(self) -> int:
+        return len(self.names)
+
+    def to_natural(self, theta) -> dict:
+        theta = np.atleast_2d(theta)
+        return {n: pr.from_sample(theta[:, i]) for i, (n, pr) in enumerate(zip(self.names, self.priors, strict=True))}
+
+    def to_sample(self, natural: dict) -> NDArray:
+        return np.stack(
+            [pr.to_sample(np.atleast_1d(natural[n])) for n, pr in zip(self.names, self.priors, strict=True)], axis=-1
+        )
 
 
 def _parse_param(name: str, spec: dict, source: str) -> ParamPrior:
