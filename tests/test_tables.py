@@ -303,3 +303,28 @@ def test_table_reader_never_shifts_a_column(delim, comma_decimal, n_meta, meta, 
         assert j < len(want), (r, want)
         j += 1
     assert tab.n_rows == len(values)
+
+
+def test_stem_and_condition_come_from_the_importer_and_group_the_datasets(tmp_path, capsys):
+    """A brace-root style series imported without hand edits: per-file stem_id and condition from --metadata."""
+    import shutil
+
+    from bayesrod.api.group import find_groups
+
+    src = tmp_path / "src"
+    src.mkdir()
+    for cond in ("intact", "cut1"):
+        shutil.copy(RIGS / "utm_instron.csv", src / f"stalk7_{cond}.csv")
+    meta = tmp_path / "meta.csv"
+    meta.write_text(
+        "file,stem_id,condition,specimen\n"
+        "stalk7_intact.csv,stalk7,intact,stalk7-intact\n"
+        "stalk7_cut1.csv,stalk7,cut1,stalk7-cut1\n"
+    )
+    out = tmp_path / "out"
+    code = main(["import", "table", str(src), "--out", str(out), *UTM, "--metadata", str(meta)])
+    assert code == 0, capsys.readouterr().err
+    doc = json.loads((out / "stalk7-cut1" / "specimen.json").read_text())
+    assert doc["stem_id"] == "stalk7" and doc["condition"] == "cut1"
+    groups, problems = find_groups(out)
+    assert list(groups) == ["stalk7"] and sorted(groups["stalk7"]) == ["cut1", "intact"] and problems == []

@@ -173,6 +173,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     im.add_argument("--species", help="table: species")
     im.add_argument(
+        "--stem-id", help="table: the stem's id: datasets sharing it are one stem under several conditions (fit-group)"
+    )
+    im.add_argument("--condition", help="table: the condition of this stem (e.g. intact, cut1); see fit-group")
+    im.add_argument(
         "--metadata",
         metavar="CSV",
         help="table: a CSV with a column file and any of height_m, "
@@ -351,6 +355,8 @@ FLAGS = {
     "min_heldout_gain": "--min-heldout-gain",
     "n_workers": "--workers",
     "shared": "--shared",
+    "stem_id": "--stem-id",
+    "condition": "--condition",
     "checkpoint": "--resume",
     "arm": "--arm",
     "max_steps": "--max-steps",
@@ -646,6 +652,8 @@ def _import_table(args: argparse.Namespace) -> int:
         length_unknown=args.length_unknown,
         specimen=args.specimen,
         species=args.species,
+        stem_id=args.stem_id,
+        condition=args.condition,
         metadata=args.metadata,
         header_row=args.header_row,
         cycles=args.cycles,

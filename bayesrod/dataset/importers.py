@@ -309,7 +309,16 @@ FORCE_UNITS = {"N": 1.0, "kN": 1e3, "gf": GF_TO_N}
 DISPLACEMENT_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 ANGLE_UNITS = {"deg": np.pi / 180.0, "rad": 1.0}
 #: per-file fields a metadata table may set (the same names as the options)
-METADATA_FIELDS = ("height_m", "length_m", "specimen", "species", "arm_height_m", "force_sign")
+METADATA_FIELDS = (
+    "height_m",
+    "length_m",
+    "specimen",
+    "species",
+    "arm_height_m",
+    "force_sign",
+    "stem_id",
+    "condition",
+)
 
 
 @dataclass(frozen=True)
@@ -377,6 +386,8 @@ class TableOptions:
     length_unknown: bool = False
     specimen: str | None = None
     species: str | None = None
+    stem_id: str | None = None
+    condition: str | None = None
     header_row: int | None = None
     cycles: str = "all"
     force_sign: int = 1
@@ -613,6 +624,12 @@ def import_tables(files, options: TableOptions, metadata=None) -> TableImport:
         rec = import_recording(p, opt)
         name = opt.specimen or p.stem
         spec = specimens.setdefault(name, {"opt": opt, "pushes": [], "files": {}, "sources": []})
+        for k in ("stem_id", "condition"):  # one stem under one condition per dataset (docs/format.md)
+            if getattr(spec["opt"], k) != getattr(opt, k):
+                raise ValueError(
+                    f"{p}: {k}: expected the same {k} as the other files of {name} "
+                    f"({getattr(spec['opt'], k)!r}), got {getattr(opt, k)!r}"
+                )
         if spec["opt"].length_m != opt.length_m:
             raise ValueError(
                 f"{p}: length_m: expected the same stem length as the other files of {name} "
@@ -652,6 +669,10 @@ def import_tables(files, options: TableOptions, metadata=None) -> TableImport:
         doc["length_m"] = opt.length_m
         if opt.length_unknown:
             doc["length_m_approximate"] = True
+        if opt.stem_id:
+            doc["stem_id"] = opt.stem_id
+        if opt.condition:
+            doc["condition"] = opt.condition
         doc["pushes"] = sorted(spec["pushes"], key=lambda e: (e["height_m"], e["cycle"]))
         doc["provenance"] = {
             "importer": "bayesrod import table",
