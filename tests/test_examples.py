@@ -15,6 +15,7 @@ SLOW_EXAMPLES = {
     "diagnose_misfit.py",
     "predict_new_height.py",
     "quickstart.py",
+    "stem_conditions.py",
 }
 
 
