@@ -27,6 +27,7 @@ from ..inference.group import (
     GroupPosterior,
     base_compliance,
     base_stiffness,
+    clamp_or_u,
     sharing_check,
     start_point,
 )
@@ -240,7 +241,8 @@ def fit_group(
     for c in conds:
         loc = lik.local[c]
         EI0 = nat["EI0"] if "EI0" in lik.shared else nat[loc["EI0"]]
-        samples[f"base_compliance_rad_per_Nm__{c}"] = base_compliance(nat[loc["u_base"]], EI0, lik.liks[c].L)
+        u = clamp_or_u(nat[loc["u_base"]])
+        samples[f"base_compliance_rad_per_Nm__{c}"] = base_compliance(u, EI0, lik.liks[c].L)
     check = sharing_check(lik, theta0) if sharing else None
     doc = _summary(sid, lik, nat, samples, res, pr, check, time.perf_counter() - t0)
     ro = {}
@@ -261,11 +263,12 @@ def _summary(sid, lik: GroupLikelihood, nat, samples, res, pr, check, seconds) -
         L = lik.liks[c].L
         EI0 = nat["EI0"] if "EI0" in lik.shared else nat[loc["EI0"]]
         p = nat["p"] if "p" in lik.shared else nat[loc["p"]]
-        kb = base_stiffness(nat[loc["u_base"]], EI0, L)
+        kb = base_stiffness(clamp_or_u(nat[loc["u_base"]]), EI0, L)
         heights = sorted({float(d.height_m) for d in lik.liks[c].data if d.D_m.size})
         kt = k_theta(np.array(heights)[None, :], EI0[:, None], p[:, None], L, kb[:, None])
         row = {
             "base_compliance_rad_per_Nm": _q(samples[f"base_compliance_rad_per_Nm__{c}"]),
+            "prob_rigid_clamp": float(np.mean(clamp_or_u(nat[loc["u_base"]]) == 0.0)),
             "k_theta": [{"height_m": h, **_q(kt[:, i])} for i, h in enumerate(heights)],
             "sigma_force_N": _q(nat[loc["sigma_force_N"]]),
         }

@@ -10,8 +10,11 @@ Parameterisation. The base compliance enters the elastica through c = EI0 C / L 
 rotational compliance relative to the rod's, L/EI0); the likelihood tables it on the bounded
 coordinate u = c / (1 + c) in [0, U_MAX] (u = 0: a clamp) for every p, exactly as the
 ``base_compliance`` effect of a single fit (:class:`~bayesrod.inference.likelihood.EffectAxis`).
-The prior of each condition's u is uniform on [0, U_MAX]: scale-free, and zero (a rigid clamp)
-is inside the support, so an intact clamp is not forced to be soft.
+Each condition's u is the positive part of a sampled v (``u_base__<condition>``) uniform on
+[-U_MAX, U_MAX]: u = max(v, 0). So the prior gives a rigid clamp (u = 0) probability 1/2 and spreads
+the rest uniformly over (0, U_MAX]: scale-free, and an intact clamp is not forced to be soft (with a
+prior continuous on [0, U_MAX] the clamp sat on the boundary, the posterior gave it some compliance
+and a stiffer stem, and the stem's EI0 came out biased high).
 
 Sharing. ``shared`` names the stem parameters common to all conditions (default EI0 and p);
 a parameter not shared gets one copy per condition (``EI0__<condition>``). The *separate*
@@ -122,7 +125,7 @@ class GroupLikelihood:
                 priors[loc["rho_force"]] = prior.get("rho_force")
             if anchorage:
                 loc["u_base"] = condition_name("u_base", c)
-                priors[loc["u_base"]] = ParamPrior(loc["u_base"], "uniform", (0.0, U_MAX), "1")
+                priors[loc["u_base"]] = ParamPrior(loc["u_base"], "uniform", (-U_MAX, U_MAX), "1")
             if force_offsets:
                 loc["force_offset"] = condition_name("force_offset_N", c)
                 peak = float(np.max(np.abs(lik.F_obs))) if lik.n_force else 1.0
@@ -148,7 +151,7 @@ class GroupLikelihood:
         if "force_offset" in loc:
             out["force_offset"] = params[loc["force_offset"]]
         if self.anchorage:
-            out["base_compliance"] = base_stiffness(params[loc["u_base"]], out["EI0"], self.liks[c].L)
+            out["base_compliance"] = base_stiffness(clamp_or_u(params[loc["u_base"]]), out["EI0"], self.liks[c].L)
         return out
 
     def log_likelihood(self, params: dict) -> NDArray:
@@ -170,6 +173,11 @@ class GroupLikelihood:
             any("force_offset" in loc for loc in self.local.values()),
             _liks=liks,
         )
+
+
+def clamp_or_u(v: NDArray) -> NDArray:
+    """The compliance coordinate u = max(v, 0) of a sampled ``u_base``: v <= 0 is a rigid clamp."""
+    return np.maximum(np.asarray(v, float), 0.0)
 
 
 def base_stiffness(u: NDArray, EI0: NDArray, L: float) -> NDArray:
