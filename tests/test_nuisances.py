@@ -133,3 +133,18 @@ def test_per_push_offsets_are_recovered_and_keep_EI0_honest():
     assert s.loc["EI0", "q05"] <= EI0 <= s.loc["EI0", "q95"], s
     plain = _fit(ds).summary()
     assert not plain.loc["EI0", "q05"] <= EI0 <= plain.loc["EI0", "q95"], plain
+
+
+def test_force_curve_cache_survives_eviction_within_one_batch(monkeypatch):
+    """A batch mixing cached and new heights, larger than the cache: every curve comes back (a KeyError once
+    stopped the blueberry length study when new curves evicted cached ones of the same batch)."""
+    import bayesrod.inference.likelihood as L
+
+    monkeypatch.setattr(L, "CURVE_CACHE_SIZE", 3)
+    monkeypatch.setattr(L, "_CURVE_CACHE", {})
+    pg = np.linspace(0.0, 1.0, 5)
+    first = L.ForceCurves.batch(np.array([0.4, 0.5]), pg, n_f=20)
+    both = L.ForceCurves.batch(np.array([0.4, 0.5, 0.6, 0.7, 0.8]), pg, n_f=20)
+    assert len(both) == 5 and both[0] is first[0] and both[1] is first[1]
+    again = L.ForceCurves.batch(np.array([0.45]), pg, n_f=20)[0]
+    np.testing.assert_allclose(again.force(np.array([0.05])), L.ForceCurves(0.45, pg, n_f=20).force(np.array([0.05])))

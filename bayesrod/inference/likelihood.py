@@ -189,7 +189,8 @@ class ForceCurves:
         tag = (np.asarray(p_grid, float).tobytes(), int(n_f))
         keys = [(float(e), tuple(sorted(r.items())), tag) for e, r in zip(etas, rows, strict=True)]
         todo = [q for q in range(Q) if keys[q] not in _CURVE_CACHE]
-        out = {}
+        # taken before anything is added: inserting the new curves may evict cached ones
+        out = {q: _CURVE_CACHE[keys[q]] for q in range(Q) if keys[q] in _CURVE_CACHE}
         if todo:
             sub = {k: np.array([rows[q][k] for q in todo]) for k in eff} or None
             for q, c in zip(todo, cls._solve(etas[todo], p_grid, n_f, sub), strict=True):
@@ -198,7 +199,7 @@ class ForceCurves:
                 _CURVE_CACHE[keys[q]] = c
                 while len(_CURVE_CACHE) > CURVE_CACHE_SIZE:
                     _CURVE_CACHE.pop(next(iter(_CURVE_CACHE)))
-        return [out[q] if q in out else _CURVE_CACHE[keys[q]] for q in range(Q)]
+        return [out[q] for q in range(Q)]
 
     @classmethod
     def _solve(cls, etas: NDArray, p_grid: NDArray, n_f: int, effects_nd: dict | None) -> list[ForceCurves]:
