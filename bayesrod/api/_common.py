@@ -29,6 +29,13 @@ def as_dataset(dataset) -> Specimen:
     raise TypeError(f"dataset: expected a bayesrod.Dataset or a dataset directory path, got {type(dataset).__name__}")
 
 
+def readonly(a) -> NDArray:
+    """A float copy of ``a`` that cannot be written (the draws result objects hand out)."""
+    arr = np.array(a, dtype=float)
+    arr.setflags(write=False)
+    return arr
+
+
 def plain_json(doc):
     """``doc`` with numpy scalars and arrays turned into JSON numbers and lists (a fresh copy)."""
     from ..dataset.io import json_default

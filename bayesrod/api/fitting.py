@@ -26,12 +26,18 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._version import __version__
 from ..dataset.model import Specimen
-from ..inference.likelihood import LogPosterior, build_likelihood, effective_shape_weight, length_is_approximate
+from ..inference.likelihood import (
+    LogPosterior,
+    build_likelihood,
+    effective_shape_weight,
+    geometry_blocker,
+    length_is_approximate,
+)
 from ..inference.priors import load_prior
 from ..inference.sampler import find_start, run_ensembles
 from ..inference.summary import build_summary, draw_lengths, predictive_forces, to_inference_data
 from ..physics import flexural_rigidity, k_theta, k_x
-from ._common import as_dataset, interval, plain_json, progress_enabled
+from ._common import as_dataset, interval, plain_json, progress_enabled, readonly
 from .bands import Band, ForceBand
 
 log = logging.getLogger("bayesrod")
@@ -72,12 +78,6 @@ def _likelihood_options(config: Mapping) -> dict:
         "height_sd_m": config.get("height_sd_m", 0.0),
         "force_offsets": config.get("force_offsets", False),
     }
-
-
-def _readonly(a) -> NDArray:
-    arr = np.array(a, dtype=float)
-    arr.setflags(write=False)
-    return arr
 
 
 @dataclass(frozen=True, eq=False)
@@ -433,11 +433,11 @@ class Posterior:
         if has_nc:
             idata = az.from_netcdf(str(path / "posterior.nc"))
             idata.load()
-            samples = {k: _readonly(idata.posterior[k].values.reshape(-1)) for k in idata.posterior.data_vars}
+            samples = {k: readonly(idata.posterior[k].values.reshape(-1)) for k in idata.posterior.data_vars}
         else:  # a minimal run: the thinned draws only
             with np.load(path / "samples.npz") as z:
                 samples = {
-                    ("length_m" if k == "length_m_sampled" else k): _readonly(z[k]) for k in z.files if k != "length_m"
+                    ("length_m" if k == "length_m_sampled" else k): readonly(z[k]) for k in z.files if k != "length_m"
                 }
                 length = float(z["length_m"])
             idata = az.from_dict(posterior={k: v[None, :] for k, v in samples.items()})
@@ -540,20 +540,6 @@ def _lumped_points(lik) -> list:
             except ValueError:
                 continue
     return pts
-
-
-def _length_stays_fixed(spec, effects, use_forces, use_shapes, preload) -> str | None:
-    """Why an approximate length cannot be sampled in this fit (None: it can)."""
-    from ..inference.likelihood import TABLE_EFFECTS
-
-    if not use_forces:
-        return "a shape-only fit"
-    if use_shapes and any(p.shapes for p in spec.pushes):
-        return "centerlines are used; fit forces only to sample L"
-    tabled = [e for e in effects if e in TABLE_EFFECTS]
-    if tabled or preload:
-        return f"{tabled[0] if tabled else 'preload'} takes the one extra table axis"
-    return None
 
 
 def _assumptions(spec, lik=None) -> list[str]:
@@ -702,7 +688,7 @@ def fit(
     if length == "auto":  # resolved here, so that the run records what was fitted
         length = "known"
         if length_is_approximate(spec):
-            why = _length_stays_fixed(spec, effects, use_forces, use_shapes, preload)
+            why = geometry_blocker(spec, effects, use_forces=use_forces, use_shapes=use_shapes, preload=preload)
             if why is None:
                 length = "unknown"
             else:
@@ -784,7 +770,7 @@ def fit(
         target_ess=target_ess,
     )
     flat = res.chain.reshape(-1, post.ndim)
-    samples = {k: _readonly(v) for k, v in post.to_natural(flat).items()}
+    samples = {k: readonly(v) for k, v in post.to_natural(flat).items()}
     median = {k: float(np.median(v)) for k, v in samples.items()}
     truth = spec.extra.get("truth")
     extra = {

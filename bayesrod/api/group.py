@@ -26,7 +26,6 @@ from ..inference.group import (
     GroupLikelihood,
     GroupPosterior,
     base_compliance,
-    base_stiffness,
     clamp_or_u,
     sharing_check,
     start_point,
@@ -34,7 +33,7 @@ from ..inference.group import (
 from ..inference.priors import load_prior
 from ..inference.sampler import run_ensembles
 from ..physics import k_theta
-from ._common import as_dataset, interval, plain_json, progress_enabled
+from ._common import as_dataset, interval, plain_json, progress_enabled, readonly
 
 log = logging.getLogger("bayesrod")
 
@@ -236,36 +235,27 @@ def fit_group(
         post, theta0, seed=seed, progress=progress_enabled(progress), max_steps=max_steps, target_ess=target_ess
     )
     nat = post.to_natural(res.chain.reshape(-1, post.ndim))
+    per = {c: lik.condition_params(nat, c) for c in lik.conditions}  # EI0, p and k_b of each condition, per draw
     samples = dict(nat)
-    conds = tuple(specs)
-    for c in conds:
-        loc = lik.local[c]
-        EI0 = nat["EI0"] if "EI0" in lik.shared else nat[loc["EI0"]]
-        u = clamp_or_u(nat[loc["u_base"]])
-        samples[f"base_compliance_rad_per_Nm__{c}"] = base_compliance(u, EI0, lik.liks[c].L)
+    for c in lik.conditions:
+        u = clamp_or_u(nat[lik.local[c]["u_base"]])
+        samples[f"base_compliance_rad_per_Nm__{c}"] = base_compliance(u, per[c]["EI0"], lik.liks[c].L)
     check = sharing_check(lik, theta0) if sharing else None
-    doc = _summary(sid, lik, nat, samples, res, pr, check, time.perf_counter() - t0)
-    ro = {}
-    for k, v in samples.items():
-        a = np.array(v, float)
-        a.setflags(write=False)
-        ro[k] = a
-    return GroupFit(sid, conds, MappingProxyType(ro), MappingProxyType(plain_json(doc)))
+    doc = _summary(sid, lik, nat, per, samples, res, pr, check, time.perf_counter() - t0)
+    ro = {k: readonly(v) for k, v in samples.items()}
+    return GroupFit(sid, tuple(lik.conditions), MappingProxyType(ro), MappingProxyType(plain_json(doc)))
 
 
-def _summary(sid, lik: GroupLikelihood, nat, samples, res, pr, check, seconds) -> dict:
+def _summary(sid, lik: GroupLikelihood, nat, per, samples, res, pr, check, seconds) -> dict:
     conds = lik.conditions
     shared = {n: _q(nat[n]) for n in lik.shared}
     out_conds = {}
     warnings = []
     for c in conds:
         loc = lik.local[c]
-        L = lik.liks[c].L
-        EI0 = nat["EI0"] if "EI0" in lik.shared else nat[loc["EI0"]]
-        p = nat["p"] if "p" in lik.shared else nat[loc["p"]]
-        kb = base_stiffness(clamp_or_u(nat[loc["u_base"]]), EI0, L)
+        EI0, p, kb = per[c]["EI0"], per[c]["p"], per[c]["base_compliance"]  # base_compliance holds k_b
         heights = sorted({float(d.height_m) for d in lik.liks[c].data if d.D_m.size})
-        kt = k_theta(np.array(heights)[None, :], EI0[:, None], p[:, None], L, kb[:, None])
+        kt = k_theta(np.array(heights)[None, :], EI0[:, None], p[:, None], lik.liks[c].L, kb[:, None])
         row = {
             "base_compliance_rad_per_Nm": _q(samples[f"base_compliance_rad_per_Nm__{c}"]),
             "prob_rigid_clamp": float(np.mean(clamp_or_u(nat[loc["u_base"]]) == 0.0)),

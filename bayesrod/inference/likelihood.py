@@ -361,7 +361,7 @@ class RodLikelihood:
         self.height_sd_m = _check_height_sd(height_sd_m, spec)
         self.force_offsets = bool(force_offsets)
         self.geometry = length_prior is not None or self.height_sd_m > 0
-        _check_nuisances(self, effect_axis, use_shapes and any(p.shapes for p in spec.pushes))
+        _check_nuisances(self, effect_axis, use_forces, use_shapes)
         self.data = prepare_data(spec, use_forces, use_shapes)
         self.n_force = int(sum(d.F_N.size for d in self.data))
         self.n_points = int(sum(d.x_m.size for d in self.data))
@@ -461,8 +461,8 @@ class RodLikelihood:
         self.f_table = np.concatenate(fF, axis=1) if fF else np.zeros((P, 0))  # (P, N); stacked to (E, P, N)
         self.F_obs = np.concatenate(fobs) if fobs else np.zeros(0)
         # the first force sample of each push: an AR(1) noise chain restarts there
-        self.F_first = np.concatenate([np.arange(f.size) == 0 for f in fobs]) if fobs else np.zeros(0, bool)
         self.F_push = np.concatenate([np.full(f.size, k) for k, f in enumerate(fobs)]) if fobs else np.zeros(0, int)
+        self.F_first = _chain_starts(self.F_push)
         self.F_height = np.concatenate(fh) if fh else np.zeros(0)
         self.x_table = np.concatenate(xs, axis=1) if xs else np.zeros((P, 0))
         self.cos_table = np.concatenate(cs, axis=1) if cs else np.zeros((P, 0))
@@ -617,9 +617,8 @@ class RodLikelihood:
         if self.n_force:
             heights = self.F_height[None, :]
             if self.preload and all(n in params for n in self.preload_names):
-                pre = np.stack([np.atleast_1d(params[n]) for n in self.preload_names], axis=1)
-                f_nd = self.predict_nd_force_preloaded(p, pre * np.ones((p.size, 1)))
-                F = EI0[:, None] / self.L**2 * f_nd
+                pre = self._per_push(params, self.preload_names, p.size)
+                F = EI0[:, None] / self.L**2 * self.predict_nd_force_preloaded(p, pre)
             elif self.geometry:
                 Lw = np.broadcast_to(np.atleast_1d(np.asarray(params.get("length_m", self.L), float)), p.shape)
                 dh = self._per_push(params, self.height_names, p.size)
@@ -641,10 +640,37 @@ class RodLikelihood:
 
     def _per_push(self, params: dict, names: list[str], W: int) -> NDArray:
         """(W, J) per-push nuisance values (zeros where not fitted or not given)."""
-        J = len(self._geom_tables) if self.geometry else int(self.F_push.max(initial=-1)) + 1
+        J = int(self.F_push.max(initial=-1)) + 1
         if not names or not all(n in params for n in names):
             return np.zeros((W, J))
         return np.stack([np.broadcast_to(np.atleast_1d(np.asarray(params[n], float)), (W,)) for n in names], axis=1)
+
+    def restricted(self, mask: NDArray) -> RodLikelihood:
+        """The same forces-only likelihood on the force samples where ``mask`` (N,) is True: the tables
+        are sliced, not rebuilt (a held-out refit of the same pushes)."""
+        mask = np.asarray(mask, bool)
+        if mask.shape != self.F_obs.shape:
+            raise ValueError(f"mask: expected shape {self.F_obs.shape}, got {mask.shape}")
+        new = object.__new__(type(self))
+        new.__dict__.update(self.__dict__)
+        new.f_table = self.f_table[..., mask]
+        new.F_obs, new.F_push, new.F_height = self.F_obs[mask], self.F_push[mask], self.F_height[mask]
+        new.F_first = _chain_starts(new.F_push)
+        new.n_force = int(mask.sum())
+        return new
+
+    def without_effect_axis(self) -> RodLikelihood:
+        """The same data with the tabled effect at its neutral value (the u = 0 slice of the tables)."""
+        new = object.__new__(type(self))
+        new.__dict__.update(self.__dict__)
+        if self.axis is not None:
+            if self.axis.grid[0] != 0.0:
+                raise ValueError(f"effect {self.axis.name}: expected a table axis starting at the neutral value 0")
+            for k in ("f_table", "x_table", "cos_table"):
+                setattr(new, k, getattr(self, k)[:1])
+            new.axis = None
+        new.effects = tuple(e for e in self.effects if e not in TABLE_EFFECTS)
+        return new
 
     def log_likelihood(self, params: dict) -> NDArray:
         """Sum of Gaussian log densities; parameter arrays of shape (W,), result (W,)."""
@@ -714,20 +740,44 @@ def _check_height_sd(height_sd_m, spec: Specimen) -> float:
     return float(height_sd_m)
 
 
-def _check_nuisances(lik, effect_axis, has_shapes: bool) -> None:
+def _chain_starts(push: NDArray) -> NDArray:
+    """True at each push's first force sample (where an AR(1) noise chain restarts), from the push index (N,)."""
+    push = np.asarray(push)
+    return np.r_[True, push[1:] != push[:-1]] if push.size else np.zeros(0, bool)
+
+
+def geometry_blocker(spec: Specimen, effects, *, use_forces=True, use_shapes=True, preload=False) -> str | None:
+    """Why a sampled length or contact-height error cannot be tabled in this fit (None: it can).
+
+    The geometry tables are forces only and the one extra table axis: no centerlines, no tabled effect,
+    no preload beside them.
+    """
+    if not use_forces:
+        return "a shape-only fit"
+    if use_shapes and any(p.shapes for p in spec.pushes):
+        return "centerlines are used (fit forces only)"
+    tabled = [e for e in effects if e in TABLE_EFFECTS]
+    if tabled or preload:
+        return f"{tabled[0] if tabled else 'preload'} takes the one extra table axis"
+    return None
+
+
+def _check_nuisances(lik, effect_axis, use_forces: bool, use_shapes: bool) -> None:
     """The nuisances' combinations the tables support (one extra table axis, forces only)."""
     if lik.geometry:
         what = "length" if lik.length_prior is not None else "height_sd_m"
-        if has_shapes:
+        why = geometry_blocker(
+            lik.spec,
+            [effect_axis.name] if effect_axis is not None else [],
+            use_forces=use_forces,
+            use_shapes=use_shapes,
+            preload=lik.preload,
+        )
+        if why:
             raise ValueError(
-                f"{what}: expected a force-only fit (use_shapes=False): an unknown length or contact height "
-                "is tabled for forces only"
-            )
-        if effect_axis is not None or lik.preload:
-            raise ValueError(
-                f"{what}: expected no tabled effect or preload beside an unknown length or height error (one "
-                f"extra table axis at a time), got {effect_axis.name if effect_axis is not None else 'preload'}; "
-                "fix the length (length 'known') or drop the other"
+                f"{what}: expected no tabled effect or preload and no centerlines beside an unknown length or "
+                f"height error (forces only, one extra table axis), got {why}; fix the length (length 'known') "
+                "or drop the other"
             )
         if lik.length_prior is not None:
             lo, hi = lik.length_prior.bounds()
@@ -802,7 +852,44 @@ def ar1_loglik(r: NDArray, sigma: NDArray, rho: NDArray, first: NDArray) -> NDAr
     )
 
 
-class LogPosterior(ParameterSpace):
+class PosteriorBase(ParameterSpace):
+    """Prior times ``self.likelihood`` in the sampling space; ``log_prob(theta)`` is what emcee sees.
+
+    Subclasses set ``likelihood``, ``names``, ``priors``, ``_p_idx`` (the columns holding a taper
+    exponent) and ``_p_bounds`` (the range the tables cover); ``_in_support`` may exclude parameter
+    sets outside the tables.
+    """
+
+    _p_idx: list
+    _p_bounds: tuple
+
+    def log_prior(self, theta) -> NDArray:
+        theta = np.atleast_2d(theta)
+        return sum(pr.logpdf_sample(theta[:, i]) for i, pr in enumerate(self.priors))
+
+    def _in_support(self, natural: dict) -> NDArray:
+        return np.ones(np.atleast_1d(next(iter(natural.values()))).shape, bool)
+
+    def log_prob(self, theta) -> NDArray | float:
+        theta_arr = np.asarray(theta, float)
+        single = theta_arr.ndim == 1
+        theta2 = np.atleast_2d(theta_arr)
+        lp = self.log_prior(theta2)
+        p = theta2[:, self._p_idx]
+        ok = np.isfinite(lp) & np.all((p >= self._p_bounds[0]) & (p <= self._p_bounds[1]), axis=1)
+        ok &= np.all(np.isfinite(theta2), 1)
+        out = np.full(theta2.shape[0], -np.inf)
+        if ok.any():
+            nat = {k: v[ok] for k, v in self.to_natural(theta2).items()}
+            inside = self._in_support(nat)
+            ll = np.full(inside.shape, -np.inf)
+            if inside.any():
+                ll[inside] = self.likelihood.log_likelihood({k: v[inside] for k, v in nat.items()})
+            out[ok] = np.where(np.isfinite(ll), lp[ok] + ll, -np.inf)
+        return float(out[0]) if single else out
+
+
+class LogPosterior(PosteriorBase):
     """Prior times likelihood in the sampling space; ``log_prob(theta)`` is what emcee sees.
 
     ``theta`` has shape (ndim,) or (W, ndim): log EI0, p, then the noise terms
@@ -819,27 +906,10 @@ class LogPosterior(ParameterSpace):
         if plo < lo - 1e-12 or phi > hi + 1e-12:
             raise ValueError(f"prior p: expected support within the table range [{lo}, {hi}], got [{plo}, {phi}]")
         self._p_bounds = (max(lo, plo), min(hi, phi))
+        self._p_idx = [1]
 
-    def log_prior(self, theta) -> NDArray:
-        theta = np.atleast_2d(theta)
-        return sum(pr.logpdf_sample(theta[:, i]) for i, pr in enumerate(self.priors))
-
-    def log_prob(self, theta) -> NDArray | float:
-        theta_arr = np.asarray(theta, float)
-        single = theta_arr.ndim == 1
-        theta2 = np.atleast_2d(theta_arr)
-        lp = self.log_prior(theta2)
-        p = theta2[:, 1]
-        ok = np.isfinite(lp) & (p >= self._p_bounds[0]) & (p <= self._p_bounds[1]) & np.all(np.isfinite(theta2), 1)
-        out = np.full(theta2.shape[0], -np.inf)
-        if ok.any():
-            nat = {k: v[ok] for k, v in self.to_natural(theta2).items()}
-            inside = self.likelihood.in_table(nat)
-            ll = np.full(inside.shape, -np.inf)
-            if inside.any():
-                ll[inside] = self.likelihood.log_likelihood({k: v[inside] for k, v in nat.items()})
-            out[ok] = np.where(np.isfinite(ll), lp[ok] + ll, -np.inf)
-        return float(out[0]) if single else out
+    def _in_support(self, natural: dict) -> NDArray:
+        return self.likelihood.in_table(natural)  # a tabled effect's coordinate inside its table
 
 
 def force_scale_fit(lik: RodLikelihood, p: float, EI0: float | None = None) -> tuple[float, float]:
