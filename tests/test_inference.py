@@ -167,7 +167,21 @@ def test_force_only_fit_of_a_blueberry_cane(tmp_path):
     assert main(["import", "blueberry", str(BLUEBERRY), "--out", str(out), "--length-m", "1.6"]) == 0
     run = tmp_path / "run"
     assert (
-        main(["fit", str(out / "bush6-cane2"), "--out", str(run), "--quiet", "--prior", "woody", "--target-ess", "200"])
+        main(
+            [
+                "fit",
+                str(out / "bush6-cane2"),
+                "--out",
+                str(run),
+                "--quiet",
+                "--prior",
+                "woody",
+                "--target-ess",
+                "200",
+                "--length",
+                "known",
+            ]
+        )
         == 0
     )
     s = json.loads((run / "summary.json").read_text())

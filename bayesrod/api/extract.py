@@ -24,7 +24,8 @@ from types import MappingProxyType
 import numpy as np
 from numpy.typing import NDArray
 
-from ..dataset.model import Dataset, ShapeFrame
+from ..dataset.model import Dataset, Diameters, ShapeFrame
+from ..vision.width import DiameterProfile
 from ._common import DocResult, plain_json
 
 log = logging.getLogger("bayesrod")
@@ -57,6 +58,8 @@ class Extraction(DocResult):
     columns: Mapping[str, Mapping[str, NDArray]] = field(repr=False)
     doc: Mapping = field(repr=False)
     examples: Mapping = field(repr=False, default_factory=dict)
+    #: the stem's diameter along s, from the silhouettes of every extracted frame (:mod:`bayesrod.vision.width`)
+    diameters: DiameterProfile | None = field(repr=False, default=None)
 
     @property
     def dataset(self) -> Dataset:
@@ -75,7 +78,11 @@ class Extraction(DocResult):
                 bridge = np.stack([cols["x_m"][br], cols["z_m"][br], cols["sd_m"][br]]) if br.any() else None
                 frames.append(ShapeFrame(float(t), cols["x_m"][seen], cols["z_m"][seen], cols["sd_m"][seen], bridge))
             pushes.append(replace(p, shapes=tuple(frames)))
-        return replace(self.source, pushes=tuple(pushes))
+        out = replace(self.source, pushes=tuple(pushes))
+        dp = self.diameters
+        if dp is not None and dp.ok.any():
+            out = replace(out, diameters=Diameters(dp.s_m[dp.ok], dp.d_m[dp.ok], dp.sd_m[dp.ok], "frames"))
+        return out
 
     def plot(self, push_id: str | None = None, ax=None):
         """The example frame of a push with mask, skeleton, path and the written points; returns the artists."""
@@ -120,6 +127,22 @@ class Extraction(DocResult):
 
                 write_bytes_atomic(tmp / "figures" / f"extract_{pid}.png", render(draw, 8, 6, dpi=90))
             (tmp / "figures").mkdir(exist_ok=True)
+            dp = self.diameters
+            if dp is not None and np.isfinite(dp.d_m).any():
+                rec = np.isfinite(dp.d_m)
+                write_csv(
+                    tmp / "diameters_extracted.csv",
+                    {
+                        "s_m": dp.s_m[rec],
+                        "d_m": dp.d_m[rec],
+                        "sd_m": dp.sd_m[rec],
+                        "n_frames": dp.n_frames[rec],
+                        "flag": dp.flag[rec].astype(object),
+                    },
+                )
+                if doc.get("diameters") is not None:
+                    doc["diameters_original"] = doc["diameters"]
+                doc["diameters"] = "diameters_extracted.csv"
             write_json(tmp / "specimen.json", doc)
             write_json(tmp / "extract_report.json", self.to_dict())
         return path
@@ -143,6 +166,7 @@ def extract(dataset, *, progress: bool = True) -> Extraction:
     from tqdm.auto import tqdm
 
     from ..vision.extract import ExtractionError, extract_frame
+    from ..vision.width import combine_profiles, width_profile
     from ._common import as_dataset, progress_enabled
 
     spec = as_dataset(dataset)
@@ -153,6 +177,7 @@ def extract(dataset, *, progress: bool = True) -> Extraction:
         raise ValueError(f"{where}: expected at least one push with 'frames', got none")
     report = {"dataset": str(Path(spec.root).resolve()) if spec.root else None, "pushes": {}}
     columns, examples = {}, {}
+    stations, widths = None, []
     total = sum(len(p.frames) for p in pushes)
     bar = tqdm(total=total, desc="extracting frames", unit="frame", disable=not progress_enabled(progress), leave=False)
     for push in pushes:
@@ -169,6 +194,9 @@ def extract(dataset, *, progress: bool = True) -> Extraction:
                 bar.update()
                 continue
             plane = plane or line.plane_depth_m  # the plane of the push: from its first good frame
+            if stations is None:  # width stations every 3 px of the first extracted frame, over the stem
+                stations = np.arange(0.0, spec.length_m, 3.0 * plane / np.sqrt(camera["fx"] * camera["fy"]))
+            widths.append(width_profile(rgb, depth, line, camera, direction=push.direction, s_m=stations))
             n = line.x_m.size
             cols["time_s"].append(np.full(n, rec.time_s))
             cols["x_m"].append(line.x_m)
@@ -197,5 +225,14 @@ def extract(dataset, *, progress: bool = True) -> Extraction:
             msg += f"; skipped {', '.join(str(s['frame']) + ' (' + s['reason'] + ')' for s in skipped)}"
         log.info("%s", msg)
     bar.close()
+    diameters = combine_profiles(widths, stations) if widths else None
+    if diameters is not None:
+        flags, counts = np.unique(diameters.flag, return_counts=True)
+        report["diameters"] = {
+            "stations": int(diameters.s_m.size),
+            "flags": {str(f): int(n) for f, n in zip(flags, counts, strict=True)},
+            "frames": len(widths),
+        }
+        log.info("diameter profile: %d of %d stations measured", int(diameters.ok.sum()), diameters.s_m.size)
     report = plain_json(report)
-    return Extraction(spec, MappingProxyType(columns), MappingProxyType(report), MappingProxyType(examples))
+    return Extraction(spec, MappingProxyType(columns), MappingProxyType(report), MappingProxyType(examples), diameters)

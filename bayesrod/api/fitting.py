@@ -77,6 +77,7 @@ def _likelihood_options(config: Mapping) -> dict:
         "length": config.get("length", "known"),
         "height_sd_m": config.get("height_sd_m", 0.0),
         "force_offsets": config.get("force_offsets", False),
+        "diameter": config.get("diameter", "off"),
     }
 
 
@@ -168,6 +169,30 @@ class Posterior:
         L = draw_lengths(self.samples, self.length_m)
         EI = flexural_rigidity(s[None, :], self.samples["EI0"][:, None], self.samples["p"][:, None], L)
         return Band(s, *interval(EI, level), level=level, x_name="s_m", unit="N m^2")
+
+    def youngs_modulus(self) -> NDArray:
+        """Young's modulus at the base per draw [Pa], E0 = 64 EI0 / (pi d0^4), shape (n_draws,).
+
+        Needs a fit with measured diameters (``diameter="shared"`` or ``"free"``); raises ValueError otherwise.
+        """
+        from ..inference.summary import youngs_modulus
+
+        if "d0_m" not in self.samples:
+            raise ValueError(
+                "youngs_modulus: expected a fit with measured diameters (fit(..., diameter='shared' or 'free') on a "
+                "dataset with 'diameters'), got a fit without"
+            )
+        return youngs_modulus(self.samples)
+
+    def modulus_band(self, s_m: ArrayLike, level: float = 0.9) -> Band:
+        """E(s) [Pa] over arc lengths ``s_m`` [m], shape (m,): E0 (1 - s/L)^(4 (p - p_geom)); flat under the
+        uniform-modulus model (``diameter="shared"``)."""
+        level = _check_level(level)
+        s = _grid(s_m, "s_m", 0.0, self.length_m, closed=True)
+        E0 = self.youngs_modulus()[:, None]
+        dq = self.samples["p"] - self.samples.get("p_geom", self.samples["p"])
+        x = np.clip(1.0 - s[None, :] / draw_lengths(self.samples, self.length_m), 0.0, None)
+        return Band(s, *interval(E0 * x ** (4.0 * dq[:, None]), level), level=level, x_name="s_m", unit="Pa")
 
     def k_theta_band(self, height_m: ArrayLike, level: float = 0.9) -> Band:
         """Lumped rotational stiffness k_theta(h) (eq. kdist) over heights ``height_m`` [m], shape (m,) [N m/rad]."""
@@ -623,6 +648,7 @@ def fit(
     length: str = "auto",
     height_sd_m: float = 0.0,
     force_offsets: bool = False,
+    diameter: str = "auto",
 ) -> Posterior:
     """Posterior of EI0, p, the noise and the fitted effects for one dataset (emcee).
 
@@ -662,6 +688,13 @@ def fit(
     force_offsets : bool
         Fit a load-cell offset per push (``force_offset_N_<id>`` [N], prior N(0, 5% of the push's peak
         force)); not together with the dataset-wide ``force_offset`` effect.
+    diameter : {"auto", "shared", "free", "off"}
+        The width term (docs/inference.md, "Young's modulus"), when the dataset has measured diameters
+        (``diameters`` in specimen.json; ``bayesrod extract`` writes them from the frames): ``"shared"`` a
+        stem of uniform modulus, d(s) = d0 (1 - s/L)^p with bending's p; ``"free"`` its own taper p_geom, so
+        that E(s) = E0 (1 - s/L)^(4 (p - p_geom)) may vary (summary ``youngs_modulus.uniform_modulus`` tests
+        it); ``"off"`` ignores the diameters; ``"auto"`` (default) is ``"shared"`` with diameters, else off.
+        With diameters the summary reports Young's modulus E0 = 64 EI0 / (pi d0^4).
     checkpoint : path or None
         An HDF5 file the chains are checkpointed to; an interrupted fit called again with the same
         arguments and checkpoint resumes from it. None (default): nothing is written.
@@ -698,6 +731,10 @@ def fit(
                     spec.length_m,
                     why,
                 )
+    if diameter not in ("auto", "shared", "free", "off"):
+        raise ValueError(f"diameter: expected 'auto', 'shared', 'free' or 'off', got {diameter!r}")
+    if diameter == "auto":
+        diameter = "shared" if getattr(spec, "diameters", None) is not None else "off"
     config = {
         "dataset": str(Path(spec.root).resolve()) if spec.root is not None else None,
         "prior": pr.source,
@@ -711,6 +748,7 @@ def fit(
         "length": length,
         "height_sd_m": height_sd_m,
         "force_offsets": bool(force_offsets),
+        "diameter": diameter,
         "bayesrod": __version__,
     }
     # the likelihood first: bad effects or data without engaged samples fail before anything is written

@@ -259,6 +259,14 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="fit a load-cell offset per push (prior N(0, 5%% of the push's peak force))",
     )
+    ft.add_argument(
+        "--diameter",
+        choices=("auto", "shared", "free", "off"),
+        default="auto",
+        help="the measured diameters (specimen.json 'diameters', written by extract): shared = uniform modulus, "
+        "geometry and bending share p; free = the diameter's own taper (tests uniform modulus); off = ignored; "
+        "auto (default) = shared when the dataset has diameters. With diameters the summary reports Young's modulus",
+    )
     ft.add_argument("--max-steps", type=int, default=8000, help="sampling budget per ensemble (default 8000)")
     ft.add_argument(
         "--target-ess", type=float, default=1000.0, help="stop once EI0 and p have this bulk ESS (default 1000)"
@@ -365,6 +373,7 @@ FLAGS = {
     "length": "--length",
     "height_sd_m": "--height-sd",
     "force_offsets": "--force-offsets",
+    "diameter": "--diameter",
     "noise_rho": "--noise-rho",
     "target_ess": "--target-ess",
     "time_unit": "--time-unit",
@@ -773,6 +782,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
         length=args.length,
         height_sd_m=args.height_sd,
         force_offsets=args.force_offsets,
+        diameter=args.diameter,
     )
     _print_fit(post.to_dict(), out, args)
     return 0
@@ -786,6 +796,19 @@ def _print_fit(summary: dict, out, args) -> None:
         print(f"  {name:>15} = {q['median']:.4g}  [{q['q05']:.4g}, {q['q95']:.4g}]  (median [90% interval])")
     for row in summary["k_theta"]:
         print(f"  k_theta({row['height_m']:g} m) = {row['median']:.4g}  [{row['q05']:.4g}, {row['q95']:.4g}] N m/rad")
+    y = summary.get("youngs_modulus")
+    if y:
+        e = y["E_Pa"]
+        print(
+            f"  Young's modulus E0 = {e['median'] / 1e9:.4g}  [{e['q05'] / 1e9:.4g}, {e['q95'] / 1e9:.4g}] GPa "
+            f"(64 EI0 / (pi d0^4); {y['model']} modulus)"
+        )
+        if "uniform_modulus" in y:
+            m = y["modulus_taper"]
+            print(
+                f"  uniform modulus {y['uniform_modulus']}: p - p_geom = {m['median']:.3g}  "
+                f"[{m['q05']:.3g}, {m['q95']:.3g}]"
+            )
     c = summary["convergence"]
     print(f"  R-hat max {c['rhat_max']:.4f}, bulk ESS min {c['ess_bulk_min']:.0f}, {summary['sampler']['seconds']:g} s")
     print(f"wrote {out}/summary.json, posterior.nc, report.html")

@@ -109,6 +109,33 @@ class Push:
 
 
 @dataclass(frozen=True)
+class Diameters:
+    """Measured stem diameters [m] at arc lengths ``s_m`` (k,) from the base, with their sd (k,).
+
+    From the frames (``bayesrod extract``: a profile along the stem) or from calipers (a few
+    stations, often only the base). ``source`` says which (``"frames"``, ``"caliper"`` or free text).
+    Only the stations a fit uses: rows flagged other than ``ok`` in a diameters file are left out.
+    """
+
+    s_m: NDArray
+    d_m: NDArray
+    sd_m: NDArray
+    source: str = "caliper"
+
+    def __post_init__(self):
+        for k in ("s_m", "d_m", "sd_m"):
+            object.__setattr__(self, k, _frozen(getattr(self, k)))
+        n = self.s_m.shape
+        if self.s_m.ndim != 1 or self.d_m.shape != n or self.sd_m.shape != n or n[0] < 1:
+            raise ValueError(
+                f"diameters: expected s_m, d_m, sd_m of one equal length >= 1, got shapes "
+                f"{self.s_m.shape}, {self.d_m.shape}, {self.sd_m.shape}"
+            )
+        if not (np.all(self.d_m > 0) and np.all(self.sd_m > 0) and np.all(self.s_m >= 0)):
+            raise ValueError("diameters: expected d_m > 0, sd_m > 0 and s_m >= 0 [m] in every row")
+
+
+@dataclass(frozen=True)
 class Dataset:
     """A dataset: one stem and its pushes (docs/format.md). Immutable; ``extra`` keeps unknown top-level keys.
 
@@ -124,6 +151,8 @@ class Dataset:
     camera: Camera | None = None
     root: Path | None = None
     extra: dict = field(default_factory=dict, compare=False)
+    #: measured diameters along the stem (``diameters`` in specimen.json), or None
+    diameters: Diameters | None = None
 
     @property
     def heights_m(self) -> NDArray:

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..physics.lumped import wire_dx_from_elongation
-from .model import FORMAT, Camera, ForceSeries, FrameRecord, Push, Sensor, ShapeFrame, Specimen
+from .model import FORMAT, Camera, Diameters, ForceSeries, FrameRecord, Push, Sensor, ShapeFrame, Specimen
 
 MAX_PER_COLUMN = 5  # row-level problems listed per file and column before summarising
 MM_HINT = 20.0  # metres: a stem or height beyond this is almost surely in millimetres
@@ -389,6 +389,77 @@ def _check_png(path: Path, kind: str):
 # --------------------------------------------------------------------------- #
 # Entry points
 # --------------------------------------------------------------------------- #
+def _read_diameters(c: _Collector, name: str, root: Path, value, length: float | None) -> Diameters | None:
+    """``diameters``: a CSV path (s_m, d_m, sd_m[, flag]) or an object of equal-length lists (docs/format.md)."""
+    source = "caliper"
+    if isinstance(value, str):
+        fp = _safe_path(c, name, root, value, "diameters")
+        if fp is None:
+            return None
+        cols = c.read_csv(fp, ("s_m", "d_m", "sd_m"), ("n_frames", "flag", "source"), text_cols=("flag", "source"))
+        if cols is None:
+            return None
+        where = c.rel(fp)
+        used = np.array([f == "ok" for f in cols["flag"]]) if "flag" in cols else np.ones(cols["s_m"].size, bool)
+        source = cols["source"][0] if "source" in cols and cols["source"] else "frames"
+    elif isinstance(value, dict):
+        where = f"{name}: diameters"
+        cols = {}
+        for k in ("s_m", "d_m", "sd_m"):
+            v = value.get(k)
+            if isinstance(v, (int, float)) and not isinstance(v, bool):
+                v = [v]
+            if not isinstance(v, list) or not v or not all(_is_number(x) for x in v):
+                c.add(name, f"diameters.{k}", "a list of numbers [m]", _fmt(v) if k in value else "the field missing")
+                return None
+            cols[k] = np.array(v, float)
+        if not cols["s_m"].size == cols["d_m"].size == cols["sd_m"].size:
+            c.add(name, "diameters", "s_m, d_m and sd_m of equal length", ", ".join(str(cols[k].size) for k in cols))
+            return None
+        used = np.ones(cols["s_m"].size, bool)
+        source = str(value.get("source", "caliper"))
+    else:
+        c.add(name, "diameters", "a CSV path or an object with s_m, d_m, sd_m lists", _fmt(value))
+        return None
+    ok = True
+    for k, cond, expected in (
+        ("d_m", lambda a: a > 0, "> 0 [m]"),
+        ("sd_m", lambda a: a > 0, "> 0 [m]"),
+        ("s_m", lambda a: a >= 0, ">= 0 [m]"),
+    ):
+        bad = np.flatnonzero(~cond(cols[k]) & used)
+        if bad.size:
+            c.add(
+                where,
+                f"column {k}" if isinstance(value, str) else f"diameters.{k}",
+                expected,
+                _fmt(float(cols[k][bad[0]])),
+                row=int(bad[0]) + 1,
+            )
+            ok = False
+    if length is not None:
+        beyond = np.flatnonzero((cols["s_m"] >= length) & used)
+        if beyond.size:
+            c.add(
+                where,
+                "s_m",
+                f"an arc length below length_m ({length:g} m)",
+                _fmt(float(cols["s_m"][beyond[0]])),
+                row=int(beyond[0]) + 1,
+            )
+            ok = False
+    big = np.flatnonzero((cols["d_m"] > 0.5) & used)
+    if big.size:
+        c.add(where, "d_m", "metres", f"{cols['d_m'][big[0]]:g}, which looks like millimetres", row=int(big[0]) + 1)
+        ok = False
+    if not used.any():
+        c.add(where, "flag", "at least one row flagged ok", "none")
+        ok = False
+    if not ok:
+        return None
+    return Diameters(cols["s_m"][used], cols["d_m"][used], cols["sd_m"][used], source)
+
+
 def _read(path, check_images=True) -> tuple[Specimen | None, list[Problem]]:
     root = Path(path)
     c = _Collector(root)
@@ -490,12 +561,13 @@ def _read(path, check_images=True) -> tuple[Specimen | None, list[Problem]]:
             pushes.append(Push(pid, h, force, int(direction), shapes, frames, files))
     if any_frames and "camera" not in doc:
         c.add(name, "camera", "camera intrinsics, because a push has frames", "the field missing")
-    known = {"format", "specimen", "species", "length_m", "sensor", "camera", "pushes"}
+    diameters = _read_diameters(c, name, root, doc["diameters"], length) if "diameters" in doc else None
+    known = {"format", "specimen", "species", "length_m", "sensor", "camera", "pushes", "diameters"}
     extra = {k: v for k, v in doc.items() if k not in known}
     if not c.ok:
         return None, c.problems
     return (
-        Specimen(spec, length, tuple(pushes), species, sensor, camera, root, extra),
+        Specimen(spec, length, tuple(pushes), species, sensor, camera, root, extra, diameters),
         c.problems,
     )
 

@@ -73,6 +73,18 @@ class SimConfig:
     force_range_N: tuple[float, float] = (0.05, 8.0)
     # the robot stops after this contact displacement if the stem has not slipped (None: push until the slip)
     max_contact_displacement_m: float | None = None
+    # the rendered stem's diameter d(s) = d0 (1 - s/L)^q (frames only): d0 [m] (None: 1 cm for a twig, 4 mm
+    # for a grass) and q (None: q = p, a uniform modulus; q != p is a modulus E(s) ~ (1 - s/L)^(4 (p - q)))
+    base_diameter_m: float | None = None
+    diameter_taper: float | None = None
+
+    @property
+    def rendered_diameter(self) -> tuple[float, float]:
+        """(d0 [m], taper q) of the stem the frames draw."""
+        from ..vision.render import BASE_DIAMETER
+
+        d0 = self.base_diameter_m or BASE_DIAMETER["grass" if self.p > 1.0 else "twig"]
+        return float(d0), float(self.p if self.diameter_taper is None else self.diameter_taper)
 
     @classmethod
     def from_preset(
@@ -288,6 +300,9 @@ def write_simulated(
             "generator": f"bayesrod simulate {__version__}",
         },
     }
+    if frames:  # the drawn stem's diameter and the Young's modulus it implies (E0 = 64 EI0 / (pi d0^4))
+        d0, q = cfg.rendered_diameter
+        doc["truth"].update(base_diameter_m=d0, diameter_taper=q, youngs_modulus_Pa=64.0 * cfg.EI0 / (np.pi * d0**4))
     doc.update(extra or {})
     if frames and camera is not None:
         doc["camera"] = camera

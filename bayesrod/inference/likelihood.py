@@ -316,6 +316,8 @@ class RodLikelihood:
         length_prior=None,
         height_sd_m: float = 0.0,
         force_offsets: bool = False,
+        diameter: str = "off",
+        diameter_priors: dict | None = None,
     ):
         if "self_weight" in effects:
             raise ValueError(
@@ -388,6 +390,8 @@ class RodLikelihood:
         self.height_names = [height_error_name(d.id) for d in forced] if self.height_sd_m > 0 else []
         self.offset_names = [force_offset_name(d.id) for d in forced] if self.force_offsets else []
         names += self.length_names + self.height_names + self.offset_names
+        self._init_diameters(spec, diameter, diameter_priors or {})
+        names += self.diameter_names
         names += list(self.effects)
         self.names = names
         #: priors of per-dataset nuisances (docs/priors.md, "Nuisances of a real push"): preload uniform on
@@ -404,9 +408,72 @@ class RodLikelihood:
         for n, d in zip(self.offset_names, forced if self.offset_names else [], strict=True):
             scale = max(FORCE_OFFSET_SD * float(np.max(np.abs(d.F_N))), 1e-9)
             self.nuisance_priors[n] = _prior(n, "normal", (0.0, scale), "N")
+        for n in self.diameter_names:
+            self.nuisance_priors[n] = (diameter_priors or {}).get(n) or _diameter_priors()[n]
         self._build_tables()
         if self.geometry:
             self._build_geometry_tables()
+
+    def _init_diameters(self, spec: Specimen, diameter: str, priors: dict) -> None:
+        """The width term's data and parameter names (docs/inference.md, "Young's modulus")."""
+        if diameter not in DIAMETER_MODELS:
+            raise ValueError(f"diameter: expected one of {', '.join(DIAMETER_MODELS)}, got {diameter!r}")
+        self.diameter = diameter
+        self.diameter_names = []
+        if diameter == "off":
+            return
+        dm = getattr(spec, "diameters", None)
+        if dm is None:
+            raise ValueError(
+                f"diameter: expected a dataset with measured diameters ('diameters' in specimen.json, or "
+                f"bayesrod extract on frames) for model {diameter!r}, got none"
+            )
+        self.d_s, self.d_obs, self.d_sd = (np.asarray(a, float) for a in (dm.s_m, dm.d_m, dm.sd_m))
+        self.n_diameters = int(self.d_s.size)
+        self.diameter_names = ["d0_m"] + (["p_geom"] if diameter == "free" else [])
+        # a profile of many stations calibrates its own sd scale and the correlation of neighbouring stations'
+        # errors (AR(1) along s: they share pixels, background and the frame's stem colour); a few caliper
+        # readings are taken as given and independent
+        order = np.argsort(self.d_s, kind="stable")
+        self.d_s, self.d_obs, self.d_sd = self.d_s[order], self.d_obs[order], self.d_sd[order]
+        if self.n_diameters >= DIAMETER_SCALE_MIN:
+            self.diameter_names += ["diameter_sd_scale", "rho_diameter"]
+            gap = np.diff(self.d_s)
+            # a chain of neighbouring stations breaks where stations are missing (flagged, occluded)
+            self.d_first = np.concatenate([[True], gap > 1.5 * float(np.median(gap))])
+        else:
+            self.d_first = None
+
+    def predict_diameter(self, params: dict, s_m: NDArray | None = None) -> NDArray:
+        """(W, k) diameter d0 (1 - s/L)^p_geom [m] at ``s_m`` (default: the measured stations); p_geom = p
+        under the uniform-modulus model; each walker's own L where the length is sampled."""
+        s = self.d_s if s_m is None else np.asarray(s_m, float)
+        d0 = np.atleast_1d(np.asarray(params["d0_m"], float))[:, None]
+        pg = np.atleast_1d(np.asarray(params["p_geom" if self.diameter == "free" else "p"], float))[:, None]
+        L = np.atleast_1d(np.asarray(params.get("length_m", self.L), float))[:, None]
+        return d0 * np.clip(1.0 - s[None, :] / L, 0.0, None) ** pg
+
+    def diameter_start(self, p_geom: float) -> dict:
+        """Least-squares d0 [m] at taper ``p_geom`` (the given L) and the sd scale of its residuals."""
+        g = np.clip(1.0 - self.d_s / self.L, 0.0, None) ** p_geom
+        w = 1.0 / self.d_sd**2
+        d0 = float(np.sum(w * g * self.d_obs) / max(np.sum(w * g * g), 1e-300))
+        z = (self.d_obs - d0 * g) / self.d_sd
+        out = {"d0_m": max(d0, 1e-6)}
+        if "diameter_sd_scale" in self.diameter_names:
+            out["diameter_sd_scale"] = float(np.clip(np.sqrt(np.mean(z**2)), 0.05, 20.0))
+            out["rho_diameter"] = float(np.clip(np.mean(z[1:] * z[:-1]) / max(np.mean(z**2), 1e-12), -0.4, 0.95))
+        if "p_geom" in self.diameter_names:
+            out["p_geom"] = p_geom
+        return out
+
+    def _diameter_loglik(self, params: dict) -> NDArray:
+        z = (self.d_obs[None, :] - self.predict_diameter(params)) / self.d_sd[None, :]
+        if self.d_first is None:
+            return np.sum(-0.5 * z**2 - np.log(self.d_sd), axis=1) - 0.5 * self.n_diameters * _LOG_2PI
+        scale = np.atleast_1d(np.asarray(params["diameter_sd_scale"], float))[:, None]
+        rho = np.atleast_1d(np.asarray(params["rho_diameter"], float))[:, None]
+        return ar1_loglik(z, scale, rho, self.d_first) - float(np.sum(np.log(self.d_sd)))
 
     # ------------------------------------------------------------------ tables
     def _build_tables(self) -> None:
@@ -689,6 +756,8 @@ class RodLikelihood:
                 s = np.atleast_1d(params["sigma_shape_m"])[:, None]
             ll_shape = np.sum(-0.5 * (res["shape"] / s) ** 2 - np.log(s), axis=1) - 0.5 * self.n_points * _LOG_2PI
             ll += self.shape_weight * ll_shape
+        if self.diameter != "off":
+            ll += self._diameter_loglik(params)
         return ll
 
     def fit_error(self, params: dict) -> dict:
@@ -698,10 +767,18 @@ class RodLikelihood:
         f = res.get("force")  # engaged samples only (see prepare_data)
         out["force_rmse_N"] = float(np.sqrt(np.mean(f**2))) if f is not None and f.size else None
         out["shape_rmse_mm"] = float(1000 * np.sqrt(np.mean(res["shape"] ** 2))) if "shape" in res else None
+        if self.diameter != "off":
+            r = self.d_obs - self.predict_diameter({k: np.atleast_1d(v) for k, v in params.items()})[0]
+            out["diameter_rmse_mm"] = float(1000 * np.sqrt(np.mean(r**2)))
         return out
 
 
 FORCE_NOISE_MODELS = ("iid", "ar1")
+#: the width term (docs/inference.md, "Young's modulus"): off; d(s) = d0 (1 - s/L)^p (a stem of uniform
+#: modulus: geometry and bending share p); or d(s) = d0 (1 - s/L)^p_geom with p_geom free (E(s) may vary)
+DIAMETER_MODELS = ("off", "shared", "free")
+#: a diameter profile of at least this many stations gets its own sd scale (diameter_sd_scale)
+DIAMETER_SCALE_MIN = 8
 #: a preload is at most this fraction of the stem length (its prior: uniform on [0, PRELOAD_MAX_L L])
 PRELOAD_MAX_L = 0.1
 #: nodes of the per-push force table in d that a preload needs (linear interpolation between them)
@@ -719,6 +796,16 @@ GEOMETRY_N_F = 80
 LENGTH_FACTOR = 1.5
 HEIGHT_CUT_SD = 4.0
 FORCE_OFFSET_SD = 0.05
+
+
+def _diameter_priors() -> dict:
+    return {
+        # base diameter: log-normal, median 1 cm, 95% in [0.5 mm, 19 cm] (grasses to canes)
+        "d0_m": _prior("d0_m", "lognormal", (0.01, 1.5), "m"),
+        "diameter_sd_scale": _prior("diameter_sd_scale", "lognormal", (1.0, 0.5), "1"),
+        "p_geom": _prior("p_geom", "truncnormal", (0.8, 0.8, 0.0, 3.0), "1"),
+        "rho_diameter": _uniform_prior("rho_diameter", -0.5, 0.995),
+    }
 
 
 def default_length_prior(spec: Specimen):
@@ -947,6 +1034,7 @@ def build_likelihood(
     length: str = "known",
     height_sd_m: float = 0.0,
     force_offsets: bool = False,
+    diameter: str = "off",
 ) -> RodLikelihood:
     """The likelihood for ``effects``; a tabled effect gets its axis from the prior and a plain EI0 estimate.
 
@@ -990,7 +1078,19 @@ def build_likelihood(
         length_prior=length_prior,
         height_sd_m=height_sd_m,
         force_offsets=force_offsets,
+        diameter=diameter,
+        diameter_priors=diameter_priors(prior) if diameter != "off" else None,
     )
+
+
+def diameter_priors(prior) -> dict:
+    """Priors of the width term: the prior file's ``d0_m``, ``diameter_sd_scale`` (else the defaults of
+    docs/priors.md) and ``p_geom`` = the prior of ``p`` under another name."""
+    from dataclasses import replace
+
+    out = {n: prior.params.get(n) or d for n, d in _diameter_priors().items()}
+    out["p_geom"] = prior.params.get("p_geom") or replace(prior.get("p"), name="p_geom")
+    return out
 
 
 def length_is_approximate(spec: Specimen) -> bool:

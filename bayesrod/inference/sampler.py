@@ -113,6 +113,8 @@ def find_start(post, rng: np.random.Generator, init: dict | None = None) -> np.n
                 nat["shape_sd_scale"] = max(rms / float(np.sqrt(np.mean(lik.sd_obs**2))), 1e-3)
             else:
                 nat["sigma_shape_m"] = max(rms, 1e-5)
+        if getattr(lik, "diameter", "off") != "off":  # the width term: closed-form d0 at this taper
+            nat.update(lik.diameter_start(p))
         for n, pr in zip(names, post.priors, strict=True):
             if n not in nat:
                 # effects start near their neutral value: a stiff base, a late yield

@@ -5,6 +5,7 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ..physics import flexural_rigidity, k_theta
 
@@ -42,6 +43,44 @@ def ei_band(EI0, p, length_m, s_m) -> dict:
     """
     EI = flexural_rigidity(np.asarray(s_m)[None, :], np.asarray(EI0)[:, None], np.asarray(p)[:, None], length_m)
     return quantiles(EI)
+
+
+def youngs_modulus(samples: dict) -> NDArray:
+    """Young's modulus at the base per draw [Pa]: E0 = 64 EI0 / (pi d0^4) (a solid round section).
+
+    Needs a fit with measured diameters (``d0_m`` in ``samples``).
+    """
+    if "d0_m" not in samples:
+        raise ValueError("samples: expected a fit with measured diameters (d0_m), got none; fit with diameter=")
+    return 64.0 * np.asarray(samples["EI0"], float) / (np.pi * np.asarray(samples["d0_m"], float) ** 4)
+
+
+def modulus_band(samples: dict, length_m: float, s_m) -> dict:
+    """90% band and median of E(s) [Pa] over ``s_m``: E0 (1 - s/L)^(4 (p - p_geom)), constant when p_geom = p."""
+    E0 = youngs_modulus(samples)[:, None]
+    dq = np.asarray(samples["p"], float) - np.asarray(samples.get("p_geom", samples["p"]), float)
+    x = np.clip(1.0 - np.asarray(s_m, float)[None, :] / draw_lengths(samples, length_m), 0.0, None)
+    return quantiles(E0 * x ** (4.0 * dq[:, None]))
+
+
+def youngs_modulus_summary(samples: dict, length_m: float, source: str | None = None) -> dict:
+    """summary.json ``youngs_modulus`` (docs/format.md): E at the base, and under the free width model the
+    modulus taper p - p_geom, the uniform-modulus verdict (0 inside its 90% interval or not) and E(s)."""
+    out = {
+        "model": "graded" if "p_geom" in samples else "uniform",
+        "source": source,
+        "E_Pa": _scalar_q(youngs_modulus(samples)),
+        "d0_m": _scalar_q(samples["d0_m"]),
+    }
+    if "p_geom" in samples:
+        dq = np.asarray(samples["p"], float) - np.asarray(samples["p_geom"], float)
+        q = _scalar_q(dq)
+        out["modulus_taper"] = q
+        out["uniform_modulus"] = "consistent" if q["q05"] <= 0.0 <= q["q95"] else "rejected"
+        s = np.linspace(0.0, 0.9, 10) * float(length_m)
+        band = modulus_band(samples, length_m, s)
+        out["band"] = {"s_m": s.tolist(), **{k: np.asarray(v).tolist() for k, v in band.items()}}
+    return out
 
 
 def k_theta_band(EI0, p, length_m: float, heights_m, base_compliance=None) -> dict:
@@ -137,5 +176,8 @@ def build_summary(spec, post, samples: dict, diag: dict, fit_error: dict, effect
         },
         "fit_error": fit_error,
     }
+    if "d0_m" in samples:
+        dm = getattr(spec, "diameters", None)
+        summary["youngs_modulus"] = youngs_modulus_summary(samples, L, dm.source if dm is not None else None)
     summary.update(extra)
     return summary

@@ -1,0 +1,359 @@
+"""The stem's diameter along its extracted centerline, sub-pixel, from the frame's colour.
+
+For every station (equal steps of arc length along a :class:`~bayesrod.vision.extract.Centerline`)
+the RGB image is sampled along the centerline's normal (bilinear, 0.25-px steps). Each sample
+is a mix of the stem's colour and the background's, rgb = (1 - a) bg + a stem, with ``a`` the
+fraction of the pixel the stem covers (anti-aliasing, blur and the sensor's point spread keep
+that sum). The stem's width in pixels is the integral of ``a`` across it:
+
+    w = integral a(t) dt,   a(t) = (rgb(t) - bg) . (stem - bg) / |stem - bg|^2,
+
+with ``bg`` the median colour just beyond the stem on each side (each half of the profile uses
+its own side) and ``stem`` the median colour of the stem's core at the station (where the stem
+is wider than 4 px; else the frame's core colour). Whole-pixel counting of the mask would be
+off by up to a pixel; the coverage integral is unbiased for any width, sub-pixel ones included.
+
+Metres: w_m = w_px Z |n / f| with the plane depth Z and the focal lengths along the normal n.
+
+Each station's standard deviation combines the pixel noise of ``a`` (measured on the background
+samples: a sum over the window's independent pixels) and the error of the two background
+medians (which spreads over the whole window). Stations are flagged and not used where:
+
+* ``occluded``: the centerline there is bridged (not seen) or the profile window meets an object
+  in front of the plane (the probe, the arm) in the depth map;
+* ``low_contrast``: the stem's colour is within 6 noise sd of the background's (a pixel's
+  coverage scatters by more than 1/6) or within 12 levels of it on either side (a branch of the
+  stem's colour passing behind it);
+* ``edge``: the window leaves the image;
+* ``base``: the first 3 widths of the stem above the base pixel (ground).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+#: flag names, in the order they are tested (the first that applies is reported)
+FLAGS = ("ok", "occluded", "low_contrast", "edge", "base")
+STEP_PX = 0.25  # sample spacing along the normal [px]
+BG_PX = 3.0  # width of each background strip [px]
+MARGIN_PX = 3.0  # the window reaches this far beyond the mask's half-width (blur, anti-aliasing)
+OWN_CORE_HALF_PX = 3.0  # a station at least 6 px wide (in the mask) takes the stem colour of its own core
+
+
+@dataclass(frozen=True)
+class WidthProfile:
+    """Stem widths along one centerline: stations at arc length ``s_m`` (k,) [m].
+
+    ``width_m`` and ``sd_m`` (k,) [m]; ``width_px`` (k,) [px]; ``flag`` (k,) str from :data:`FLAGS`
+    (only ``"ok"`` stations are measurements); ``uv`` (k, 2) the stations' pixels.
+    """
+
+    s_m: NDArray
+    width_m: NDArray
+    sd_m: NDArray
+    width_px: NDArray
+    flag: NDArray
+    uv: NDArray
+
+
+def _sample(img: NDArray, pts: NDArray) -> NDArray:
+    """Bilinear samples of a (H, W, C) image at pixel points (..., 2) as (u, v); shape (..., C)."""
+    from scipy.ndimage import map_coordinates
+
+    flat = pts.reshape(-1, 2)
+    out = np.stack(
+        [map_coordinates(img[..., c], [flat[:, 1], flat[:, 0]], order=1, mode="nearest") for c in range(img.shape[2])],
+        axis=-1,
+    )
+    return out.reshape(*pts.shape[:-1], img.shape[2])
+
+
+def width_profile(
+    rgb: NDArray,
+    depth_mm: NDArray | None,
+    line,
+    camera: dict,
+    *,
+    direction: int = 1,
+    s_m: NDArray | None = None,
+    spacing_px: float = 3.0,
+) -> WidthProfile:
+    """Width of the stem at stations along an extracted centerline (see the module docstring).
+
+    Parameters
+    ----------
+    rgb : (H, W, 3) uint8 array
+    depth_mm : (H, W) uint16 array or None
+        Depth in mm (0 = missing); finds occluders in front of the plane. None: not checked.
+    line : Centerline
+        From :func:`bayesrod.vision.extract.extract_frame` (its ``x_m``, ``z_m``, ``s_m``,
+        ``observed``, ``mask`` and ``plane_depth_m``).
+    camera : dict
+        ``fx``, ``fy``, ``base_px`` (docs/format.md, camera block).
+    direction : +1 or -1
+        The push direction of the frame (the sign of x in the image).
+    s_m : (k,) array, optional
+        Stations [m of arc length]; default every ``spacing_px`` pixels along the centerline.
+
+    Returns
+    -------
+    WidthProfile
+    """
+    from scipy.interpolate import CubicSpline
+
+    from .extract import _band_tol
+
+    fx, fy = float(camera["fx"]), float(camera["fy"])
+    u0, v0 = (float(c) for c in camera["base_px"])
+    Z = float(line.plane_depth_m)
+    if line.s_m.size < 4:
+        raise ValueError(f"line: expected a centerline of at least 4 points, got {line.s_m.size}")
+    sx, sz = CubicSpline(line.s_m, line.x_m), CubicSpline(line.s_m, line.z_m)
+    if s_m is None:
+        step_m = spacing_px * Z / np.sqrt(fx * fy)
+        s_m = np.arange(0.0, float(line.s_m[-1]) + 1e-12, step_m)
+    s_m = np.asarray(s_m, float)
+    s_m = s_m[(s_m >= 0) & (s_m <= line.s_m[-1])]
+    x, z = sx(s_m), sz(s_m)
+    tx, tz = sx(s_m, 1), sz(s_m, 1)
+    # to pixels: u = u0 + fx dir x / Z, v = v0 - fy z / Z; the tangent and normal in the image
+    u, v = u0 + fx * direction * x / Z, v0 - fy * z / Z
+    tu, tv = fx * direction * tx, -fy * tz
+    norm = np.maximum(np.hypot(tu, tv), 1e-12)
+    nu, nv = -tv / norm, tu / norm
+    metres_per_px = Z * np.hypot(nu / fx, nv / fy)
+    img = rgb.astype(float)
+    H, W = rgb.shape[:2]
+    mask = np.asarray(line.mask, bool)
+    # the mask's half-width across the stem: the window's extent (at least 2 px)
+    reach = 20.0
+    t = np.arange(-reach, reach + 1e-9, STEP_PX)
+    pts = np.stack([u[:, None] + t[None, :] * nu[:, None], v[:, None] + t[None, :] * nv[:, None]], axis=-1)
+    from scipy.ndimage import map_coordinates
+
+    mvals = map_coordinates(mask.astype(float), [pts[..., 1].ravel(), pts[..., 0].ravel()], order=0, cval=0.0)
+    mvals = mvals.reshape(pts.shape[:2]) > 0.5
+    centre = t.size // 2
+    left = np.where(~mvals[:, :centre], np.arange(centre)[None, :], -1).max(axis=1) + 1
+    right = np.where(~mvals[:, centre:], np.arange(centre, t.size)[None, :], t.size).min(axis=1)
+    half_mask = 0.5 * np.maximum(right - left, 0) * STEP_PX
+    half = np.maximum(half_mask, 2.0) + MARGIN_PX
+    import cv2
+
+    # the frame's stem colour, for stations too narrow to have a core of their own: at the stations of the
+    # widest third at least 2.5 px wide, the pixel near the centerline farthest in colour from the local
+    # background (an interval of >= 2 px always covers one whole pixel). An interpolated sample on the
+    # centerline, or the median of eroded mask pixels, mixes in the background: a 3-px stem came out 15% too wide
+    wide = np.flatnonzero(2 * half_mask >= 2.5)
+    frame_stem = None
+    if wide.size >= 3:
+        top = wide[np.argsort(half_mask[wide])[-max(3, wide.size // 3) :]]
+        picks = [c for c in (_purest_pixel(img, u[i], v[i], nu[i], nv[i], half_mask[i]) for i in top) if c is not None]
+        if picks:
+            frame_stem = np.median(np.array(picks), axis=0)
+    if frame_stem is None:
+        core = cv2.erode(mask.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+        frame_stem = np.median(img[core], axis=0) if core.sum() >= 20 else np.median(img[mask], axis=0)
+    occluder = None
+    if depth_mm is not None:
+        occluder = (depth_mm > 0) & (depth_mm / 1000.0 < Z - _band_tol(Z))
+        occluder = cv2.dilate(occluder.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    observed = np.interp(s_m, line.s_m, (line.observed if line.observed is not None else np.ones(line.s_m.size)))
+    k = s_m.size
+    width_px, sd_px = np.full(k, np.nan), np.full(k, np.nan)
+    flag = np.full(k, "ok", dtype=object)
+    own_core = half_mask >= OWN_CORE_HALF_PX
+    profiles: dict[int, tuple] = {}
+    for i in range(k):
+        T = half[i]
+        tt = np.arange(-(T + BG_PX), T + BG_PX + 1e-9, STEP_PX)
+        q = np.stack([u[i] + tt * nu[i], v[i] + tt * nv[i]], axis=-1)
+        if q[:, 0].min() < 0 or q[:, 0].max() > W - 1 or q[:, 1].min() < 0 or q[:, 1].max() > H - 1:
+            flag[i] = "edge"
+            continue
+        prof = _sample(img, q)
+        inner = np.abs(tt) <= T
+        bg_l = np.median(prof[tt < -T], axis=0)
+        bg_r = np.median(prof[tt > T], axis=0)
+        stem = np.median(prof[np.abs(tt) <= half_mask[i] - 1.5], axis=0) if own_core[i] else frame_stem
+        a = np.empty(tt.size)
+        contrast = []
+        for side, bg in ((tt < 0, bg_l), (tt >= 0, bg_r)):
+            dcol = stem - bg
+            dd = float(dcol @ dcol)
+            contrast.append(np.sqrt(dd))
+            a[side] = (prof[side] - bg) @ dcol / max(dd, 1e-12)
+        # noise of a: the scatter of the background samples (one value per pixel: 1/STEP_PX samples)
+        bg_a = a[~inner]
+        per_px = 1.4826 * float(np.median(np.abs(bg_a - np.median(bg_a)))) if bg_a.size >= 8 else 0.1
+        per_px = max(per_px, 0.01)
+        # window sum over 2T independent pixels, plus each side's background median (BG_PX pixels)
+        # carried over that side's T pixels
+        width_px[i] = float(np.sum(a[inner]) * STEP_PX)
+        sd_px[i] = per_px * np.sqrt(2 * T + 2 * (np.pi / 2) * T**2 / BG_PX)
+        profiles[i] = (tt[inner], a[inner])
+        if observed[i] < 0.999 or (occluder is not None and _touches(occluder, q)):
+            flag[i] = "occluded"
+        elif per_px > 1.0 / 6.0 or min(contrast) < 12.0:  # a pixel's coverage known to worse than 1/6
+            flag[i] = "low_contrast"
+        elif s_m[i] * np.sqrt(fx * fy) / Z < 3 * max(2 * half_mask[i], 1.0) + 2:
+            flag[i] = "base"
+    # stations without a core of their own used the frame's stem colour, which on a stem a few pixels wide
+    # is still mixed with the background (blur): their coverage is scaled by the contrast the profiles'
+    # shapes imply (:func:`contrast_scale`)
+    borrowed = [i for i in profiles if not own_core[i] and flag[i] == "ok"]
+    scale = contrast_scale([profiles[i] for i in borrowed], half_mask[borrowed]) if borrowed else 1.0
+    width_px[~own_core] /= scale
+    sd_px[~own_core] /= scale
+    return WidthProfile(
+        s_m=s_m,
+        width_m=width_px * metres_per_px,
+        sd_m=sd_px * metres_per_px,
+        width_px=width_px,
+        flag=flag.astype(str),
+        uv=np.column_stack([u, v]),
+    )
+
+
+def _blurred_box(t: NDArray, w: NDArray, sigma: float) -> NDArray:
+    """A box of width ``w`` [px] seen through a Gaussian point spread of sd ``sigma`` [px], at offsets t."""
+    from scipy.special import ndtr
+
+    return ndtr((t + w / 2) / sigma) - ndtr((t - w / 2) / sigma)
+
+
+def contrast_scale(profiles: list, half_mask: NDArray, n_max: int = 40) -> float:
+    """Contrast of the true stem colour relative to the assumed one, from the shapes of narrow profiles.
+
+    Each profile (t, a) of coverage against the assumed colour is modelled as
+    ``k * box(w_i) * Gaussian(sigma)`` with the contrast ``k`` and the blur ``sigma`` shared by the frame
+    (least squares over the ``n_max`` widest profiles; widths and centres per profile). The coverage
+    integral itself needs no model (it is ``k w`` whatever the point spread); only ``k`` does. Returns 1
+    when fewer than 5 profiles are 2 px or wider (no shape to read the contrast from).
+    """
+    from scipy.optimize import least_squares
+
+    order = np.argsort(half_mask)[::-1]
+    use = [i for i in order if 2 * half_mask[i] >= 2.0][:n_max]
+    if len(use) < 5:
+        return 1.0
+    ts = [profiles[i][0] for i in use]
+    ys = [profiles[i][1] for i in use]
+    w0 = np.array([max(float(np.sum(y) * STEP_PX), 0.5) for y in ys])
+
+    def resid(x):
+        k, sig = np.exp(x[0]), np.exp(x[1])
+        w, c = x[2 : 2 + len(use)], x[2 + len(use) :]
+        parts = [y - k * _blurred_box(t - ci, wi, sig) for t, y, wi, ci in zip(ts, ys, w, c, strict=True)]
+        return np.concatenate(parts)
+
+    x0 = np.concatenate([[0.0, np.log(0.8)], w0, np.zeros(len(use))])
+    lo = np.concatenate([[np.log(0.5), np.log(0.2)], np.full(len(use), 0.1), np.full(len(use), -2.0)])
+    hi = np.concatenate([[np.log(2.0), np.log(3.0)], np.full(len(use), 50.0), np.full(len(use), 2.0)])
+    fit = least_squares(resid, np.clip(x0, lo + 1e-9, hi - 1e-9), bounds=(lo, hi), loss="soft_l1", f_scale=0.1)
+    return float(np.exp(fit.x[0])) if fit.success else 1.0
+
+
+def _purest_pixel(img: NDArray, u: float, v: float, nu: float, nv: float, half: float):
+    """Colour (3,) of the pixel within 1 px of (u, v) farthest from the background beyond ``half`` + 3 px."""
+    H, W = img.shape[:2]
+    ui, vi = int(round(u)), int(round(v))
+    if not (4 <= ui < W - 4 and 4 <= vi < H - 4):
+        return None
+    far = half + MARGIN_PX + 1.5
+    bg_pts = [(u + sgn * far * nu, v + sgn * far * nv) for sgn in (-1, 1)]
+    if any(not (0 <= a < W and 0 <= b < H) for a, b in bg_pts):
+        return None
+    bg = np.mean([img[int(round(b)), int(round(a))] for a, b in bg_pts], axis=0)
+    patch = img[vi - 1 : vi + 2, ui - 1 : ui + 2].reshape(-1, 3)
+    return patch[int(np.argmax(np.sum((patch - bg) ** 2, axis=1)))]
+
+
+def _touches(mask: NDArray, q: NDArray) -> bool:
+    """True when any point (m, 2) as (u, v) falls on a True pixel of ``mask``."""
+    ui = np.clip(np.round(q[:, 0]).astype(int), 0, mask.shape[1] - 1)
+    vi = np.clip(np.round(q[:, 1]).astype(int), 0, mask.shape[0] - 1)
+    return bool(mask[vi, ui].any())
+
+
+@dataclass(frozen=True)
+class DiameterProfile:
+    """The stem's diameter along its arc length, combined over frames: stations ``s_m`` (k,) [m].
+
+    ``d_m``, ``sd_m`` (k,) [m]: the median width over the frames where the station is ``ok`` and its
+    standard deviation (at flagged stations: the median and spread of whatever the frames measured, for
+    the record; NaN where nothing was); ``n_frames`` (k,) int; ``flag`` (k,) str: ``ok`` where at least
+    ``min_frames`` frames measured it, else the most frequent flag of the frames (``few_frames`` when
+    they were ``ok`` but too few).
+    """
+
+    s_m: NDArray
+    d_m: NDArray
+    sd_m: NDArray
+    n_frames: NDArray
+    flag: NDArray
+
+    @property
+    def ok(self) -> NDArray:
+        return self.flag == "ok"
+
+
+def combine_profiles(profiles: list[WidthProfile], s_m: NDArray, min_frames: int = 3) -> DiameterProfile:
+    """Median over frames of widths measured at the same stations ``s_m`` (k,), with an honest sd.
+
+    The frames of a push share their background, so their errors at a station are correlated and
+    do not average down as 1/sqrt(n): the sd is the larger of the frames' spread over sqrt(n) (and
+    their own sd over sqrt(n)) and the noise the combined profile shows along the stem, measured
+    by second differences of neighbouring stations (robust, Rice 1984; the true profile is smooth on
+    the scale of a few pixels), which scales every station's sd up when it is the larger.
+    """
+    s_m = np.asarray(s_m, float)
+    k = s_m.size
+    W = np.full((len(profiles), k), np.nan)
+    S = np.full((len(profiles), k), np.nan)
+    raw = np.full((len(profiles), k), np.nan)  # every frame's number, flagged or not
+    flags = np.full((len(profiles), k), "", dtype=object)
+    for j, wp in enumerate(profiles):
+        idx = np.searchsorted(s_m, wp.s_m)
+        hit = (idx < k) & np.isclose(s_m[np.minimum(idx, k - 1)], wp.s_m, rtol=0, atol=1e-9)
+        flags[j, idx[hit]] = wp.flag[hit]
+        raw[j, idx[hit]] = wp.width_m[hit]
+        good = hit & (wp.flag == "ok")
+        W[j, idx[good]] = wp.width_m[good]
+        S[j, idx[good]] = wp.sd_m[good]
+    n = np.sum(np.isfinite(W), axis=0)
+    d = np.full(k, np.nan)
+    sd = np.full(k, np.nan)
+    ok = n >= min_frames
+    if ok.any():
+        med = np.nanmedian(W[:, ok], axis=0)
+        spread = 1.4826 * np.nanmedian(np.abs(W[:, ok] - med), axis=0)
+        own = np.nanmedian(S[:, ok], axis=0)
+        # the median of n values: sqrt(pi/2) x the mean's sd
+        sd_ok = np.sqrt(np.pi / 2) * np.maximum(spread, own) / np.sqrt(n[ok])
+        d[ok], sd[ok] = med, sd_ok
+        if ok.sum() >= 8:
+            second = med[:-2] - 2 * med[1:-1] + med[2:]
+            rice = 1.4826 * float(np.median(np.abs(second - np.median(second)))) / np.sqrt(6.0)
+            typical = float(np.median(sd_ok))
+            if rice > typical:
+                sd[ok] *= rice / typical
+    # flagged stations keep a number (the median of whatever the frames measured) for the record
+    other = ~ok & (np.sum(np.isfinite(raw), axis=0) > 0)
+    if other.any():
+        d[other] = np.nanmedian(raw[:, other], axis=0)
+        sd[other] = 1.4826 * np.nanmedian(np.abs(raw[:, other] - d[other]), axis=0) + 1e-12
+    flag = np.full(k, "ok", dtype=object)
+    for i in np.flatnonzero(~ok):
+        seen = [f for f in flags[:, i] if f]
+        if not seen:
+            flag[i] = "unseen"
+        elif any(f == "ok" for f in seen):
+            flag[i] = "few_frames"
+        else:
+            vals, counts = np.unique(seen, return_counts=True)
+            flag[i] = str(vals[np.argmax(counts)])
+    return DiameterProfile(s_m=s_m, d_m=d, sd_m=sd, n_frames=n.astype(int), flag=flag.astype(str))

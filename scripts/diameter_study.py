@@ -1,0 +1,143 @@
+"""Diameter from the frames, taper and Young's modulus: replicate study (issue 22).
+
+    python scripts/diameter_study.py --out diameter-study --reps 10 [--workers 1]
+
+Per replicate and stem (twig, grass; one contact height, the preset's middle one; rendered frames
+with clutter, the probe and depth dropouts, ``bayesrod simulate``'s renderer):
+
+1. ``bayesrod.extract``: the diameter profile from the frames (docs/vision.md); its median absolute
+   error against the drawn diameter [px], the sd of (measured - true) / sd over the ok stations,
+   the fraction within +-1.645 sd;
+2. force-only fits with the width term ``shared`` (uniform modulus), ``off`` (width ignored) and
+   ``free`` (p_geom free): E0's and d0's 90% intervals against the truth, the p interval's width with
+   and without the width, the uniform-modulus verdict;
+3. the same stem drawn with a modulus gradient (diameter taper q = p - 0.15, so that
+   E(s) ~ (1 - s/L)^0.6): the ``free`` fit's verdict (expected ``rejected``).
+
+Writes diameter_study.csv (resumable: done rows are skipped) and diameter_study.md (the table of
+docs/validation.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+import bayesrod
+from bayesrod.dataset.io import append_rows, read_rows
+
+FIELDS = ["stem", "seed", "graded", "stations_ok", "median_abs_err_px", "z_sd", "z_cover90"]
+FIELDS += ["d0_true", "d0", "d0_q05", "d0_q95", "E_true", "E", "E_q05", "E_q95"]
+FIELDS += ["p_true", "p_q05_shared", "p_q95_shared", "p_q05_off", "p_q95_off", "dq_q05", "dq_q95", "verdict"]
+FIELDS += ["seconds"]
+GRADIENT = 0.15  # p - q of the graded stems
+
+
+def one(job) -> dict:
+    stem, seed, graded = job
+    t0 = time.perf_counter()
+    from bayesrod.dataset.simulate import SimConfig
+
+    cfg = SimConfig.from_preset(stem, seed=seed)
+    h = cfg.heights_m[len(cfg.heights_m) // 2]
+    over = {"diameter_taper": cfg.p - GRADIENT} if graded else {}
+    sim = bayesrod.simulate(stem, seed=seed, heights_m=[h], config_overrides=over)
+    row = {"stem": stem, "seed": seed, "graded": int(graded)}
+    with tempfile.TemporaryDirectory() as tmp:
+        sim.save(Path(tmp) / "raw", frames=True)
+        ex = bayesrod.extract(Path(tmp) / "raw", progress=False)
+        ds = ex.dataset
+        truth = ex.source.extra["truth"]
+        d0, q, L = truth["base_diameter_m"], truth["diameter_taper"], ds.length_m
+        dp = ex.diameters
+        ok = dp.ok
+        true = d0 * np.clip(1 - dp.s_m / L, 0, 1) ** q
+        px = ex.doc["pushes"][ds.pushes[0].id]["plane_depth_m"] / 600.0
+        z = (dp.d_m[ok] - true[ok]) / dp.sd_m[ok]
+        row.update(
+            stations_ok=int(ok.sum()),
+            median_abs_err_px=float(np.median(np.abs(dp.d_m[ok] - true[ok])) / px),
+            z_sd=float(np.std(z)),
+            z_cover90=float(np.mean(np.abs(z) < 1.645)),
+            d0_true=d0,
+            E_true=truth["youngs_modulus_Pa"],
+            p_true=truth["p"],
+        )
+        modes = ("free",) if graded else ("shared", "off", "free")
+        for mode in modes:
+            post = bayesrod.fit(ds, use_shapes=False, diameter=mode, progress=False, max_steps=4000)
+            doc = post.to_dict()
+            pq = doc["parameters"]["p"]
+            if mode in ("shared", "off"):
+                row[f"p_q05_{mode}"], row[f"p_q95_{mode}"] = pq["q05"], pq["q95"]
+            if mode == "shared" or (graded and mode == "free"):
+                y = doc["youngs_modulus"]
+                row.update(d0=y["d0_m"]["median"], d0_q05=y["d0_m"]["q05"], d0_q95=y["d0_m"]["q95"])
+                row.update(E=y["E_Pa"]["median"], E_q05=y["E_Pa"]["q05"], E_q95=y["E_Pa"]["q95"])
+            if mode == "free":
+                y = doc["youngs_modulus"]
+                row.update(dq_q05=y["modulus_taper"]["q05"], dq_q95=y["modulus_taper"]["q95"])
+                row["verdict"] = y["uniform_modulus"]
+    row["seconds"] = round(time.perf_counter() - t0, 1)
+    return row
+
+
+def table(rows) -> str:
+    out = [
+        "| stem | modulus | reps | width error, median px | station z sd | station 90% cover | d0 within 5% "
+        "| d0 90% cover | E 90% cover | p width with / without width | uniform modulus rejected |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for stem in ("twig", "grass"):
+        for graded in (0, 1):
+            rs = [r for r in rows if r["stem"] == stem and int(float(r["graded"])) == graded]
+            if not rs:
+                continue
+
+            def f(k, rs=rs):
+                return np.array([float(r[k]) for r in rs])
+
+            cover_d0 = np.mean((f("d0_q05") <= f("d0_true")) & (f("d0_true") <= f("d0_q95")))
+            cover_E = np.mean((f("E_q05") <= f("E_true")) & (f("E_true") <= f("E_q95")))
+            within = np.mean(np.abs(f("d0") / f("d0_true") - 1) < 0.05)
+            if graded:
+                ratio = "-"
+            else:
+                ratio = f"{np.median((f('p_q95_shared') - f('p_q05_shared')) / (f('p_q95_off') - f('p_q05_off'))):.2f}"
+            rej = sum(r["verdict"] == "rejected" for r in rs)
+            out.append(
+                f"| {stem} | {'graded' if graded else 'uniform'} | {len(rs)} | {np.median(f('median_abs_err_px')):.3f} "
+                f"| {np.median(f('z_sd')):.2f} | {np.median(f('z_cover90')):.2f} | {within:.2f} | {cover_d0:.2f} "
+                f"| {cover_E:.2f} | {ratio} | {rej}/{len(rs)} |"
+            )
+    return "\n".join(out) + "\n"
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="diameter-study")
+    ap.add_argument("--reps", type=int, default=10)
+    ap.add_argument("--graded-reps", type=int, default=5)
+    ap.add_argument("--workers", type=int, default=1)
+    a = ap.parse_args(argv)
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    csv = out / "diameter_study.csv"
+    done = {(r["stem"], int(float(r["seed"])), int(float(r["graded"]))) for r in read_rows(csv)}
+    jobs = [(s, k, False) for k in range(a.reps) for s in ("twig", "grass")]
+    jobs += [(s, 100 + k, True) for k in range(a.graded_reps) for s in ("twig", "grass")]
+    jobs = [j for j in jobs if (j[0], j[1], int(j[2])) not in done]
+    with ProcessPoolExecutor(a.workers) as pool:
+        for row in append_rows(csv, FIELDS, pool.map(one, jobs), new_file=not done):
+            print(row["stem"], row["seed"], row["graded"], row.get("verdict"), row["seconds"], flush=True)
+    (out / "diameter_study.md").write_text(table(read_rows(csv)))
+    print(table(read_rows(csv)))
+
+
+if __name__ == "__main__":
+    main()
