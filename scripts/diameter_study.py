@@ -45,7 +45,7 @@ def one(job) -> dict:
 
     cfg = SimConfig.from_preset(stem, seed=seed)
     h = cfg.heights_m[len(cfg.heights_m) // 2]
-    over = {"diameter_taper": cfg.p - GRADIENT} if graded else {}
+    over = {"exact_width": True, **({"diameter_taper": cfg.p - GRADIENT} if graded else {})}
     sim = bayesrod.simulate(stem, seed=seed, heights_m=[h], config_overrides=over)
     row = {"stem": stem, "seed": seed, "graded": int(graded)}
     with tempfile.TemporaryDirectory() as tmp:

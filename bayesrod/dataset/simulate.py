@@ -77,6 +77,8 @@ class SimConfig:
     # for a grass) and q (None: q = p, a uniform modulus; q != p is a modulus E(s) ~ (1 - s/L)^(4 (p - q)))
     base_diameter_m: float | None = None
     diameter_taper: float | None = None
+    # frames draw each pixel's exact coverage of the true width (the diameter study); default whole-pixel widths
+    exact_width: bool = False
 
     @property
     def rendered_diameter(self) -> tuple[float, float]:

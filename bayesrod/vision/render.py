@@ -116,7 +116,9 @@ def stem_coverage(u, v, width_px, shape, step_px: float = 0.2):
 ARMS = ("trailing", "leading")
 
 
-def render_frame(bg_rgb, bg_depth, xz_m, s_m, length_m, p, d0, camera, Z0, probe_xz, rng, arm="leading"):
+def render_frame(
+    bg_rgb, bg_depth, xz_m, s_m, length_m, p, d0, camera, Z0, probe_xz, rng, arm="leading", exact_width=False
+):
     """One RGB (uint8) and depth (uint16 mm) image of the stem centerline ``xz_m`` (2, n).
 
     ``arm`` places the bar that holds the probe, in front of the stem at the contact
@@ -124,12 +126,33 @@ def render_frame(bg_rgb, bg_depth, xz_m, s_m, length_m, p, d0, camera, Z0, probe
     the image edge, over the part of the stem the push bends forward, a deliberately hard
     occlusion; ``"trailing"`` runs it back (-x), as a rig held from behind the push would
     (the seed's wire anchors lead the contact by the wire's deflection).
+
+    ``exact_width=True`` draws each pixel's exact coverage of the true width (:func:`stem_coverage`, the truth
+    of the diameter study); the default draws whole-pixel line widths with a visible sub-pixel tip (what every
+    centerline number of docs/vision.md was measured on).
     """
     rgb = bg_rgb.copy()
     depth = bg_depth.copy()
     u, v = project(xz_m[0], xz_m[1], camera, Z0)
     diam = d0 * np.clip(1 - s_m / length_m, 0, 1) ** p
-    alpha = stem_coverage(u, v, diam * FOCAL / Z0, (HEIGHT, WIDTH))
+    if exact_width:
+        alpha = stem_coverage(u, v, diam * FOCAL / Z0, (HEIGHT, WIDTH))
+    else:  # the default: whole-pixel line widths, a faint but visible (>= 35%) sub-pixel tip
+        stem = np.zeros((HEIGHT, WIDTH), np.uint8)
+        for i in range(len(u) - 1):
+            w_px = diam[i] * FOCAL / Z0
+            thick = max(1, int(round(w_px)))
+            shade = 255 if w_px >= 1 else int(255 * max(w_px, 0.35))
+            cv2.line(
+                stem,
+                (int(round(u[i] * 4)), int(round(v[i] * 4))),
+                (int(round(u[i + 1] * 4)), int(round(v[i + 1] * 4))),
+                shade,
+                thick,
+                cv2.LINE_AA,
+                shift=2,
+            )
+        alpha = stem / 255.0
     col = STEM_RGB + rng.normal(0, 4, 3)
     rgb = rgb * (1 - alpha[..., None]) + col * alpha[..., None]
     depth[alpha > 0.5] = Z0
@@ -186,6 +209,7 @@ def render_push_frames(cfg, sp, folder: Path, camera: dict, rng: np.random.Gener
             probe,
             rng,
             arm,
+            cfg.exact_width,
         )
         cv2.imwrite(str(folder / f"rgb_{k:03d}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
         cv2.imwrite(str(folder / f"depth_{k:03d}.png"), dmm)
