@@ -57,7 +57,7 @@ def one(job) -> dict:
         dp = ex.diameters
         ok = dp.ok
         true = d0 * np.clip(1 - dp.s_m / L, 0, 1) ** q
-        px = ex.doc["pushes"][ds.pushes[0].id]["plane_depth_m"] / 600.0
+        px = ex.doc["pushes"][ds.pushes[0].id]["plane_depth_m"] / ds.camera.fx  # metres per pixel
         z = (dp.d_m[ok] - true[ok]) / dp.sd_m[ok]
         row.update(
             stations_ok=int(ok.sum()),

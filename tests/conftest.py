@@ -1,3 +1,4 @@
+import functools
 import os
 import shutil
 from pathlib import Path
@@ -27,8 +28,15 @@ def make_dataset(path: Path, preset="twig", **kw) -> Path:
         from bayesrod.vision.render import default_camera
 
         camera = default_camera(cfg.length_m)
-    write_simulated(cfg, simulate(cfg), path, frames=frames, camera=camera, arm=arm)
+    write_simulated(cfg, list(_simulated(cfg)), path, frames=frames, camera=camera, arm=arm)
     return path
+
+
+@functools.lru_cache(maxsize=16)
+def _simulated(cfg: SimConfig) -> tuple:
+    """The pushes of ``cfg`` (deterministic in its seed), solved once per test process: several tests
+    write the same stem (the plain twig beside every effect of test_simulate)."""
+    return tuple(simulate(cfg))
 
 
 @pytest.fixture(scope="session")

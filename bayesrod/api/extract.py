@@ -166,7 +166,7 @@ def extract(dataset, *, progress: bool = True) -> Extraction:
     from tqdm.auto import tqdm
 
     from ..vision.extract import ExtractionError, extract_frame
-    from ..vision.width import combine_profiles, width_profile
+    from ..vision.width import SPACING_PX, combine_profiles, width_profile
     from ._common import as_dataset, progress_enabled
 
     spec = as_dataset(dataset)
@@ -194,8 +194,8 @@ def extract(dataset, *, progress: bool = True) -> Extraction:
                 bar.update()
                 continue
             plane = plane or line.plane_depth_m  # the plane of the push: from its first good frame
-            if stations is None:  # width stations every 3 px of the first extracted frame, over the stem
-                stations = np.arange(0.0, spec.length_m, 3.0 * plane / np.sqrt(camera["fx"] * camera["fy"]))
+            if stations is None:  # width stations every SPACING_PX of the first extracted frame, over the stem
+                stations = np.arange(0.0, spec.length_m, SPACING_PX * plane / np.sqrt(camera["fx"] * camera["fy"]))
             widths.append(width_profile(rgb, depth, line, camera, direction=push.direction, s_m=stations))
             n = line.x_m.size
             cols["time_s"].append(np.full(n, rec.time_s))

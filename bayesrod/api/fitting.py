@@ -177,22 +177,17 @@ class Posterior:
         """
         from ..inference.summary import youngs_modulus
 
-        if "d0_m" not in self.samples:
-            raise ValueError(
-                "youngs_modulus: expected a fit with measured diameters (fit(..., diameter='shared' or 'free') on a "
-                "dataset with 'diameters'), got a fit without"
-            )
         return youngs_modulus(self.samples)
 
     def modulus_band(self, s_m: ArrayLike, level: float = 0.9) -> Band:
         """E(s) [Pa] over arc lengths ``s_m`` [m], shape (m,): E0 (1 - s/L)^(4 (p - p_geom)); flat under the
         uniform-modulus model (``diameter="shared"``)."""
+        from ..inference.summary import modulus_draws
+
         level = _check_level(level)
         s = _grid(s_m, "s_m", 0.0, self.length_m, closed=True)
-        E0 = self.youngs_modulus()[:, None]
-        dq = self.samples["p"] - self.samples.get("p_geom", self.samples["p"])
-        x = np.clip(1.0 - s[None, :] / draw_lengths(self.samples, self.length_m), 0.0, None)
-        return Band(s, *interval(E0 * x ** (4.0 * dq[:, None]), level), level=level, x_name="s_m", unit="Pa")
+        E = modulus_draws(self.samples, self.length_m, s)
+        return Band(s, *interval(E, level), level=level, x_name="s_m", unit="Pa")
 
     def k_theta_band(self, height_m: ArrayLike, level: float = 0.9) -> Band:
         """Lumped rotational stiffness k_theta(h) (eq. kdist) over heights ``height_m`` [m], shape (m,) [N m/rad]."""
@@ -734,7 +729,7 @@ def fit(
     if diameter not in ("auto", "shared", "free", "off"):
         raise ValueError(f"diameter: expected 'auto', 'shared', 'free' or 'off', got {diameter!r}")
     if diameter == "auto":
-        diameter = "shared" if getattr(spec, "diameters", None) is not None else "off"
+        diameter = "shared" if spec.diameters is not None else "off"
     config = {
         "dataset": str(Path(spec.root).resolve()) if spec.root is not None else None,
         "prior": pr.source,

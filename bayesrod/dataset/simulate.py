@@ -28,6 +28,7 @@ from .model import FORMAT
 WIRE_LENGTH = 0.44  # m, the seed's wire sensor span
 WIRE_STIFFNESS = 2000.0  # N/m axial stiffness of the whole wire
 ROBOT_SPEED = 0.02  # m/s
+BASE_DIAMETER = {"twig": 0.010, "grass": 0.004}  # of the rendered stems [m], by preset kind
 
 
 @dataclass(frozen=True)
@@ -83,8 +84,6 @@ class SimConfig:
     @property
     def rendered_diameter(self) -> tuple[float, float]:
         """(d0 [m], taper q) of the stem the frames draw."""
-        from ..vision.render import BASE_DIAMETER
-
         d0 = self.base_diameter_m or BASE_DIAMETER["grass" if self.p > 1.0 else "twig"]
         return float(d0), float(self.p if self.diameter_taper is None else self.diameter_taper)
 

@@ -33,7 +33,7 @@ def dataset_document(ds) -> dict:
             entry["shapes"] = f"{p.id}/shapes.csv"
         entry.update(p.files.get("extra", {}) if isinstance(p.files, dict) else {})
         doc["pushes"].append(entry)
-    if getattr(ds, "diameters", None) is not None:
+    if ds.diameters is not None:
         doc["diameters"] = "diameters.csv"
     doc.update(ds.extra)
     return doc
@@ -63,7 +63,7 @@ def write_dataset(ds, path, *, overwrite: bool = False) -> Path:
                         rows["sd_m"].append(fr.sd_m)
                 cols = {k: np.concatenate(v) for k, v in rows.items() if v}
                 write_csv(tmp / p.id / "shapes.csv", cols)
-        if getattr(ds, "diameters", None) is not None:
+        if ds.diameters is not None:
             dm = ds.diameters
             source = np.array([dm.source] * dm.s_m.size, dtype=object)
             write_csv(tmp / "diameters.csv", {"s_m": dm.s_m, "d_m": dm.d_m, "sd_m": dm.sd_m, "source": source})

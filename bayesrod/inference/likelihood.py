@@ -422,7 +422,7 @@ class RodLikelihood:
         self.diameter_names = []
         if diameter == "off":
             return
-        dm = getattr(spec, "diameters", None)
+        dm = spec.diameters
         if dm is None:
             raise ValueError(
                 f"diameter: expected a dataset with measured diameters ('diameters' in specimen.json, or "

@@ -113,7 +113,7 @@ def find_start(post, rng: np.random.Generator, init: dict | None = None) -> np.n
                 nat["shape_sd_scale"] = max(rms / float(np.sqrt(np.mean(lik.sd_obs**2))), 1e-3)
             else:
                 nat["sigma_shape_m"] = max(rms, 1e-5)
-        if getattr(lik, "diameter", "off") != "off":  # the width term: closed-form d0 at this taper
+        if lik.diameter != "off":  # the width term: closed-form d0 at this taper
             nat.update(lik.diameter_start(p))
         for n, pr in zip(names, post.priors, strict=True):
             if n not in nat:

@@ -51,16 +51,19 @@ def youngs_modulus(samples: dict) -> NDArray:
     Needs a fit with measured diameters (``d0_m`` in ``samples``).
     """
     if "d0_m" not in samples:
-        raise ValueError("samples: expected a fit with measured diameters (d0_m), got none; fit with diameter=")
+        raise ValueError(
+            "youngs_modulus: expected a fit with measured diameters (fit(..., diameter='shared' or 'free') on a "
+            "dataset with 'diameters'), got a fit without"
+        )
     return 64.0 * np.asarray(samples["EI0"], float) / (np.pi * np.asarray(samples["d0_m"], float) ** 4)
 
 
-def modulus_band(samples: dict, length_m: float, s_m) -> dict:
-    """90% band and median of E(s) [Pa] over ``s_m``: E0 (1 - s/L)^(4 (p - p_geom)), constant when p_geom = p."""
+def modulus_draws(samples: dict, length_m: float, s_m) -> NDArray:
+    """E(s) [Pa] per draw over ``s_m`` (m,), shape (n, m): E0 (1 - s/L)^(4 (p - p_geom)), flat when p_geom = p."""
     E0 = youngs_modulus(samples)[:, None]
     dq = np.asarray(samples["p"], float) - np.asarray(samples.get("p_geom", samples["p"]), float)
     x = np.clip(1.0 - np.asarray(s_m, float)[None, :] / draw_lengths(samples, length_m), 0.0, None)
-    return quantiles(E0 * x ** (4.0 * dq[:, None]))
+    return E0 * x ** (4.0 * dq[:, None])
 
 
 def youngs_modulus_summary(samples: dict, length_m: float, source: str | None = None) -> dict:
@@ -78,7 +81,7 @@ def youngs_modulus_summary(samples: dict, length_m: float, source: str | None = 
         out["modulus_taper"] = q
         out["uniform_modulus"] = "consistent" if q["q05"] <= 0.0 <= q["q95"] else "rejected"
         s = np.linspace(0.0, 0.9, 10) * float(length_m)
-        band = modulus_band(samples, length_m, s)
+        band = quantiles(modulus_draws(samples, length_m, s))
         out["band"] = {"s_m": s.tolist(), **{k: np.asarray(v).tolist() for k, v in band.items()}}
     return out
 
@@ -177,7 +180,7 @@ def build_summary(spec, post, samples: dict, diag: dict, fit_error: dict, effect
         "fit_error": fit_error,
     }
     if "d0_m" in samples:
-        dm = getattr(spec, "diameters", None)
+        dm = spec.diameters
         summary["youngs_modulus"] = youngs_modulus_summary(samples, L, dm.source if dm is not None else None)
     summary.update(extra)
     return summary

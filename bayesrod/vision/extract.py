@@ -215,6 +215,30 @@ def _path_noise(x: NDArray, z: NDArray) -> float:
     return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(6.0))
 
 
+def mask_across(mask: NDArray, uv: NDArray, n: NDArray, offs: NDArray, order: int = 1) -> NDArray:
+    """The mask (H, W) sampled along each point's normal: points ``uv`` (k, 2), unit normals ``n`` (k, 2),
+    offsets ``offs`` (m,) [px]; returns (k, m) (``order`` 1 bilinear, 0 nearest; 0 outside the image)."""
+    from scipy.ndimage import map_coordinates
+
+    pts = uv[:, None, :] + offs[None, :, None] * n[:, None, :]  # (k, m, 2)
+    m = map_coordinates(mask.astype(float), [pts[..., 1].ravel(), pts[..., 0].ravel()], order=order, cval=0.0)
+    return m.reshape(uv.shape[0], offs.size)
+
+
+def band_around_centre(empty: NDArray) -> tuple[NDArray, NDArray]:
+    """First and one-past-last index (k,) of the run of non-empty samples around the middle sample
+    (index m // 2) of each row of ``empty`` (k, m) bool."""
+    centre = empty.shape[1] // 2
+    left = np.where(empty[:, :centre], np.arange(centre)[None, :], -1).max(axis=1) + 1
+    right = np.where(empty[:, centre:], np.arange(centre, empty.shape[1])[None, :], empty.shape[1]).min(axis=1)
+    return left, right
+
+
+def in_front_of_plane(depth_mm: NDArray, Z: float, band_m: float = 0.02) -> NDArray:
+    """Pixels (H, W) whose depth reads nearer than the plane's depth band (the probe, the arm)."""
+    return (depth_mm > 0) & (depth_mm / 1000.0 < Z - _band_tol(Z, band_m))
+
+
 def recentre(uv: NDArray, mask: NDArray, half_window: int = 3, max_half_width: float = 12.0) -> NDArray:
     """Move each path pixel (k, 2) to the middle of the mask across the path's local normal.
 
@@ -224,8 +248,6 @@ def recentre(uv: NDArray, mask: NDArray, half_window: int = 3, max_half_width: f
     sampled along the normal in 0.25-px steps out to the first empty sample on either side, and
     the pixel moves to the centroid (by at most 1 px). Tangents from +-``half_window`` path pixels.
     """
-    from scipy.ndimage import map_coordinates
-
     k = uv.shape[0]
     if k < 3:
         return uv
@@ -235,14 +257,9 @@ def recentre(uv: NDArray, mask: NDArray, half_window: int = 3, max_half_width: f
     t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-9)
     n = np.stack([-t[:, 1], t[:, 0]], axis=1)
     offs = np.arange(-max_half_width, max_half_width + 0.01, 0.25)
-    pts = uv[:, None, :] + offs[None, :, None] * n[:, None, :]  # (k, m, 2)
-    m = map_coordinates(mask.astype(float), [pts[..., 1].ravel(), pts[..., 0].ravel()], order=1, cval=0.0)
-    m = m.reshape(k, offs.size)
-    centre = offs.size // 2
+    m = mask_across(mask, uv, n, offs, order=1)
     # the band containing the path pixel: contiguous non-zero samples around the centre
-    empty = m <= 0.0
-    left = np.where(empty[:, :centre], np.arange(centre)[None, :], -1).max(axis=1) + 1
-    right = np.where(empty[:, centre:], np.arange(centre, offs.size)[None, :], offs.size).min(axis=1)
+    left, right = band_around_centre(m <= 0.0)
     inside = (np.arange(offs.size)[None, :] >= left[:, None]) & (np.arange(offs.size)[None, :] < right[:, None])
     w = np.where(inside, m, 0.0)
     tot = w.sum(axis=1)
@@ -579,7 +596,7 @@ def extract_frame(
             steps = max(int((max_length_m - so_far) * camera["fx"] / Z / 1.5), 0)
         if steps:
             alpha, blocked = stem_likeness(rgb, mask, depth_mm, Z, return_blocked=True)
-            front = (depth_mm > 0) & (depth_mm / 1000.0 < Z - _band_tol(Z, band_m))
+            front = in_front_of_plane(depth_mm, Z, band_m)
             front = _close(front) & blocked
             pts, coasted = track_tip(
                 alpha,

@@ -22,7 +22,6 @@ from ..dataset.io import write_csv
 WIDTH, HEIGHT = 640, 480
 FOCAL = 600.0
 STEM_RGB = np.array([112, 118, 62], float)  # olive-brown
-BASE_DIAMETER = {"twig": 0.010, "grass": 0.004}
 
 
 def plane_depth(length_m: float) -> float:

@@ -35,9 +35,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..dataset.engagement import robust_noise
+
 #: flag names, in the order they are tested (the first that applies is reported)
 FLAGS = ("ok", "occluded", "low_contrast", "edge", "base")
 STEP_PX = 0.25  # sample spacing along the normal [px]
+SPACING_PX = 3.0  # default station spacing along the centerline [px]
 BG_PX = 3.0  # width of each background strip [px]
 MARGIN_PX = 3.0  # the window reaches this far beyond the mask's half-width (blur, anti-aliasing)
 OWN_CORE_HALF_PX = 3.0  # a station at least 6 px wide (in the mask) takes the stem colour of its own core
@@ -79,7 +82,7 @@ def width_profile(
     *,
     direction: int = 1,
     s_m: NDArray | None = None,
-    spacing_px: float = 3.0,
+    spacing_px: float = SPACING_PX,
 ) -> WidthProfile:
     """Width of the stem at stations along an extracted centerline (see the module docstring).
 
@@ -102,9 +105,10 @@ def width_profile(
     -------
     WidthProfile
     """
+    import cv2
     from scipy.interpolate import CubicSpline
 
-    from .extract import _band_tol
+    from .extract import band_around_centre, in_front_of_plane, mask_across
 
     fx, fy = float(camera["fx"]), float(camera["fy"])
     u0, v0 = (float(c) for c in camera["base_px"])
@@ -128,21 +132,11 @@ def width_profile(
     img = rgb.astype(float)
     H, W = rgb.shape[:2]
     mask = np.asarray(line.mask, bool)
-    # the mask's half-width across the stem: the window's extent (at least 2 px)
-    reach = 20.0
-    t = np.arange(-reach, reach + 1e-9, STEP_PX)
-    pts = np.stack([u[:, None] + t[None, :] * nu[:, None], v[:, None] + t[None, :] * nv[:, None]], axis=-1)
-    from scipy.ndimage import map_coordinates
-
-    mvals = map_coordinates(mask.astype(float), [pts[..., 1].ravel(), pts[..., 0].ravel()], order=0, cval=0.0)
-    mvals = mvals.reshape(pts.shape[:2]) > 0.5
-    centre = t.size // 2
-    left = np.where(~mvals[:, :centre], np.arange(centre)[None, :], -1).max(axis=1) + 1
-    right = np.where(~mvals[:, centre:], np.arange(centre, t.size)[None, :], t.size).min(axis=1)
+    # the mask's half-width across the stem (nearest samples out to 20 px): the window's extent (at least 2 px)
+    t = np.arange(-20.0, 20.0 + 1e-9, STEP_PX)
+    left, right = band_around_centre(mask_across(mask, np.column_stack([u, v]), np.column_stack([nu, nv]), t, 0) <= 0.5)
     half_mask = 0.5 * np.maximum(right - left, 0) * STEP_PX
     half = np.maximum(half_mask, 2.0) + MARGIN_PX
-    import cv2
-
     # the frame's stem colour, for stations too narrow to have a core of their own: at the stations of the
     # widest third at least 2.5 px wide, the pixel near the centerline farthest in colour from the local
     # background (an interval of >= 2 px always covers one whole pixel). An interpolated sample on the
@@ -159,8 +153,7 @@ def width_profile(
         frame_stem = np.median(img[core], axis=0) if core.sum() >= 20 else np.median(img[mask], axis=0)
     occluder = None
     if depth_mm is not None:
-        occluder = (depth_mm > 0) & (depth_mm / 1000.0 < Z - _band_tol(Z))
-        occluder = cv2.dilate(occluder.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+        occluder = cv2.dilate(in_front_of_plane(depth_mm, Z).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
     observed = np.interp(s_m, line.s_m, (line.observed if line.observed is not None else np.ones(line.s_m.size)))
     k = s_m.size
     width_px, sd_px = np.full(k, np.nan), np.full(k, np.nan)
@@ -336,8 +329,7 @@ def combine_profiles(profiles: list[WidthProfile], s_m: NDArray, min_frames: int
         sd_ok = np.sqrt(np.pi / 2) * np.maximum(spread, own) / np.sqrt(n[ok])
         d[ok], sd[ok] = med, sd_ok
         if ok.sum() >= 8:
-            second = med[:-2] - 2 * med[1:-1] + med[2:]
-            rice = 1.4826 * float(np.median(np.abs(second - np.median(second)))) / np.sqrt(6.0)
+            rice = robust_noise(med)
             typical = float(np.median(sd_ok))
             if rice > typical:
                 sd[ok] *= rice / typical
