@@ -157,6 +157,34 @@ def test_derivative_mean_and_variance_match_finite_differences():
         assert gp.predict([x])["kappa_var"][0] == pytest.approx(fd_var, rel=2e-2)
 
 
+@pytest.mark.parametrize("known_cov", [False, True])
+def test_marginal_likelihood_gradient_matches_the_reference(known_cov):
+    """The hyperparameter fit's fast path (value and analytic gradient from one Cholesky factor) against
+    the plain log-determinant formula and its central differences."""
+    from bayesrod.vision.curvature import _marginal_nll, _marginal_nll_reference, _trend_basis
+
+    rng = np.random.default_rng(5)
+    s = np.linspace(0, 0.8, 30)
+    y = np.sin(4 * s) + rng.normal(0, 0.02, s.size)
+    P, _ = _trend_basis(s, 0.4, 0.8, 1)
+    trend = 0.5**2 * P @ P.T
+    cov = 0.02**2 * np.exp(-np.abs(s[:, None] - s[None, :]) / 0.05) if known_cov else None
+    for logp in ([np.log(0.3), np.log(0.2)], [np.log(2.0), np.log(0.05)]):
+        logp = np.array(logp + ([] if known_cov else [np.log(1e-3)]))
+        value, grad = _marginal_nll(logp, s, y, cov, trend)
+        assert value == pytest.approx(_marginal_nll_reference(logp, s, y, cov, trend), abs=1e-8)
+        h = 1e-6
+        fd = [
+            (
+                _marginal_nll_reference(logp + h * e, s, y, cov, trend)
+                - _marginal_nll_reference(logp - h * e, s, y, cov, trend)
+            )
+            / (2 * h)
+            for e in np.eye(logp.size)
+        ]
+        np.testing.assert_allclose(grad, fd, rtol=1e-5, atol=1e-6)
+
+
 def test_bad_input():
     with pytest.raises(ValueError, match="s_m, theta_rad"):
         fit_curvature_gp([0, 1, 2], [0, 1])

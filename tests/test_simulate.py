@@ -28,6 +28,26 @@ def test_noise_free_forces_match_predict_and_reference(twig_clean):
             assert F[i] == pytest.approx(ref, rel=1e-4)
 
 
+def test_samples_at_a_uniform_robot_advance_and_frames_on_their_clock(twig_clean):
+    """The placement table (a cubic through exact branch samples) only places samples: the robot
+    advances uniformly to 1% of a step, and each frame's time is its exact robot position."""
+    import csv
+
+    from bayesrod.dataset.simulate import ROBOT_SPEED, wire_deflection
+
+    spec = read_dataset(twig_clean)
+    for push in spec.pushes:
+        eng = detect_engagement(push.force.force_N)
+        steps = np.diff(push.force.robot_x_m[eng.mask])
+        assert np.ptp(steps) < 0.01 * steps.mean()
+        np.testing.assert_allclose(push.force.time_s * ROBOT_SPEED, push.force.robot_x_m, rtol=1e-9, atol=1e-12)
+        rows = list(csv.DictReader(open(twig_clean / push.id / "truth_shapes.csv")))
+        t_D = sorted({(float(r["time_s"]), float(r["contact_x_m"])) for r in rows if float(r["contact_x_m"]) > 0})
+        t, D = np.array(t_D).T
+        F = force_from_displacement(D, push.height_m, 2.63, 0.43, 0.8).force_N
+        np.testing.assert_allclose(t * ROBOT_SPEED, D + wire_deflection(F), rtol=0, atol=1e-7)
+
+
 def test_noise_free_centerlines_within_0p1_mm(twig_clean):
     import csv
 

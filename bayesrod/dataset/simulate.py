@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from scipy.interpolate import PchipInterpolator
 
 from .._version import __version__
 from ..physics import Effects, force_from_displacement
@@ -165,32 +166,50 @@ class SimulatedPush:
     s_m: np.ndarray  # (n_points,) arc length of each point
 
 
-def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> SimulatedPush:
+def _loading_branch(cfg: SimConfig, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """Exact (D, F_true) samples of the loading branch from first contact to its end.
+
+    The end (the slip: contact passes the tip, the stem bends over, or the
+    force curve turns) is bracketed on a grid and refined once, to ~6e-5 L
+    below the model's own end; every sample returned is an exact solve on
+    the branch. The solver's cost grows with its iterations, hardly with the
+    batch size, so one large grid and one large refinement beat rounds of
+    bisection (simulation time 2.5x lower than four rounds of 33).
+    """
     L, EI0, p, eff = cfg.length_m, cfg.EI0, cfg.p, cfg.effects
-    # Branch end (slip) on a dense grid of contact displacements, then refine.
-    D_grid = np.linspace(0.0, 1.3 * L, 66)
-    dense = force_from_displacement(D_grid, h, EI0, p, L, eff)
-    ok = ~dense.slipped
+    D_grid = 1.3 * L * np.linspace(0.0, 1.0, 257) ** 1.5  # a call costs its iterations, hardly its size
+    sol = force_from_displacement(D_grid, h, EI0, p, L, eff)
+    ok = ~sol.slipped
     if ok.sum() < 3:
         raise ValueError(f"height_m: expected a height the stem can be pushed at, got {h:g} m (slips at once)")
-    # The model's own slip point, to 1e-7 L: the stem slips exactly where its branch ends.
-    lo = D_grid[ok].max()
-    hi = lo + (D_grid[1] - D_grid[0])
-    for _ in range(4):  # four batched rounds of 32 candidates: (hi - lo) / 32^4 ~ 2e-8 L
-        cand = np.linspace(lo, hi, 33)
-        slipped = force_from_displacement(cand, h, EI0, p, L, eff).slipped
-        first = int(np.argmax(slipped)) if slipped.any() else cand.size
-        lo, hi = cand[max(first - 1, 0)], cand[min(first, cand.size - 1)]
-    D_end = lo
+    i_lo = int(np.flatnonzero(ok).max())
+    keep = ok & (np.arange(D_grid.size) <= i_lo)
+    Ds, Fs = [D_grid[keep]], [sol.true_force_N[keep]]
+    # one batched refinement of 126 candidates: 0.008 L / 127 ~ 6e-5 L
+    cand = np.linspace(D_grid[i_lo], D_grid[min(i_lo + 1, D_grid.size - 1)], 128)[1:-1]
+    sol = force_from_displacement(cand, h, EI0, p, L, eff)
+    first = int(np.argmax(sol.slipped)) if sol.slipped.any() else cand.size
+    Ds.append(cand[:first])
+    Fs.append(sol.true_force_N[:first])
+    D, F = np.concatenate(Ds), np.concatenate(Fs)
+    order = np.argsort(D)
+    return D[order], F[order]
+
+
+def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> SimulatedPush:
+    L, EI0, p, eff = cfg.length_m, cfg.EI0, cfg.p, cfg.effects
+    D_branch, F_branch = _loading_branch(cfg, h)
+    D_end = D_branch[-1]
     cap = cfg.max_contact_displacement_m
     if cap is not None and cap < D_end:
         D_end = float(cap)  # the push stops before the slip; the robot then withdraws (force back to zero)
-    # dense enough for linear interpolation of D(robot) at frame times: the wire deflection grows like
-    # F^(1/3) near first contact, so D(robot) bends sharply there (120 points left 0.3 mm shape errors)
-    D_dense = D_end * np.linspace(0.0, 1.0, 1500) ** 1.5
-    sol = force_from_displacement(D_dense, h, EI0, p, L, eff)
-    D_dense, F_true = D_dense[~sol.slipped], sol.true_force_N[~sol.slipped]
-    robot_dense = D_dense + wire_deflection(F_true)
+    # Robot position over the branch, to place samples at a uniform robot advance: the force is smooth in
+    # D (monotone cubic through the exact samples, kinks at yield kept), the wire deflection grows like
+    # F^(1/3) near first contact, so robot(D) is built on a fine grid from the exact wire law. Only the
+    # placement uses this table: every recorded sample is solved exactly below.
+    D_dense = D_end * np.linspace(0.0, 1.0, 3000) ** 1.5
+    F_dense = PchipInterpolator(D_branch, F_branch)(D_dense)
+    robot_dense = D_dense + wire_deflection(F_dense)
     # Uniform robot advance in time; exact contact displacement at each sample.
     x_slip = robot_dense[-1]
     n_e = cfg.n_force_engaged
@@ -224,7 +243,13 @@ def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> Simulat
     t_all = np.concatenate([t_frames, t_after])
     D_frames = np.interp(t_frames * ROBOT_SPEED, robot_dense, D_dense)
     D_all = np.concatenate([D_frames, np.zeros(t_after.size)])
-    grid_nd = force_from_displacement_nd(D_all / L, h / L, p, eff.nondim(L, EI0), keep_shape=True)["grid"]
+    frames = force_from_displacement_nd(D_all / L, h / L, p, eff.nondim(L, EI0), keep_shape=True)
+    grid_nd = frames["grid"]
+    # each frame's exact time for its exact contact displacement (the camera clock, off uniform by the
+    # placement table's error only)
+    F_frames = frames["f"][:nf] * EI0 / L**2
+    exact = np.isfinite(F_frames)
+    t_all[:nf][exact] = (D_frames[exact] + wire_deflection(F_frames[exact])) / ROBOT_SPEED
     s = np.linspace(0.0, L, cfg.n_points)
     true = np.moveaxis(centerline_at(grid_nd, s / L), -1, 0) * L  # (frames, 2, points)
     obs = true + rng.normal(0.0, cfg.noise.shape_sd_m, true.shape)

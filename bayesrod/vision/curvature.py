@@ -136,28 +136,53 @@ def _trend_basis(s: NDArray, centre: float, span: float, degree: int):
     return P, dP
 
 
+def _marginal_nll_reference(logp, s, y, cov, trend) -> float:
+    """Negative log marginal likelihood of theta(s) (up to a constant), plainly: the value the fast
+    :func:`_marginal_nll` must reproduce. ``logp`` = log(s2, l[, white variance when ``cov`` is None])."""
+    from sklearn.gaussian_process.kernels import Matern
+
+    s2, ell = np.exp(logp[:2])
+    noise = cov if cov is not None else np.exp(logp[2]) * np.eye(s.size)
+    K = s2 * Matern(ell, nu=1.5)(s[:, None]) + trend + noise
+    sign, logdet = np.linalg.slogdet(K)
+    return 0.5 * y @ np.linalg.solve(K, y) + 0.5 * logdet
+
+
+def _marginal_nll(logp, s, y, cov, trend) -> tuple[float, NDArray]:
+    """:func:`_marginal_nll_reference` and its gradient in ``logp``, from one Cholesky factor:
+    d nll = 0.5 tr((K^-1 - a a^T) dK), a = K^-1 y. (1e25, 0) where K is not positive definite."""
+    from sklearn.gaussian_process.kernels import Matern
+
+    s2, ell = np.exp(logp[:2])
+    eye = np.eye(s.size)
+    Km, dKm = Matern(ell, nu=1.5)(s[:, None], eval_gradient=True)  # dKm: d/dlog(l)
+    white = np.exp(logp[2]) if cov is None else 0.0
+    K = s2 * Km + trend + (cov if cov is not None else white * eye)
+    try:
+        L = np.linalg.cholesky(K)
+    except np.linalg.LinAlgError:
+        return 1e25, np.zeros(len(logp))
+    a = cho_solve((L, True), y)
+    A = cho_solve((L, True), eye) - np.outer(a, a)
+    grad = [0.5 * s2 * np.sum(A * Km), 0.5 * s2 * np.sum(A * dKm[:, :, 0])]
+    if cov is None:
+        grad.append(0.5 * white * np.trace(A))
+    return 0.5 * y @ a + np.sum(np.log(np.diag(L))), np.array(grad)
+
+
 def _fit_hyper(s, y, cov, span, centre, n_restarts, rng, degree=1):
-    """Type-II maximum likelihood of (s2, l[, white noise]) with scikit-learn's Matern-3/2 kernel.
+    """Type-II maximum likelihood of (s2, l[, white noise]) with scikit-learn's Matern-3/2 kernel
+    (L-BFGS-B on the analytic gradient of :func:`_marginal_nll`).
 
     ``cov`` is the known noise covariance, or None to fit a white-noise variance too.
     """
     from scipy.optimize import minimize
-    from sklearn.gaussian_process.kernels import Matern
 
-    X = s[:, None]
     P, _ = _trend_basis(s, centre, span, degree)
     trend = TREND_SD**2 * P @ P.T
-    eye = np.eye(s.size)
 
     def nll(logp):
-        s2, ell = np.exp(logp[:2])
-        K = s2 * Matern(ell, nu=1.5)(X) + trend + (cov if cov is not None else np.exp(logp[2]) * eye)
-        try:
-            L = np.linalg.cholesky(K)
-        except np.linalg.LinAlgError:
-            return 1e25
-        a = np.linalg.solve(L, y)
-        return 0.5 * a @ a + np.sum(np.log(np.diag(L)))
+        return _marginal_nll(logp, s, y, cov, trend)
 
     bounds = [(np.log(1e-12), np.log(1e3)), (np.log(1e-2 * span), np.log(10 * span))]
     v0 = max(float(np.var(y)), 1e-8)
@@ -166,7 +191,10 @@ def _fit_hyper(s, y, cov, span, centre, n_restarts, rng, degree=1):
         bounds.append((np.log(1e-12), np.log(1.0)))
         starts = [x + [np.log(0.1 * v0)] for x in starts]
     starts += [[rng.uniform(*b) for b in bounds] for _ in range(max(n_restarts - 2, 0))]
-    best = min((minimize(nll, np.array(x0), method="L-BFGS-B", bounds=bounds) for x0 in starts), key=lambda r: r.fun)
+    best = min(
+        (minimize(nll, np.array(x0), jac=True, method="L-BFGS-B", bounds=bounds) for x0 in starts),
+        key=lambda r: r.fun,
+    )
     return np.exp(best.x)
 
 
