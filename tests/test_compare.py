@@ -54,10 +54,43 @@ def test_same_species_split_in_two_rarely_differs_20_replications():
     assert _null_hits(20) >= 17
 
 
-def _fake_run(path, specimen, species, draws, L=0.8):
+def _fake_run(path, specimen, species, draws, L=0.8, d0=None):
     path.mkdir(parents=True)
     (path / "summary.json").write_text(json.dumps({"specimen": specimen, "species": species, "length_m": L}))
-    np.savez(path / "samples.npz", length_m=L, EI0=np.exp(draws[:, 0]), p=draws[:, 1])
+    extra = {} if d0 is None else {"d0_m": d0}
+    np.savez(path / "samples.npz", length_m=L, EI0=np.exp(draws[:, 0]), p=draws[:, 1], **extra)
+
+
+def test_compare_contrasts_youngs_modulus_when_every_fit_has_diameters(tmp_path):
+    """Two species of equal EI0 whose stems differ in thickness (d0 1.2x): E differs by 1.2^4 = 2.07x.
+    The E contrast finds that ratio (the EI0 contrast does not), and a fit without diameters is named."""
+    import bayesrod
+
+    rng = np.random.default_rng(4)
+    runs = []
+    for name, d0 in (("thick", 0.012), ("thin", 0.010)):
+        for j in range(4):
+            logEI0 = np.log(2.6) + rng.normal(0, 0.2)
+            dj = d0 * np.exp(rng.normal(0, 0.02))  # stems of a species vary in thickness too
+            n = 1500
+            draws = np.column_stack([logEI0 + rng.normal(0, 0.01, n), 0.43 + rng.normal(0, 0.005, n)])
+            _fake_run(tmp_path / f"{name}-{j}", f"{name}-{j}", name, draws, d0=dj * np.exp(rng.normal(0, 0.005, n)))
+            runs.append(tmp_path / f"{name}-{j}")
+    res = bayesrod.compare(runs).to_dict()
+    c = {x["parameter"]: x for x in res["contrasts"]}
+    assert c["EI0"]["ratio_q05"] <= 1.0 <= c["EI0"]["ratio_q95"], c["EI0"]
+    E = c["E"]  # a = thick, b = thin
+    assert E["ratio_q05"] <= 1 / 1.2**4 <= E["ratio_q95"] and E["ratio_q95"] < 1.0, E
+    assert E["prob_a_greater"] < 0.05
+    E_thin = 64 * 2.6 / (np.pi * 0.010**4)
+    assert res["species"]["thin"]["E_Pa"]["q05"] <= E_thin <= res["species"]["thin"]["E_Pa"]["q95"]
+    assert "log_E" in res["between_specimen_sd"]
+    # one fit without diameters: E is not compared, and the user is told which
+    plain = tmp_path / "thin-9"
+    _fake_run(plain, "thin-9", "thin", np.column_stack([np.full(200, np.log(2.6)), np.full(200, 0.43)]))
+    res = bayesrod.compare([*runs, plain]).to_dict()
+    assert not any(x["parameter"] == "E" for x in res["contrasts"])
+    assert any("not compared" in w and "thin-9" in w for w in res["warnings"])
 
 
 def test_compare_cli_writes_contract_json_and_warns(tmp_path, capsys):

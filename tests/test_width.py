@@ -90,6 +90,21 @@ def test_combined_profile_sd_is_calibrated_when_frames_share_their_errors():
     assert 0.8 <= np.std(z) <= 1.3, np.std(z)
 
 
+def test_combined_profile_flags_unresolved_tips_and_carries_the_shared_errors():
+    from bayesrod.vision.width import OFFSET_SD_PX
+
+    s = np.linspace(0.0, 0.4, 20)
+    px = 2e-3  # metres per pixel
+    true = np.where(s < 0.35, 0.004, 2e-5)
+    profs = [
+        WidthProfile(s, true + np.where(s < 0.35, 0.0, -6e-5), np.full(20, 2e-5), true / px, np.full(20, "ok"), s)
+        for _ in range(4)
+    ]
+    dp = combine_profiles(profs, s, depth_scale_sd=0.01)
+    assert list(dp.flag[s >= 0.35]) == ["unresolved"] * int(np.sum(s >= 0.35)) and dp.ok[s < 0.35].all()
+    assert dp.shared_offset_sd_m == pytest.approx(OFFSET_SD_PX * px) and dp.shared_scale_sd == 0.01
+
+
 @functools.lru_cache(maxsize=1)
 def _twig():
     return bayesrod.simulate("twig", seed=2, heights_m=[0.3])  # immutable: shared by the tests below
@@ -120,24 +135,46 @@ def test_diameters_read_from_a_csv_and_an_object_with_row_errors(tmp_path):
     msgs = [str(p) for p in validate_dataset(root)]
     assert any("diameters.sd_m" in m and "> 0" in m for m in msgs), msgs
     # a dataset written back keeps its diameters
-    doc["diameters"] = {"s_m": [0.0, 0.05], "d_m": [0.0101, 0.0098], "sd_m": [2e-4, 2e-4], "source": "caliper"}
+    doc["diameters"] = {"s_m": [0.0], "d_m": [0.0101], "sd_m": [2e-4], "shared_scale_sd": -0.01}
+    (root / "specimen.json").write_text(json.dumps(doc))
+    msgs = [str(p) for p in validate_dataset(root)]
+    assert any("diameters.shared_scale_sd" in m and ">= 0" in m for m in msgs), msgs
+    (root / "d.csv").write_text(
+        "s_m,d_m,sd_m,shared_offset_sd_m\n0.0,0.0101,0.0002,5e-5\n0.2,0.009,0.0002,6e-5\n"  # not one value
+    )
+    doc["diameters"] = "d.csv"
+    (root / "specimen.json").write_text(json.dumps(doc))
+    msgs = [str(p) for p in validate_dataset(root)]
+    assert any("d.csv" in m and "shared_offset_sd_m" in m and "row 2" in m for m in msgs), msgs
+    # a dataset written back keeps its diameters and their shared errors
+    doc["diameters"] = {
+        "s_m": [0.0, 0.05],
+        "d_m": [0.0101, 0.0098],
+        "sd_m": [2e-4, 2e-4],
+        "source": "caliper",
+        "shared_offset_sd_m": 5e-5,
+        "shared_scale_sd": 0.01,
+    }
     (root / "specimen.json").write_text(json.dumps(doc))
     ds = read_dataset(root)
     ds.save(tmp_path / "copy")
     back = read_dataset(tmp_path / "copy")
     np.testing.assert_allclose(back.diameters.d_m, [0.0101, 0.0098])
     assert back.diameters.source == "caliper"
+    assert (back.diameters.shared_offset_sd_m, back.diameters.shared_scale_sd) == (5e-5, 0.01)
 
 
-def test_width_term_matches_a_dense_gaussian_reference():
-    """The O(n) AR(1) width term against the dense multivariate normal it stands for."""
+@pytest.mark.parametrize("offset_sd,scale_sd", [(0.0, 0.0), (8e-5, 0.0), (0.0, 0.02), (8e-5, 0.02)])
+def test_width_term_matches_a_dense_gaussian_reference(offset_sd, scale_sd):
+    """The O(n) width term (AR(1) along s, shared offset and scale marginalised by a rank-k update)
+    against the dense multivariate normal it stands for."""
     from scipy.stats import multivariate_normal
 
     rng = np.random.default_rng(0)
     s = np.sort(rng.uniform(0, 0.7, 30))
     sd = rng.uniform(5e-5, 2e-4, 30)
     d = 0.01 * (1 - s / 0.8) ** 0.43 + rng.normal(0, 1e-4, 30)
-    ds = _forces_only_twig(Diameters(s, d, sd, "frames"))
+    ds = _forces_only_twig(Diameters(s, d, sd, "frames", shared_offset_sd_m=offset_sd, shared_scale_sd=scale_sd))
     lik = RodLikelihood(ds, use_shapes=False, diameter="free")
     params = {"d0_m": 0.0101, "p_geom": 0.41, "diameter_sd_scale": 1.3, "rho_diameter": 0.6, "p": 0.43}
     got = lik._diameter_loglik({k: np.atleast_1d(v) for k, v in params.items()})[0]
@@ -147,8 +184,14 @@ def test_width_term_matches_a_dense_gaussian_reference():
     block = np.cumsum(first)
     lag = np.abs(np.arange(30)[:, None] - np.arange(30)[None, :])
     corr = np.where(block[:, None] == block[None, :], 0.6**lag, 0.0)
-    cov = corr * np.outer(1.3 * sd, 1.3 * sd)
+    cov = corr * np.outer(1.3 * sd, 1.3 * sd) + offset_sd**2 + scale_sd**2 * np.outer(mean, mean)
     assert got == pytest.approx(multivariate_normal(mean, cov).logpdf(d), rel=1e-9)
+    # a caliper's few readings: independent, plus the shared terms
+    few = Diameters(s[:3], d[:3], sd[:3], "caliper", shared_offset_sd_m=offset_sd, shared_scale_sd=scale_sd)
+    lik = RodLikelihood(_forces_only_twig(few), use_shapes=False, diameter="free")
+    got = lik._diameter_loglik({k: np.atleast_1d(v) for k, v in params.items()})[0]
+    cov = np.diag(sd[:3] ** 2) + offset_sd**2 + scale_sd**2 * np.outer(mean[:3], mean[:3])
+    assert got == pytest.approx(multivariate_normal(mean[:3], cov).logpdf(d[:3]), rel=1e-9)
 
 
 def test_youngs_modulus_from_a_caliper_base_diameter_has_the_propagated_width():
@@ -184,6 +227,21 @@ def test_free_width_taper_tests_uniform_modulus():
         if q == 0.28:
             band = post.modulus_band([0.0, 0.4])
             assert band.median[1] < 0.8 * band.median[0]
+            # the report says so, and draws the widths against the fitted d(s) and E(s)
+            html = post.report_html(pngs={})
+            assert "Young's modulus" in html and "The modulus varies along the stem" in html
+            import matplotlib.pyplot as plt
+
+            from bayesrod.report.plots import plot_diameter_fit
+
+            fig, axes = plt.subplots(1, 2)
+            art = plot_diameter_fit(post.samples, 0.8, ds.diameters, ax=axes[0], modulus_ax=axes[1])
+            assert {"band", "median", "measured", "modulus_band", "modulus_median"} <= set(art)
+            plt.close(fig)
+            d_band = post.diameter_band([0.0, 0.4])
+            assert d_band.lower[0] < 0.01 < d_band.upper[0] and d_band.median[1] == pytest.approx(
+                0.01 * 0.5**0.28, rel=0.02
+            )
     assert verdicts == {0.43: "consistent", 0.28: "rejected"}
 
 

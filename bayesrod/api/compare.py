@@ -16,7 +16,14 @@ from types import MappingProxyType
 
 import numpy as np
 
-from ..inference.hierarchical import SpecimenPosterior, check_reduction, contrasts, sample_species
+from ..inference.hierarchical import (
+    PRIOR_LOG_E,
+    SpecimenPosterior,
+    check_reduction,
+    contrasts,
+    modulus_contrasts,
+    sample_species,
+)
 from ._common import DocResult, plain_json
 
 log = logging.getLogger("bayesrod")
@@ -46,6 +53,17 @@ def _specimen_posterior(post, species: str | None = None) -> SpecimenPosterior:
         raise ValueError(f"{where}: field species: expected the specimen's species (set it in specimen.json), got none")
     d = post.thinned()
     return SpecimenPosterior(post.specimen, str(species), post.length_m, np.column_stack([np.log(d["EI0"]), d["p"]]))
+
+
+def _modulus_posterior(post, species: str | None = None) -> SpecimenPosterior | None:
+    """log Young's modulus draws (n, 1) of one fit (its thinned draws), or None without diameters."""
+    d = post.thinned()
+    if "d0_m" not in d:
+        return None
+    from ..inference.summary import youngs_modulus
+
+    species = species or post.doc.get("species")
+    return SpecimenPosterior(post.specimen, str(species), post.length_m, np.log(youngs_modulus(d))[:, None])
 
 
 def _as_posterior(x):
@@ -105,9 +123,10 @@ def compare(posteriors, *, height_m: float | None = None, seed: int = 0) -> Comp
         Random seed of the hierarchical sampler.
     """
     if isinstance(posteriors, Mapping):
-        specimens = [_specimen_posterior(_as_posterior(x), sp) for sp, xs in posteriors.items() for x in xs]
+        fits = [(_as_posterior(x), sp) for sp, xs in posteriors.items() for x in xs]
     else:
-        specimens = [_specimen_posterior(_as_posterior(x)) for x in posteriors]
+        fits = [(_as_posterior(x), None) for x in posteriors]
+    specimens = [_specimen_posterior(post, sp) for post, sp in fits]
     names = [s.specimen for s in specimens]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
@@ -126,6 +145,17 @@ def compare(posteriors, *, height_m: float | None = None, seed: int = 0) -> Comp
                 f"{sp}: one specimen only; its species mean rests on the between-specimen spread "
                 "estimated from the other species (wide interval)"
             )
+    moduli = [_modulus_posterior(post, sp) for post, sp in fits]
+    with_E = [m for m in moduli if m is not None]
+    if with_E and len(with_E) < len(moduli):
+        missing = [s.specimen for s, m in zip(specimens, moduli, strict=True) if m is None]
+        warnings.append(
+            f"Young's modulus not compared: {', '.join(missing)} fitted without diameters "
+            '(fit with measured diameters: docs/inference.md, "Young\'s modulus")'
+        )
+    compare_E = bool(with_E) and len(with_E) == len(moduli)
+    if compare_E:
+        warnings += [w for m in with_E for w in check_reduction(m, prior_sd=PRIOR_LOG_E["sd"] / 2, names=("log E",))]
     for w in warnings:
         log.warning("warning: %s", w)
     fit = sample_species(specimens, seed=seed)
@@ -146,6 +176,16 @@ def compare(posteriors, *, height_m: float | None = None, seed: int = 0) -> Comp
         "method": "normal-normal hierarchical model on per-specimen posteriors (docs/compare.md)",
         "level": 0.9,
     }
+    if compare_E:
+        fit_E = sample_species(with_E, seed=seed + 1, prior=PRIOR_LOG_E)
+        result["contrasts"] += modulus_contrasts(fit_E)
+        for g, sp in enumerate(fit_E["species"]):
+            result["species"][sp]["E_Pa"] = _qd(np.exp(fit_E["mu"][:, g, 0]))
+        result["between_specimen_sd"]["log_E"] = _qd(fit_E["tau"][:, 0])
+        result["convergence"] = {
+            "rhat_max": max(fit["rhat_max"], fit_E["rhat_max"]),
+            "ess_bulk_min": min(fit["ess_bulk_min"], fit_E["ess_bulk_min"]),
+        }
     result = plain_json(result)
     return Comparison(MappingProxyType(result), MappingProxyType(fit), tuple(specimens))
 

@@ -81,7 +81,17 @@ class Extraction(DocResult):
         out = replace(self.source, pushes=tuple(pushes))
         dp = self.diameters
         if dp is not None and dp.ok.any():
-            out = replace(out, diameters=Diameters(dp.s_m[dp.ok], dp.d_m[dp.ok], dp.sd_m[dp.ok], "frames"))
+            out = replace(
+                out,
+                diameters=Diameters(
+                    dp.s_m[dp.ok],
+                    dp.d_m[dp.ok],
+                    dp.sd_m[dp.ok],
+                    "frames",
+                    shared_offset_sd_m=dp.shared_offset_sd_m,
+                    shared_scale_sd=dp.shared_scale_sd,
+                ),
+            )
         return out
 
     def plot(self, push_id: str | None = None, ax=None):
@@ -138,6 +148,8 @@ class Extraction(DocResult):
                         "sd_m": dp.sd_m[rec],
                         "n_frames": dp.n_frames[rec],
                         "flag": dp.flag[rec].astype(object),
+                        "shared_offset_sd_m": np.full(int(rec.sum()), dp.shared_offset_sd_m),
+                        "shared_scale_sd": np.full(int(rec.sum()), dp.shared_scale_sd),
                     },
                 )
                 if doc.get("diameters") is not None:
@@ -225,7 +237,8 @@ def extract(dataset, *, progress: bool = True) -> Extraction:
             msg += f"; skipped {', '.join(str(s['frame']) + ' (' + s['reason'] + ')' for s in skipped)}"
         log.info("%s", msg)
     bar.close()
-    diameters = combine_profiles(widths, stations) if widths else None
+    depth_scale_sd = spec.camera.depth_scale_sd if spec.camera is not None else 0.0
+    diameters = combine_profiles(widths, stations, depth_scale_sd=depth_scale_sd) if widths else None
     if diameters is not None:
         flags, counts = np.unique(diameters.flag, return_counts=True)
         report["diameters"] = {

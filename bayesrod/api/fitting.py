@@ -189,6 +189,17 @@ class Posterior:
         E = modulus_draws(self.samples, self.length_m, s)
         return Band(s, *interval(E, level), level=level, x_name="s_m", unit="Pa")
 
+    def diameter_band(self, s_m: ArrayLike, level: float = 0.9) -> Band:
+        """The fitted diameter d(s) = d0 (1 - s/L)^q [m] over arc lengths ``s_m`` [m], shape (m,) (q = p_geom
+        under ``diameter="free"``, else p); needs a fit with measured diameters."""
+        from ..inference.summary import diameter_draws
+
+        level = _check_level(level)
+        s = _grid(s_m, "s_m", 0.0, self.length_m, closed=True)
+        return Band(
+            s, *interval(diameter_draws(self.samples, self.length_m, s), level), level=level, x_name="s_m", unit="m"
+        )
+
     def k_theta_band(self, height_m: ArrayLike, level: float = 0.9) -> Band:
         """Lumped rotational stiffness k_theta(h) (eq. kdist) over heights ``height_m`` [m], shape (m,) [N m/rad]."""
         return self._stiffness_band(k_theta, height_m, level, "N m/rad")
@@ -365,6 +376,21 @@ class Posterior:
 
             med = self._median()
             out["residuals"] = render(lambda axes: plot_residuals(lik, med, axes=axes), 10, 3.6, ncols=2)
+        dm = getattr(self.dataset, "diameters", None) if self.dataset is not None else None
+        if dm is not None and "d0_m" in sub:
+            from ..report.plots import plot_diameter_fit
+
+            if "p_geom" in sub:  # the modulus may vary along s: E(s) beside the widths
+                out["diameter_fit"] = render(
+                    lambda axes: plot_diameter_fit(sub, self.length_m, dm, ax=axes[0], modulus_ax=axes[1]),
+                    10,
+                    3.8,
+                    ncols=2,
+                )
+            else:
+                out["diameter_fit"] = render(
+                    lambda ax: plot_diameter_fit(sub, self.length_m, dm, ax=ax), 6.4, 4.2, dpi=110
+                )
         n_ens = self.doc.get("sampler", {}).get("ensembles", 4)
         out["rank"] = render(lambda axes: plot_rank(self.idata, n_ens, axes=axes), 10, 3.4, ncols=2)
         return out

@@ -28,13 +28,18 @@ class Sensor:
 
 @dataclass(frozen=True)
 class Camera:
-    """Pinhole intrinsics [px] and the clamped base's pixel (u, v)."""
+    """Pinhole intrinsics [px] and the clamped base's pixel (u, v).
+
+    ``depth_scale_sd`` is the relative sd of the depth sensor's scale (its calibration; 0 when
+    taken as exact): every metric length read from the frames shares it.
+    """
 
     fx: float
     fy: float
     cx: float
     cy: float
     base_px: tuple[float, float]
+    depth_scale_sd: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -115,12 +120,19 @@ class Diameters:
     From the frames (``bayesrod extract``: a profile along the stem) or from calipers (a few
     stations, often only the base). ``source`` says which (``"frames"``, ``"caliper"`` or free text).
     Only the stations a fit uses: rows flagged other than ``ok`` in a diameters file are left out.
+
+    Errors every station shares, on top of each station's own ``sd_m``: an additive offset of sd
+    ``shared_offset_sd_m`` [m] (the width method's bias at the edges; a caliper's zero) and a
+    relative scale of sd ``shared_scale_sd`` (the depth sensor's scale; a caliper's calibration).
+    They do not average down over stations; the fit marginalises both (docs/inference.md).
     """
 
     s_m: NDArray
     d_m: NDArray
     sd_m: NDArray
     source: str = "caliper"
+    shared_offset_sd_m: float = 0.0
+    shared_scale_sd: float = 0.0
 
     def __post_init__(self):
         for k in ("s_m", "d_m", "sd_m"):
@@ -133,6 +145,11 @@ class Diameters:
             )
         if not (np.all(self.d_m > 0) and np.all(self.sd_m > 0) and np.all(self.s_m >= 0)):
             raise ValueError("diameters: expected d_m > 0, sd_m > 0 and s_m >= 0 [m] in every row")
+        for k in ("shared_offset_sd_m", "shared_scale_sd"):
+            v = getattr(self, k)
+            if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v >= 0):
+                raise ValueError(f"diameters.{k}: expected a finite number >= 0, got {v!r}")
+            object.__setattr__(self, k, float(v))
 
 
 @dataclass(frozen=True)

@@ -241,9 +241,13 @@ def _parse_camera(c, name, obj) -> Camera | None:
     if not (isinstance(bp, list) and len(bp) == 2 and all(_is_number(v) for v in bp)):
         c.add(name, "camera.base_px", "[u, v] pixel of the base", _fmt(bp) if "base_px" in obj else "the field missing")
         bp = None
+    dss = _number(c, name, obj, "depth_scale_sd", required=False, default=0.0, label="camera.depth_scale_sd")
+    if dss is not None and not 0 <= dss < 0.5:
+        c.add(name, "camera.depth_scale_sd", "a relative sd in [0, 0.5) (0.01 = 1%)", _fmt(dss))
+        return None
     if bp is None or any(v is None for v in vals.values()):
         return None
-    return Camera(vals["fx"], vals["fy"], vals["cx"], vals["cy"], (float(bp[0]), float(bp[1])))
+    return Camera(vals["fx"], vals["fy"], vals["cx"], vals["cy"], (float(bp[0]), float(bp[1])), float(dss or 0.0))
 
 
 def _safe_path(c, name, root: Path, value, field) -> Path | None:
@@ -389,6 +393,10 @@ def _check_png(path: Path, kind: str):
 # --------------------------------------------------------------------------- #
 # Entry points
 # --------------------------------------------------------------------------- #
+#: optional columns (CSV) or keys (inline object) of ``diameters``: the errors every station shares
+SHARED_DIAMETER_ERRORS = ("shared_offset_sd_m", "shared_scale_sd")
+
+
 def _read_diameters(c: _Collector, name: str, root: Path, value, length: float | None) -> Diameters | None:
     """``diameters``: a CSV path (s_m, d_m, sd_m[, flag]) or an object of equal-length lists (docs/format.md)."""
     source = "caliper"
@@ -396,12 +404,28 @@ def _read_diameters(c: _Collector, name: str, root: Path, value, length: float |
         fp = _safe_path(c, name, root, value, "diameters")
         if fp is None:
             return None
-        cols = c.read_csv(fp, ("s_m", "d_m", "sd_m"), ("n_frames", "flag", "source"), text_cols=("flag", "source"))
+        cols = c.read_csv(
+            fp,
+            ("s_m", "d_m", "sd_m"),
+            ("n_frames", "flag", "source", *SHARED_DIAMETER_ERRORS),
+            text_cols=("flag", "source"),
+        )
         if cols is None:
             return None
         where = c.rel(fp)
         used = np.array([f == "ok" for f in cols["flag"]]) if "flag" in cols else np.ones(cols["s_m"].size, bool)
         source = cols["source"][0] if "source" in cols and cols["source"] else "frames"
+        shared = {}
+        for k in SHARED_DIAMETER_ERRORS:
+            if k in cols:
+                v = cols[k]
+                if not (np.all(np.isfinite(v)) and np.all(v >= 0) and np.all(v == v[0])):
+                    bad = int(np.flatnonzero(~(np.isfinite(v) & (v >= 0) & (v == v[0])))[0])
+                    c.add(
+                        where, f"column {k}", "one finite value >= 0 repeated in every row", _fmt(v[bad]), row=bad + 1
+                    )
+                    return None
+                shared[k] = float(v[0])
     elif isinstance(value, dict):
         where = f"{name}: diameters"
         cols = {}
@@ -418,6 +442,14 @@ def _read_diameters(c: _Collector, name: str, root: Path, value, length: float |
             return None
         used = np.ones(cols["s_m"].size, bool)
         source = str(value.get("source", "caliper"))
+        shared = {}
+        for k in SHARED_DIAMETER_ERRORS:
+            if k in value:
+                v = value[k]
+                if not (_is_number(v) and v >= 0):
+                    c.add(name, f"diameters.{k}", "a finite number >= 0", _fmt(v))
+                    return None
+                shared[k] = float(v)
     else:
         c.add(name, "diameters", "a CSV path or an object with s_m, d_m, sd_m lists", _fmt(value))
         return None
@@ -457,7 +489,10 @@ def _read_diameters(c: _Collector, name: str, root: Path, value, length: float |
         ok = False
     if not ok:
         return None
-    return Diameters(cols["s_m"][used], cols["d_m"][used], cols["sd_m"][used], source)
+    if shared.get("shared_scale_sd", 0.0) >= 0.5:
+        c.add(where, "shared_scale_sd", "a relative sd below 0.5 (0.01 = 1%)", _fmt(shared["shared_scale_sd"]))
+        return None
+    return Diameters(cols["s_m"][used], cols["d_m"][used], cols["sd_m"][used], source, **shared)
 
 
 def _read(path, check_images=True) -> tuple[Specimen | None, list[Problem]]:

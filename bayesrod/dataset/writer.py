@@ -26,6 +26,8 @@ def dataset_document(ds) -> dict:
     if ds.camera is not None:
         c = ds.camera
         doc["camera"] = {"fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "base_px": list(c.base_px)}
+        if c.depth_scale_sd:
+            doc["camera"]["depth_scale_sd"] = c.depth_scale_sd
     doc["pushes"] = []
     for p in ds.pushes:
         entry = {"id": p.id, "height_m": p.height_m, "direction": p.direction, "force": f"{p.id}/force.csv"}
@@ -66,6 +68,10 @@ def write_dataset(ds, path, *, overwrite: bool = False) -> Path:
         if ds.diameters is not None:
             dm = ds.diameters
             source = np.array([dm.source] * dm.s_m.size, dtype=object)
-            write_csv(tmp / "diameters.csv", {"s_m": dm.s_m, "d_m": dm.d_m, "sd_m": dm.sd_m, "source": source})
+            cols = {"s_m": dm.s_m, "d_m": dm.d_m, "sd_m": dm.sd_m, "source": source}
+            for k in ("shared_offset_sd_m", "shared_scale_sd"):
+                if getattr(dm, k):
+                    cols[k] = np.full(dm.s_m.size, getattr(dm, k))
+            write_csv(tmp / "diameters.csv", cols)
         write_json(tmp / "specimen.json", dataset_document(ds))
     return path

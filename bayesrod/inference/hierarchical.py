@@ -35,11 +35,15 @@ from numpy.typing import NDArray
 
 PRIOR_MU = {"mean": np.array([0.0, 1.0]), "sd": np.array([5.0, 1.5])}
 PRIOR_TAU_SCALE = np.array([0.5, 0.3])
+#: the species model of log Young's modulus [log Pa] (``compare`` when every fit has diameters):
+#: mu ~ N(log 3 GPa, 3^2) (0.15-60 GPa within 1 sd), tau ~ half-normal(0.5)
+PRIOR_LOG_E = {"mean": np.array([np.log(3e9)]), "sd": np.array([3.0]), "tau_scale": np.array([0.5])}
 
 
 @dataclass(frozen=True)
 class SpecimenPosterior:
-    """Posterior draws of one specimen: ``draws`` (n, 2) of (log EI0 [log N m^2], p)."""
+    """Posterior draws of one specimen: ``draws`` (n, D), by default D = 2: (log EI0 [log N m^2], p);
+    (n, 1) of log E [log Pa] for the modulus model."""
 
     specimen: str
     species: str
@@ -52,14 +56,15 @@ class SpecimenPosterior:
 
     @property
     def cov(self) -> NDArray:
-        return np.cov(self.draws.T) + 1e-12 * np.eye(2)
+        D = self.draws.shape[1]
+        return np.atleast_2d(np.cov(self.draws.T)) + 1e-12 * np.eye(D)
 
 
-def check_reduction(sp: SpecimenPosterior, prior_sd=(1.5, 0.4)) -> list[str]:
+def check_reduction(sp: SpecimenPosterior, prior_sd=(1.5, 0.4), names=("log EI0", "p")) -> list[str]:
     """Warnings where the normal, prior-flat reduction may not hold for this specimen."""
     out = []
     sd = np.sqrt(np.diag(sp.cov))
-    for k, name in enumerate(("log EI0", "p")):
+    for k, name in enumerate(names):
         if sd[k] > 0.3 * prior_sd[k]:
             out.append(f"{sp.specimen}: posterior sd of {name} ({sd[k]:.3g}) is not small against its prior")
         x = sp.draws[:, k]
@@ -70,47 +75,68 @@ def check_reduction(sp: SpecimenPosterior, prior_sd=(1.5, 0.4)) -> list[str]:
 
 
 class HierarchicalPosterior:
-    """log_prob(theta) of the species model; theta = [mu_1 (2), ..., mu_G (2), log tau (2)]."""
+    """log_prob(theta) of the species model; theta = [mu_1 (D), ..., mu_G (D), log tau (D)].
 
-    def __init__(self, specimens: list[SpecimenPosterior]):
+    ``prior`` holds ``mean``, ``sd`` (D,) of mu and ``tau_scale`` (D,); default: (log EI0, p) with
+    :data:`PRIOR_MU` and :data:`PRIOR_TAU_SCALE`.
+    """
+
+    def __init__(self, specimens: list[SpecimenPosterior], prior: dict | None = None):
         self.species = sorted({s.species for s in specimens})
         self.group = np.array([self.species.index(s.species) for s in specimens])
-        self.m = np.stack([s.mean for s in specimens])  # (J, 2)
-        self.S = np.stack([s.cov for s in specimens])  # (J, 2, 2)
+        self.m = np.stack([s.mean for s in specimens])  # (J, D)
+        self.S = np.stack([s.cov for s in specimens])  # (J, D, D)
+        self.D = self.m.shape[1]
+        prior = prior or {**PRIOR_MU, "tau_scale": PRIOR_TAU_SCALE}
+        self.prior_mean, self.prior_sd, self.tau_scale = (
+            np.asarray(prior[k], float) for k in ("mean", "sd", "tau_scale")
+        )
+        if not self.prior_mean.shape == self.prior_sd.shape == self.tau_scale.shape == (self.D,):
+            raise ValueError(f"prior: expected mean, sd and tau_scale of length {self.D}, got {prior}")
         self.G = len(self.species)
-        self.ndim = 2 * self.G + 2
+        self.ndim = self.D * self.G + self.D
 
     def split(self, theta: NDArray):
         theta = np.atleast_2d(theta)
-        mu = theta[:, : 2 * self.G].reshape(-1, self.G, 2)
-        log_tau = theta[:, 2 * self.G :]
+        mu = theta[:, : self.D * self.G].reshape(-1, self.G, self.D)
+        log_tau = theta[:, self.D * self.G :]
         return mu, log_tau
 
     def log_prob(self, theta: NDArray) -> NDArray:
         mu, log_tau = self.split(theta)
-        tau = np.exp(log_tau)  # (W, 2)
-        lp = -0.5 * np.sum(((mu - PRIOR_MU["mean"]) / PRIOR_MU["sd"]) ** 2, axis=(1, 2))
-        lp += np.sum(-0.5 * (tau / PRIOR_TAU_SCALE) ** 2 + log_tau, axis=1)  # half-normal, Jacobian of log
-        C = self.S[None, :, :, :] + np.einsum("wk,kl->wkl", tau**2, np.eye(2))[:, None, :, :]  # (W, J, 2, 2)
-        r = self.m[None, :, :] - mu[:, self.group, :]  # (W, J, 2)
-        det = C[..., 0, 0] * C[..., 1, 1] - C[..., 0, 1] * C[..., 1, 0]
-        inv00, inv11, inv01 = C[..., 1, 1] / det, C[..., 0, 0] / det, -C[..., 0, 1] / det
-        quad = r[..., 0] ** 2 * inv00 + r[..., 1] ** 2 * inv11 + 2 * r[..., 0] * r[..., 1] * inv01
-        lp += np.sum(-0.5 * quad - 0.5 * np.log(det), axis=1)
+        tau = np.exp(log_tau)  # (W, D)
+        lp = -0.5 * np.sum(((mu - self.prior_mean) / self.prior_sd) ** 2, axis=(1, 2))
+        lp += np.sum(-0.5 * (tau / self.tau_scale) ** 2 + log_tau, axis=1)  # half-normal, Jacobian of log
+        C = self.S[None] + np.einsum("wk,kl->wkl", tau**2, np.eye(self.D))[:, None, :, :]  # (W, J, D, D)
+        r = self.m[None, :, :] - mu[:, self.group, :]  # (W, J, D)
+        sign, logdet = np.linalg.slogdet(C)
+        quad = np.einsum("wjk,wjk->wj", r, np.linalg.solve(C, r[..., None])[..., 0])
+        lp += np.sum(-0.5 * quad - 0.5 * logdet, axis=1)
+        lp = np.where(np.all(sign > 0, axis=1), lp, -np.inf)
         out = np.where(np.isfinite(lp), lp, -np.inf)
         return out if np.ndim(theta) == 2 else float(out[0])
 
 
-def sample_species(specimens: list[SpecimenPosterior], *, seed: int = 0, n_steps: int = 3000, progress=False):
-    """emcee draws of the species model: dict with ``mu`` (n, G, 2), ``tau`` (n, 2), ``species``, diagnostics."""
+def sample_species(
+    specimens: list[SpecimenPosterior],
+    *,
+    seed: int = 0,
+    n_steps: int = 3000,
+    progress=False,
+    prior: dict | None = None,
+):
+    """emcee draws of the species model: dict with ``mu`` (n, G, D), ``tau`` (n, D), ``species``, diagnostics.
+
+    ``prior``: see :class:`HierarchicalPosterior` (default: the (log EI0, p) model).
+    """
     import emcee
 
     from .summary import import_arviz
 
-    post = HierarchicalPosterior(specimens)
+    post = HierarchicalPosterior(specimens, prior)
     rng = np.random.default_rng(seed)
     start = np.concatenate(
-        [np.concatenate([post.m[post.group == g].mean(axis=0) for g in range(post.G)]), np.log(PRIOR_TAU_SCALE / 2)]
+        [np.concatenate([post.m[post.group == g].mean(axis=0) for g in range(post.G)]), np.log(post.tau_scale / 2)]
     )
     n_walkers = max(32, 4 * post.ndim)
     chains = []
@@ -134,6 +160,28 @@ def sample_species(specimens: list[SpecimenPosterior], *, seed: int = 0, n_steps
     ess = float(np.min(az.ess(idata, method="bulk")["theta"].values))
     mu, log_tau = post.split(chain)
     return {"mu": mu, "tau": np.exp(log_tau), "species": post.species, "rhat_max": rhat, "ess_bulk_min": ess}
+
+
+def modulus_contrasts(fit: dict) -> list[dict]:
+    """Every pair of species of a log-E species model (:data:`PRIOR_LOG_E`): the ratio of their
+    typical Young's moduli E_a / E_b and P(E_a > E_b)."""
+    sp, mu = fit["species"], fit["mu"]
+    out = []
+    for ia, ib in combinations(range(len(sp)), 2):
+        dlog = mu[:, ia, 0] - mu[:, ib, 0]
+        r = _q(np.exp(dlog))
+        out.append(
+            {
+                "a": sp[ia],
+                "b": sp[ib],
+                "parameter": "E",
+                "ratio_median": r["median"],
+                "ratio_q05": r["q05"],
+                "ratio_q95": r["q95"],
+                "prob_a_greater": float(np.mean(dlog > 0)),
+            }
+        )
+    return out
 
 
 def _q(x) -> dict:

@@ -429,6 +429,7 @@ class RodLikelihood:
                 f"bayesrod extract on frames) for model {diameter!r}, got none"
             )
         self.d_s, self.d_obs, self.d_sd = (np.asarray(a, float) for a in (dm.s_m, dm.d_m, dm.sd_m))
+        self.d_offset_sd, self.d_scale_sd = dm.shared_offset_sd_m, dm.shared_scale_sd
         self.n_diameters = int(self.d_s.size)
         self.diameter_names = ["d0_m"] + (["p_geom"] if diameter == "free" else [])
         # a profile of many stations calibrates its own sd scale and the correlation of neighbouring stations'
@@ -468,12 +469,25 @@ class RodLikelihood:
         return out
 
     def _diameter_loglik(self, params: dict) -> NDArray:
-        z = (self.d_obs[None, :] - self.predict_diameter(params)) / self.d_sd[None, :]
+        """Log density of the measured widths: each station's own error (AR(1) along s with a fitted
+        sd scale for a profile; independent for a few caliper readings), plus the offset and scale
+        errors all stations share, marginalised exactly (rank-k update, :func:`shared_error_loglik`)."""
+        pred = self.predict_diameter(params)
+        z = (self.d_obs[None, :] - pred) / self.d_sd[None, :]
         if self.d_first is None:
-            return np.sum(-0.5 * z**2 - np.log(self.d_sd), axis=1) - 0.5 * self.n_diameters * _LOG_2PI
-        scale = np.atleast_1d(np.asarray(params["diameter_sd_scale"], float))[:, None]
-        rho = np.atleast_1d(np.asarray(params["rho_diameter"], float))[:, None]
-        return ar1_loglik(z, scale, rho, self.d_first) - float(np.sum(np.log(self.d_sd)))
+            scale = np.ones((z.shape[0], 1))
+            rho = np.zeros((z.shape[0], 1))
+            first = np.ones(self.n_diameters, bool)
+        else:
+            scale = np.atleast_1d(np.asarray(params["diameter_sd_scale"], float))[:, None]
+            rho = np.atleast_1d(np.asarray(params["rho_diameter"], float))[:, None]
+            first = self.d_first
+        shared = []
+        if self.d_offset_sd > 0:
+            shared.append(np.broadcast_to(self.d_offset_sd / self.d_sd, z.shape))
+        if self.d_scale_sd > 0:
+            shared.append(self.d_scale_sd * pred / self.d_sd[None, :])
+        return shared_error_loglik(z, scale, rho, first, shared) - float(np.sum(np.log(self.d_sd)))
 
     # ------------------------------------------------------------------ tables
     def _build_tables(self) -> None:
@@ -937,6 +951,32 @@ def ar1_loglik(r: NDArray, sigma: NDArray, rho: NDArray, first: NDArray) -> NDAr
     return (
         np.sum(-0.5 * e**2 / (sigma**2 * v) - 0.5 * np.log(v), axis=-1) - n * np.log(sigma[..., 0]) - 0.5 * n * _LOG_2PI
     )
+
+
+def shared_error_loglik(z: NDArray, sigma: NDArray, rho: NDArray, first: NDArray, shared: list) -> NDArray:
+    """Log density of standardised residuals ``z`` (W, N) under AR(1) noise plus errors all points share.
+
+    z = e + sum_j a_j u_j with e AR(1) (marginal sd ``sigma``, correlation ``rho``, both (W, 1); chains
+    start where ``first`` (N,)) and independent a_j ~ N(0, 1) along each column u_j (W, N) of
+    ``shared`` (an offset: a constant column; a scale error: the prediction). Exact and O(N k^2): with
+    S the AR(1) covariance, U = [u_j], M = I + U^T S^-1 U and b = U^T S^-1 z (S^-1 applied by whitening),
+    log p = ar1_loglik(z) + b^T M^-1 b / 2 - log det M / 2 (Woodbury, matrix determinant lemma).
+    With no columns it is :func:`ar1_loglik`.
+    """
+    base = ar1_loglik(z, sigma, rho, first)
+    if not shared:
+        return base
+
+    def whiten(x):
+        e, v = ar1_innovations(x, rho, first)
+        return e / (sigma * np.sqrt(v))
+
+    wz = whiten(z)
+    wu = np.stack([whiten(np.asarray(u, float)) for u in shared], axis=1)  # (W, k, N)
+    M = np.eye(len(shared))[None] + np.einsum("wkn,wln->wkl", wu, wu)
+    b = np.einsum("wkn,wn->wk", wu, wz)
+    sol = np.linalg.solve(M, b[..., None])[..., 0]
+    return base + 0.5 * np.sum(b * sol, axis=1) - 0.5 * np.linalg.slogdet(M)[1]
 
 
 class PosteriorBase(ParameterSpace):

@@ -66,6 +66,16 @@ def modulus_draws(samples: dict, length_m: float, s_m) -> NDArray:
     return E0 * x ** (4.0 * dq[:, None])
 
 
+def diameter_draws(samples: dict, length_m: float, s_m) -> NDArray:
+    """The fitted diameter d(s) = d0 (1 - s/L)^q [m] per draw over ``s_m`` (m,), shape (n, m); q = p_geom
+    under the free width model, else p (the width term of docs/inference.md, "Young's modulus")."""
+    if "d0_m" not in samples:
+        raise ValueError("diameter: expected a fit with measured diameters, got a fit without")
+    q = np.asarray(samples.get("p_geom", samples["p"]), float)[:, None]
+    x = np.clip(1.0 - np.asarray(s_m, float)[None, :] / draw_lengths(samples, length_m), 0.0, None)
+    return np.asarray(samples["d0_m"], float)[:, None] * x**q
+
+
 def youngs_modulus_summary(samples: dict, length_m: float, source: str | None = None) -> dict:
     """summary.json ``youngs_modulus`` (docs/format.md): E at the base, and under the free width model the
     modulus taper p - p_geom, the uniform-modulus verdict (0 inside its 90% interval or not) and E(s)."""

@@ -59,12 +59,44 @@ def _weight_sentence(data: dict) -> str:
     return ""
 
 
+def _modulus_section(ym: dict | None, lo: float, hi: float) -> str:
+    """summary.json ``youngs_modulus`` as a table and the uniform-modulus verdict ('' without diameters)."""
+    if not ym:
+        return ""
+
+    def row(name, q, scale, unit):
+        return (
+            f"<tr><td>{name}</td><td>{q['median'] * scale:.4g}</td><td>{q['q05'] * scale:.4g}</td>"
+            f"<td>{q['q95'] * scale:.4g}</td><td>{unit}</td></tr>"
+        )
+
+    rows = row("E0 (base)", ym["E_Pa"], 1e-9, "GPa") + row("d0 (base diameter)", ym["d0_m"], 1e3, "mm")
+    verdict = ""
+    if "modulus_taper" in ym:
+        rows += row("p - p_geom (modulus taper)", ym["modulus_taper"], 1.0, "")
+        if ym.get("uniform_modulus") == "rejected":
+            verdict = (
+                '<p class="warn">The modulus varies along the stem: 0 lies outside the interval of '
+                "p - p_geom (E(s) = E0 (1 - s/L)^(4 (p - p_geom)), figure <i>diameter_fit</i>).</p>"
+            )
+        else:
+            verdict = "<p>A uniform modulus is consistent with the data (0 lies inside the interval of p - p_geom).</p>"
+    model = "uniform modulus (width and bending share p)" if ym["model"] == "uniform" else "modulus free to vary"
+    return (
+        f"<h3>Young's modulus (E = 64 EI / (&pi; d<sup>4</sup>), solid round section)</h3>"
+        f"<p>Diameters from {esc(str(ym.get('source')))}; model: {model}.</p>"
+        f"<table><tr><th>quantity</th><th>median</th><th>{lo:g}%</th><th>{hi:g}%</th><th>unit</th></tr>{rows}"
+        f"</table>{verdict}"
+    )
+
+
 def fit_report(summary: dict, pngs: Mapping[str, bytes], provenance: dict | None = None, source: str = "") -> str:
     """The fit report: posterior table, k_theta, two-stage comparison, convergence, figures, assumptions.
 
     ``summary`` is summary.json's content (docs/format.md); ``pngs`` the figures as PNG bytes.
     """
     level = summary.get("level", 0.9)
+    lo, hi = round(50 * (1 - level), 1), round(50 * (1 + level), 1)
     conv = summary["convergence"]
     rows = "".join(
         f"<tr><td>{esc(k)}</td><td>{v['median']:.4g}</td><td>{v['q05']:.4g}</td><td>{v['q95']:.4g}</td>"
@@ -98,12 +130,12 @@ def fit_report(summary: dict, pngs: Mapping[str, bytes], provenance: dict | None
             "Its p is biased by curvature smoothing (docs/inference.md); the posterior above uses the whole "
             "elastica.</p>"
         )
+    ym_html = _modulus_section(summary.get("youngs_modulus"), lo, hi)
     smp = summary.get("sampler", {})
     prov_html = f"<pre>{esc(json.dumps(provenance, indent=1))}</pre>" if provenance else ""
     truth = summary.get("truth")
     truth_html = f"<p>Simulated dataset; the truth: {esc(json.dumps(truth))}</p>" if truth else ""
     data = summary["data"]
-    lo, hi = round(50 * (1 - level), 1), round(50 * (1 + level), 1)
     mc = summary.get("model_check") or {}
     check_html = ""
     if mc.get("verdict") == "misfit":
@@ -124,7 +156,7 @@ Effects: {esc(", ".join(summary["effects"]) or "none")}.</p>
 <p>Units: EI0 in N m<sup>2</sup>, p dimensionless, sigma_force_N in N, sigma_shape_m in m.</p>
 <h3>Lumped stiffness k<sub>&theta;</sub>(h) [N m/rad] at the pushed heights</h3>
 <table><tr><th>h [m]</th><th>median</th><th>{lo:g}%</th><th>{hi:g}%</th></tr>{kt}</table>
-{ts_html}
+{ym_html}{ts_html}
 <h2>Convergence</h2><p class="{"ok" if ok else "bad"}">{verdict}</p>
 <p>emcee: {smp.get("ensembles")} independent ensembles of {smp.get("walkers_per_ensemble")} walkers
 (differential-evolution moves), {smp.get("steps")} steps each after a burn-in of {smp.get("burn_in")};

@@ -8,7 +8,15 @@ import numpy as np
 
 from ..inference.diagnose import CATALOG
 from ..inference.likelihood import force_offset_name, height_error_name, preload_name
-from ..inference.summary import draw_lengths, ei_band, k_theta_band, predictive_forces, quantiles
+from ..inference.summary import (
+    diameter_draws,
+    draw_lengths,
+    ei_band,
+    k_theta_band,
+    modulus_draws,
+    predictive_forces,
+    quantiles,
+)
 
 if TYPE_CHECKING:
     from ..inference.diagnose import ForwardModel
@@ -53,6 +61,42 @@ def plot_ei_band(samples: dict, length_m: float, ax=None, truth: dict | None = N
         )
     ax.set(xlabel="arc length s [m]", ylabel="EI(s) [N m$^2$]", yscale="log", title="Flexural rigidity profile")
     ax.legend()
+    return artists
+
+
+def plot_diameter_fit(samples: dict, length_m: float, diameters, ax=None, color="C2", modulus_ax=None):
+    """Measured diameters (90% error bars, 1.645 sd) against the fitted d(s) median and 90% band.
+
+    ``diameters``: a :class:`~bayesrod.dataset.model.Diameters`. ``modulus_ax``: where the modulus may
+    vary (the free width model), also draws E(s) [GPa] with its 90% band there. Returns the artists.
+    """
+    ax = _ax(ax)
+    s = np.linspace(0, length_m * 0.98, 200)
+    band = quantiles(diameter_draws(samples, length_m, s) * 1000)
+    artists = {
+        "band": ax.fill_between(s, band["q05"], band["q95"], color=color, alpha=0.3, label="fitted d(s), 90% band"),
+        "median": ax.plot(s, band["median"], color=color, label="fitted d(s), median")[0],
+        "measured": ax.errorbar(
+            diameters.s_m,
+            diameters.d_m * 1000,
+            yerr=1.645 * diameters.sd_m * 1000,
+            fmt="o",
+            ms=2,
+            color="k",
+            ecolor="0.6",
+            label=f"measured ({diameters.source})",
+        ),
+    }
+    ax.set(xlabel="arc length s [m]", ylabel="diameter [mm]", title="Stem diameter")
+    ax.legend()
+    if modulus_ax is not None:
+        E = quantiles(modulus_draws(samples, length_m, s) / 1e9)
+        artists["modulus_band"] = modulus_ax.fill_between(
+            s, E["q05"], E["q95"], color="C4", alpha=0.3, label="90% band"
+        )
+        (artists["modulus_median"],) = modulus_ax.plot(s, E["median"], color="C4", label="median")
+        modulus_ax.set(xlabel="arc length s [m]", ylabel="E(s) [GPa]", title="Young's modulus along the stem")
+        modulus_ax.legend()
     return artists
 
 

@@ -43,6 +43,9 @@ STEP_PX = 0.25  # sample spacing along the normal [px]
 SPACING_PX = 3.0  # default station spacing along the centerline [px]
 BG_PX = 3.0  # width of each background strip [px]
 MARGIN_PX = 3.0  # the window reaches this far beyond the mask's half-width (blur, anti-aliasing)
+#: sd [px] of the width error all stations of a profile share (the method's bias at the stem's edges:
+#: blur, anti-aliasing, the colour model), measured by scripts/width_error_study.py (docs/validation.md)
+OFFSET_SD_PX = 0.1
 OWN_CORE_HALF_PX = 3.0  # a station at least 6 px wide (in the mask) takes the stem colour of its own core
 
 
@@ -280,7 +283,10 @@ class DiameterProfile:
     standard deviation (at flagged stations: the median and spread of whatever the frames measured, for
     the record; NaN where nothing was); ``n_frames`` (k,) int; ``flag`` (k,) str: ``ok`` where at least
     ``min_frames`` frames measured it, else the most frequent flag of the frames (``few_frames`` when
-    they were ``ok`` but too few).
+    they were ``ok`` but too few; ``unresolved`` where their median width is not above zero: a tip
+    thinner than the width's noise). ``shared_offset_sd_m`` [m] and ``shared_scale_sd`` (relative): the
+    sd of an offset and of a scale error that every station shares (:data:`OFFSET_SD_PX` pixels at the
+    stem's distance; the camera's ``depth_scale_sd``), which no number of stations averages down.
     """
 
     s_m: NDArray
@@ -288,13 +294,17 @@ class DiameterProfile:
     sd_m: NDArray
     n_frames: NDArray
     flag: NDArray
+    shared_offset_sd_m: float = 0.0
+    shared_scale_sd: float = 0.0
 
     @property
     def ok(self) -> NDArray:
         return self.flag == "ok"
 
 
-def combine_profiles(profiles: list[WidthProfile], s_m: NDArray, min_frames: int = 3) -> DiameterProfile:
+def combine_profiles(
+    profiles: list[WidthProfile], s_m: NDArray, min_frames: int = 3, depth_scale_sd: float = 0.0
+) -> DiameterProfile:
     """Median over frames of widths measured at the same stations ``s_m`` (k,), with an honest sd.
 
     The frames of a push share their background, so their errors at a station are correlated and
@@ -348,4 +358,20 @@ def combine_profiles(profiles: list[WidthProfile], s_m: NDArray, min_frames: int
         else:
             vals, counts = np.unique(seen, return_counts=True)
             flag[i] = str(vals[np.argmax(counts)])
-    return DiameterProfile(s_m=s_m, d_m=d, sd_m=sd, n_frames=n.astype(int), flag=flag.astype(str))
+    # below resolution: at a thin tip the frames' median width can come out at or below zero (the noise of
+    # the coverage integral exceeds the width); no diameter to report there
+    flag[ok & ~((d > 0) & (sd > 0))] = "unresolved"
+    # metres per pixel where the stem was measured (the stations' own widths in both units)
+    px = [wp.width_m[wp.flag == "ok"] / wp.width_px[wp.flag == "ok"] for wp in profiles]
+    px = np.concatenate(px) if px else np.array([])
+    px = px[np.isfinite(px) & (px > 0)]
+    offset_sd = OFFSET_SD_PX * float(np.median(px)) if px.size else 0.0
+    return DiameterProfile(
+        s_m=s_m,
+        d_m=d,
+        sd_m=sd,
+        n_frames=n.astype(int),
+        flag=flag.astype(str),
+        shared_offset_sd_m=offset_sd,
+        shared_scale_sd=float(depth_scale_sd),
+    )
