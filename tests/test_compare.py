@@ -61,43 +61,48 @@ def _fake_run(path, specimen, species, draws, L=0.8, d0=None):
     np.savez(path / "samples.npz", length_m=L, EI0=np.exp(draws[:, 0]), p=draws[:, 1], **extra)
 
 
-def test_compare_contrasts_youngs_modulus_when_every_fit_has_diameters(tmp_path):
-    """Two species of equal EI0 whose stems differ in thickness (d0 1.2x): E differs by 1.2^4 = 2.07x.
-    The E contrast finds that ratio (the EI0 contrast does not), and a fit without diameters is named."""
-    import bayesrod
+def test_modulus_model_finds_a_thickness_difference_that_EI0_hides():
+    """Two species of equal EI0 whose stems differ 1.2x in diameter: E differs by 1.2^4 = 2.07x. The log-E
+    species model (compare's, with its prior and steps) finds that ratio and its direction."""
+    from bayesrod.inference.hierarchical import PRIOR_LOG_E, modulus_contrasts
 
     rng = np.random.default_rng(4)
-    runs = []
+    sp = []
     for name, d0 in (("thick", 0.012), ("thin", 0.010)):
         for j in range(4):
-            logEI0 = np.log(2.6) + rng.normal(0, 0.2)
-            dj = d0 * np.exp(rng.normal(0, 0.02))  # stems of a species vary in thickness too
-            n = 1500
-            draws = np.column_stack([logEI0 + rng.normal(0, 0.01, n), 0.43 + rng.normal(0, 0.005, n)])
-            _fake_run(tmp_path / f"{name}-{j}", f"{name}-{j}", name, draws, d0=dj * np.exp(rng.normal(0, 0.005, n)))
-            runs.append(tmp_path / f"{name}-{j}")
-    res = bayesrod.compare(runs).to_dict()
-    c = {x["parameter"]: x for x in res["contrasts"]}
-    assert c["EI0"]["ratio_q05"] <= 1.0 <= c["EI0"]["ratio_q95"], c["EI0"]
-    E = c["E"]  # a = thick, b = thin
-    assert E["ratio_q05"] <= 1 / 1.2**4 <= E["ratio_q95"] and E["ratio_q95"] < 1.0, E
-    assert E["prob_a_greater"] < 0.05
-    E_thin = 64 * 2.6 / (np.pi * 0.010**4)
-    assert res["species"]["thin"]["E_Pa"]["q05"] <= E_thin <= res["species"]["thin"]["E_Pa"]["q95"]
-    assert "log_E" in res["between_specimen_sd"]
-    # one fit without diameters: E is not compared, and the user is told which
-    plain = tmp_path / "thin-9"
-    _fake_run(plain, "thin-9", "thin", np.column_stack([np.full(200, np.log(2.6)), np.full(200, 0.43)]))
-    res = bayesrod.compare([*runs, plain]).to_dict()
-    assert not any(x["parameter"] == "E" for x in res["contrasts"])
-    assert any("not compared" in w and "thin-9" in w for w in res["warnings"])
+            logE = np.log(64 * 2.6 / (np.pi * d0**4)) + rng.normal(0, 0.2)  # between-specimen spread
+            sp.append(SpecimenPosterior(f"{name}-{j}", name, 0.8, (logE + rng.normal(0, 0.03, 1500))[:, None]))
+    fit = sample_species(sp, seed=1, prior=PRIOR_LOG_E, n_steps=1500)
+    (c,) = modulus_contrasts(fit)
+    assert (c["a"], c["b"], c["parameter"]) == ("thick", "thin", "E")
+    assert c["ratio_q05"] <= 1 / 1.2**4 <= c["ratio_q95"] and c["ratio_q95"] < 1.0, c
+    assert c["prob_a_greater"] < 0.05 and fit["rhat_max"] < 1.02
+
+
+def test_compare_takes_youngs_modulus_only_from_fits_that_all_have_diameters(tmp_path):
+    import bayesrod
+    from bayesrod.api.compare import _moduli
+
+    rng = np.random.default_rng(4)
+    draws = np.column_stack([np.log(2.6) + rng.normal(0, 0.01, 300), 0.43 + rng.normal(0, 0.005, 300)])
+    _fake_run(tmp_path / "a", "a", "x", draws, d0=0.01 * np.exp(rng.normal(0, 0.005, 300)))
+    _fake_run(tmp_path / "b", "b", "y", draws)
+    fits = [(bayesrod.Posterior.load(tmp_path / n), None) for n in ("a", "b")]
+    with_E, warnings = _moduli(fits)
+    assert with_E is None and len(warnings) == 1 and "not compared" in warnings[0] and "b fitted without" in warnings[0]
+    with_E, warnings = _moduli(fits[:1])
+    (m,) = with_E
+    E = 64 * np.exp(draws[:, 0]) / (np.pi * 0.01**4)
+    assert np.median(m.draws[:, 0]) == pytest.approx(np.log(np.median(E)), abs=0.01) and warnings == []
+    assert _moduli(fits[1:]) == (None, [])
 
 
 def test_compare_cli_writes_contract_json_and_warns(tmp_path, capsys):
     rng = np.random.default_rng(3)
     runs = []
     for s in _species(rng, "oak", 5.0, 0.4, 3) + _species(rng, "reed", 1.0, 1.2, 1):
-        _fake_run(tmp_path / s.specimen, s.specimen, s.species, s.draws)
+        d0 = np.full(len(s.draws), 0.01 if s.species == "oak" else 0.006)  # calipers: Young's modulus too
+        _fake_run(tmp_path / s.specimen, s.specimen, s.species, s.draws, d0=d0)
         runs.append(str(tmp_path / s.specimen))
     out = tmp_path / "cmp"
     assert main(["compare", *runs, "--out", str(out), "--height", "0.3"]) == 0
@@ -107,6 +112,9 @@ def test_compare_cli_writes_contract_json_and_warns(tmp_path, capsys):
         assert {"a", "b", "parameter", "ratio_median", "ratio_q05", "ratio_q95", "prob_a_greater"} <= set(c)
     ei0 = next(c for c in res["contrasts"] if c["parameter"] == "EI0")
     assert ei0["ratio_q05"] > 1.0  # oak (a) stiffer than reed
+    E = next(c for c in res["contrasts"] if c["parameter"] == "E")  # E ~ EI0 / d0^4: 5 x 0.6^4 = 0.65
+    assert E["ratio_q05"] < 0.65 < E["ratio_q95"] and set(res["species"]["reed"]) >= {"E_Pa", "EI0"}
+    assert "log_E" in res["between_specimen_sd"]
     assert any("one specimen only" in w for w in res["warnings"])
     assert (out / "figures" / "forest.png").is_file()
     capsys.readouterr()

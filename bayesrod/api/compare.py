@@ -66,6 +66,20 @@ def _modulus_posterior(post, species: str | None = None) -> SpecimenPosterior | 
     return SpecimenPosterior(post.specimen, str(species), post.length_m, np.log(youngs_modulus(d))[:, None])
 
 
+def _moduli(fits) -> tuple[list[SpecimenPosterior] | None, list[str]]:
+    """log E posteriors of every fit when all have measured diameters (else None), and the warnings."""
+    moduli = [_modulus_posterior(post, sp) for post, sp in fits]
+    if all(m is None for m in moduli):
+        return None, []
+    if any(m is None for m in moduli):
+        missing = [post.specimen for (post, _), m in zip(fits, moduli, strict=True) if m is None]
+        return None, [
+            f"Young's modulus not compared: {', '.join(missing)} fitted without diameters "
+            "(fit with measured diameters: docs/inference.md, \"Young's modulus\")"
+        ]
+    return moduli, [w for m in moduli for w in check_reduction(m, prior_sd=PRIOR_LOG_E["sd"] / 2, names=("log E",))]
+
+
 def _as_posterior(x):
     from .fitting import Posterior
 
@@ -145,17 +159,8 @@ def compare(posteriors, *, height_m: float | None = None, seed: int = 0) -> Comp
                 f"{sp}: one specimen only; its species mean rests on the between-specimen spread "
                 "estimated from the other species (wide interval)"
             )
-    moduli = [_modulus_posterior(post, sp) for post, sp in fits]
-    with_E = [m for m in moduli if m is not None]
-    if with_E and len(with_E) < len(moduli):
-        missing = [s.specimen for s, m in zip(specimens, moduli, strict=True) if m is None]
-        warnings.append(
-            f"Young's modulus not compared: {', '.join(missing)} fitted without diameters "
-            '(fit with measured diameters: docs/inference.md, "Young\'s modulus")'
-        )
-    compare_E = bool(with_E) and len(with_E) == len(moduli)
-    if compare_E:
-        warnings += [w for m in with_E for w in check_reduction(m, prior_sd=PRIOR_LOG_E["sd"] / 2, names=("log E",))]
+    with_E, w_E = _moduli(fits)
+    warnings += w_E
     for w in warnings:
         log.warning("warning: %s", w)
     fit = sample_species(specimens, seed=seed)
@@ -176,8 +181,9 @@ def compare(posteriors, *, height_m: float | None = None, seed: int = 0) -> Comp
         "method": "normal-normal hierarchical model on per-specimen posteriors (docs/compare.md)",
         "level": 0.9,
     }
-    if compare_E:
-        fit_E = sample_species(with_E, seed=seed + 1, prior=PRIOR_LOG_E)
+    if with_E:
+        # one dimension per species: half the steps of the (log EI0, p) model still give an ESS in the thousands
+        fit_E = sample_species(with_E, seed=seed + 1, prior=PRIOR_LOG_E, n_steps=1500)
         result["contrasts"] += modulus_contrasts(fit_E)
         for g, sp in enumerate(fit_E["species"]):
             result["species"][sp]["E_Pa"] = _qd(np.exp(fit_E["mu"][:, g, 0]))
