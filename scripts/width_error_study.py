@@ -1,0 +1,105 @@
+"""Errors of the extracted diameter profile that the stations share: offset and scale (issue 22).
+
+    python scripts/width_error_study.py --out width-study --reps 20 [--workers 2]
+
+Per replicate and stem (twig, grass; one contact height, the preset's middle one; frames drawn with
+exact widths, clutter, the probe and depth dropouts), ``bayesrod.extract`` measures the diameter
+profile, and against the drawn diameter this records, over the ``ok`` stations:
+
+* ``offset_px``: the median signed error [px], the part of the error all stations share;
+* ``z_sd_within``: the sd of the errors about that offset, in units of the stations' sd (the
+  station-to-station part the fit's own sd scale absorbs);
+* ``depth_rel_err``: the plane depth the extraction used, relative to the rendered plane (a scale
+  error every width and every centerline shares).
+
+The spread of ``offset_px`` and ``depth_rel_err`` over replicates sets the defaults of the width
+term's shared errors (``bayesrod.vision.width.OFFSET_SD_PX``, ``DEPTH_SCALE_SD``; docs/inference.md).
+Writes width_error_study.csv (resumable: done rows are skipped) and width_error_study.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+import bayesrod
+from bayesrod.dataset.io import append_rows, read_rows
+
+FIELDS = ["stem", "seed", "stations_ok", "px_mm", "offset_px", "median_abs_err_px", "z_sd_within"]
+FIELDS += ["depth_rel_err", "seconds"]
+
+
+def one(job) -> dict:
+    stem, seed = job
+    t0 = time.perf_counter()
+    from bayesrod.dataset.simulate import SimConfig
+    from bayesrod.vision.render import plane_depth
+
+    cfg = SimConfig.from_preset(stem, seed=seed)
+    h = cfg.heights_m[len(cfg.heights_m) // 2]
+    sim = bayesrod.simulate(stem, seed=seed, heights_m=[h], config_overrides={"exact_width": True})
+    with tempfile.TemporaryDirectory() as tmp:
+        sim.save(Path(tmp) / "raw", frames=True)
+        ex = bayesrod.extract(Path(tmp) / "raw", progress=False)
+    truth = ex.source.extra["truth"]
+    d0, q, L = truth["base_diameter_m"], truth["diameter_taper"], ex.dataset.length_m
+    dp = ex.diameters
+    ok = dp.ok
+    Z = ex.doc["pushes"][ex.dataset.pushes[0].id]["plane_depth_m"]
+    px = Z / ex.dataset.camera.fx  # metres per pixel at the plane the extraction used
+    err = dp.d_m[ok] - d0 * np.clip(1 - dp.s_m[ok] / L, 0, 1) ** q
+    offset = float(np.median(err))
+    return {
+        "stem": stem,
+        "seed": seed,
+        "stations_ok": int(ok.sum()),
+        "px_mm": 1000 * px,
+        "offset_px": offset / px,
+        "median_abs_err_px": float(np.median(np.abs(err)) / px),
+        "z_sd_within": float(np.std((err - offset) / dp.sd_m[ok])),
+        "depth_rel_err": Z / plane_depth(L) - 1.0,
+        "seconds": round(time.perf_counter() - t0, 1),
+    }
+
+
+def table(rows: list[dict]) -> str:
+    out = ["| stem | reps | offset_px mean | offset_px sd | offset_px rms | depth_rel_err sd | z_sd_within median |"]
+    out.append("|---|---|---|---|---|---|---|")
+    for stem in sorted({r["stem"] for r in rows}):
+        sub = [r for r in rows if r["stem"] == stem]
+        off = np.array([float(r["offset_px"]) for r in sub])
+        dep = np.array([float(r["depth_rel_err"]) for r in sub])
+        zs = np.array([float(r["z_sd_within"]) for r in sub])
+        out.append(
+            f"| {stem} | {len(sub)} | {off.mean():+.3f} | {off.std(ddof=1) if off.size > 1 else float('nan'):.3f} "
+            f"| {np.sqrt(np.mean(off**2)):.3f} | {dep.std(ddof=1) if dep.size > 1 else float('nan'):.4f} "
+            f"| {np.median(zs):.2f} |"
+        )
+    return "\n".join(out) + "\n"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--reps", type=int, default=20)
+    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--stems", nargs="+", default=["twig", "grass"])
+    a = ap.parse_args()
+    a.out.mkdir(parents=True, exist_ok=True)
+    csv_path = a.out / "width_error_study.csv"
+    done = {(r["stem"], int(r["seed"])) for r in read_rows(csv_path)} if csv_path.exists() else set()
+    jobs = [(s, seed) for seed in range(a.reps) for s in a.stems if (s, seed) not in done]
+    with ProcessPoolExecutor(a.workers) as pool:
+        for row in append_rows(csv_path, FIELDS, pool.map(one, jobs), new_file=not csv_path.exists()):
+            print(row["stem"], row["seed"], f"offset {row['offset_px']:+.3f} px", f"depth {row['depth_rel_err']:+.4f}")
+    (a.out / "width_error_study.md").write_text(table(read_rows(csv_path)))
+    print(table(read_rows(csv_path)))
+
+
+if __name__ == "__main__":
+    main()
