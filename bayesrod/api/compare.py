@@ -75,7 +75,7 @@ def _moduli(fits) -> tuple[list[SpecimenPosterior] | None, list[str]]:
         missing = [post.specimen for (post, _), m in zip(fits, moduli, strict=True) if m is None]
         return None, [
             f"Young's modulus not compared: {', '.join(missing)} fitted without diameters "
-            "(fit with measured diameters: docs/inference.md, \"Young's modulus\")"
+            '(fit with measured diameters: docs/inference.md, "Young\'s modulus")'
         ]
     return moduli, [w for m in moduli for w in check_reduction(m, prior_sd=PRIOR_LOG_E["sd"] / 2, names=("log E",))]
 
