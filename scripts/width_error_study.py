@@ -1,10 +1,11 @@
 """Errors of the extracted diameter profile that the stations share: offset and scale (issue 22).
 
-    python scripts/width_error_study.py --out width-study --reps 20 [--workers 2]
+    python scripts/width_error_study.py --out width-study --reps 20 [--workers 2] [--style shaded]
 
 Per replicate and stem (twig, grass; one contact height, the preset's middle one; frames drawn with
 exact widths, clutter, the probe and depth dropouts), ``bayesrod.extract`` measures the diameter
-profile, and against the drawn diameter this records, over the ``ok`` stations:
+profile, and against the drawn diameter this records, over the ``ok`` stations (``--style shaded``:
+frames of a round, limb-darkened stem through a defocused lens, ``bayesrod.vision.render``):
 
 * ``offset_px``: the median signed error [px], the part of the error all stations share;
 * ``z_sd_within``: the sd of the errors about that offset, in units of the stations' sd (the
@@ -30,19 +31,20 @@ import numpy as np
 import bayesrod
 from bayesrod.dataset.io import append_rows, read_rows
 
-FIELDS = ["stem", "seed", "stations_ok", "px_mm", "offset_px", "median_abs_err_px", "z_sd_within"]
+FIELDS = ["stem", "style", "seed", "stations_ok", "px_mm", "offset_px", "median_abs_err_px", "z_sd_within"]
 FIELDS += ["depth_rel_err", "seconds"]
 
 
 def one(job) -> dict:
-    stem, seed = job
+    stem, seed, style = job
     t0 = time.perf_counter()
     from bayesrod.dataset.simulate import SimConfig
     from bayesrod.vision.render import plane_depth
 
     cfg = SimConfig.from_preset(stem, seed=seed)
     h = cfg.heights_m[len(cfg.heights_m) // 2]
-    sim = bayesrod.simulate(stem, seed=seed, heights_m=[h], config_overrides={"exact_width": True})
+    over = {"exact_width": True, "render_style": style}
+    sim = bayesrod.simulate(stem, seed=seed, heights_m=[h], config_overrides=over)
     with tempfile.TemporaryDirectory() as tmp:
         sim.save(Path(tmp) / "raw", frames=True)
         ex = bayesrod.extract(Path(tmp) / "raw", progress=False)
@@ -56,6 +58,7 @@ def one(job) -> dict:
     offset = float(np.median(err))
     return {
         "stem": stem,
+        "style": style,
         "seed": seed,
         "stations_ok": int(ok.sum()),
         "px_mm": 1000 * px,
@@ -68,15 +71,19 @@ def one(job) -> dict:
 
 
 def table(rows: list[dict]) -> str:
-    out = ["| stem | reps | offset_px mean | offset_px sd | offset_px rms | depth_rel_err sd | z_sd_within median |"]
-    out.append("|---|---|---|---|---|---|---|")
-    for stem in sorted({r["stem"] for r in rows}):
-        sub = [r for r in rows if r["stem"] == stem]
+    out = [
+        "| stem | style | reps | offset_px mean | offset_px sd | offset_px rms | depth_rel_err sd "
+        "| z_sd_within median |"
+    ]
+    out.append("|---|---|---|---|---|---|---|---|")
+    for stem, style in sorted({(r["stem"], r.get("style") or "flat") for r in rows}):
+        sub = [r for r in rows if r["stem"] == stem and (r.get("style") or "flat") == style]
         off = np.array([float(r["offset_px"]) for r in sub])
         dep = np.array([float(r["depth_rel_err"]) for r in sub])
         zs = np.array([float(r["z_sd_within"]) for r in sub])
+        sd = off.std(ddof=1) if off.size > 1 else float("nan")
         out.append(
-            f"| {stem} | {len(sub)} | {off.mean():+.3f} | {off.std(ddof=1) if off.size > 1 else float('nan'):.3f} "
+            f"| {stem} | {style} | {len(sub)} | {off.mean():+.3f} | {sd:.3f} "
             f"| {np.sqrt(np.mean(off**2)):.3f} | {dep.std(ddof=1) if dep.size > 1 else float('nan'):.4f} "
             f"| {np.median(zs):.2f} |"
         )
@@ -89,11 +96,15 @@ def main() -> None:
     ap.add_argument("--reps", type=int, default=20)
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--stems", nargs="+", default=["twig", "grass"])
+    ap.add_argument("--style", default="flat", choices=["flat", "shaded"])
     a = ap.parse_args()
     a.out.mkdir(parents=True, exist_ok=True)
     csv_path = a.out / "width_error_study.csv"
-    done = {(r["stem"], int(r["seed"])) for r in read_rows(csv_path)} if csv_path.exists() else set()
-    jobs = [(s, seed) for seed in range(a.reps) for s in a.stems if (s, seed) not in done]
+    old = read_rows(csv_path)
+    if old and list(old[0]) != FIELDS:
+        raise SystemExit(f"{csv_path}: columns {', '.join(old[0])}, expected {', '.join(FIELDS)}: use another --out")
+    done = {(r["stem"], int(r["seed"]), r["style"]) for r in old}
+    jobs = [(s, seed, a.style) for seed in range(a.reps) for s in a.stems if (s, seed, a.style) not in done]
     with ProcessPoolExecutor(a.workers) as pool:
         for row in append_rows(csv_path, FIELDS, pool.map(one, jobs), new_file=not csv_path.exists()):
             print(row["stem"], row["seed"], f"offset {row['offset_px']:+.3f} px", f"depth {row['depth_rel_err']:+.4f}")

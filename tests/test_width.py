@@ -40,17 +40,19 @@ def test_rendered_coverage_sums_to_the_drawn_width_for_every_width():
             assert a[250].sum() == pytest.approx(w0, abs=1e-3), (w0, off, a[250].sum())
 
 
-def _synthetic(w0: float, p: float, noise: float, seed: int = 1):
-    """A gently curved stem of width w0 (1 - s/L)^p [px] on a flat background, blurred like a camera."""
+def _synthetic(w0: float, p: float, noise: float, seed: int = 1, shaded: bool = False):
+    """A gently curved stem of width w0 (1 - s/L)^p [px] on a flat background, blurred like a camera;
+    ``shaded``: a round stem lit from the camera, its colour falling to 55% of the core's at the limbs."""
     H, W, n = 480, 640, 400
     s = np.linspace(0, 0.4, n)
     x, z = 0.15 * s**2, s
     u, v = 128 + F * x / Z, 441.6 - F * z / Z
     wpx = w0 * (1 - s / 0.47) ** p
-    a = stem_coverage(u, v, wpx, (H, W))
+    a, limb = stem_coverage(u, v, wpx, (H, W), return_limb=True)
     rng = np.random.default_rng(seed)
     img = BG + rng.normal(0, noise, (H, W, 3))
-    img = img * (1 - a[..., None]) + STEM * a[..., None]
+    col = STEM * ((0.55 + 0.45 * limb)[..., None] if shaded else 1.0)
+    img = img * (1 - a[..., None]) + col * a[..., None]
     img = cv2.GaussianBlur(np.clip(img, 0, 255).astype(np.uint8), (3, 3), 0.6)
     line = Centerline(x, z, np.full(n, 1e-4), s, np.zeros((0, 2)), a > 0.5, a > 0.5, Z, 0.4, np.ones(n, bool))
     return img, line, (lambda ss: np.interp(ss, s, wpx))
@@ -68,6 +70,21 @@ def test_width_profile_is_subpixel_on_a_thin_and_a_wide_stem(w0):
     assert np.median(np.abs(err)) < 0.03 and abs(np.mean(err)) < 0.03, (np.median(np.abs(err)), np.mean(err))
     # metres: the width at the plane depth
     np.testing.assert_allclose(wp.width_m[ok], wp.width_px[ok] * Z / F, rtol=1e-6)
+
+
+def test_unmixing_reads_a_shaded_stem_that_projection_reads_too_wide():
+    """A round stem's darker limbs project as more than full coverage: projection reads an 8-px shaded
+    stem ~0.5 px too wide; unmixing into background and a stem colour of free brightness does not."""
+    img, line, truth = _synthetic(8.0, 0.43, 0.0, shaded=True)
+    cam = {"fx": F, "fy": F, "base_px": [128, 441.6]}
+    err = {}
+    for model in ("projection", "unmixing"):
+        wp = width_profile(img, None, line, cam, colour_model=model)
+        ok = wp.flag == "ok"
+        err[model] = float(np.median(wp.width_px[ok] - truth(wp.s_m[ok])))
+    assert err["projection"] > 0.3 and abs(err["unmixing"]) < 0.05, err
+    with pytest.raises(ValueError, match="colour_model: expected one of projection, unmixing"):
+        width_profile(img, None, line, cam, colour_model="ratio")
 
 
 def test_combined_profile_sd_is_calibrated_when_frames_share_their_errors():

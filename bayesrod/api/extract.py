@@ -165,7 +165,7 @@ def _camera_dict(ds) -> dict | None:
     return None if c is None else {"fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "base_px": list(c.base_px)}
 
 
-def extract(dataset, *, progress: bool = True) -> Extraction:
+def extract(dataset, *, progress: bool = True, width_colour_model: str = "projection") -> Extraction:
     """Extract centerlines (with per-point sd) from every push with RGB-D frames (docs/vision.md).
 
     Parameters
@@ -174,7 +174,14 @@ def extract(dataset, *, progress: bool = True) -> Extraction:
         A dataset whose pushes have ``frames`` (read from disk: the frames are files).
     progress : bool
         A progress bar, only on a terminal or in a notebook.
+    width_colour_model : {"projection", "unmixing"}
+        How the diameter profile reads coverage from colour (:func:`bayesrod.vision.width.width_profile`);
+        ``unmixing`` for round stems with strong shading.
     """
+    from ..vision.width import COLOUR_MODELS
+
+    if width_colour_model not in COLOUR_MODELS:
+        raise ValueError(f"width_colour_model: expected one of {', '.join(COLOUR_MODELS)}, got {width_colour_model!r}")
     from tqdm.auto import tqdm
 
     from ..vision.extract import ExtractionError, extract_frame
@@ -208,7 +215,17 @@ def extract(dataset, *, progress: bool = True) -> Extraction:
             plane = plane or line.plane_depth_m  # the plane of the push: from its first good frame
             if stations is None:  # width stations every SPACING_PX of the first extracted frame, over the stem
                 stations = np.arange(0.0, spec.length_m, SPACING_PX * plane / np.sqrt(camera["fx"] * camera["fy"]))
-            widths.append(width_profile(rgb, depth, line, camera, direction=push.direction, s_m=stations))
+            widths.append(
+                width_profile(
+                    rgb,
+                    depth,
+                    line,
+                    camera,
+                    direction=push.direction,
+                    s_m=stations,
+                    colour_model=width_colour_model,
+                )
+            )
             n = line.x_m.size
             cols["time_s"].append(np.full(n, rec.time_s))
             cols["x_m"].append(line.x_m)

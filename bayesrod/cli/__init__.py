@@ -90,6 +90,12 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("dataset", help="dataset directory whose pushes have frames")
     ex.add_argument("--out", required=True, help="directory for the copy of the dataset with extracted shapes")
     ex.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
+    ex.add_argument(
+        "--width-colour-model",
+        choices=["projection", "unmixing"],
+        default="projection",
+        help="how the diameter profile reads coverage from colour: unmixing for round stems with strong shading",
+    )
     fm = sub.add_parser("fit-many", help="fit every dataset of a folder on a Dask cluster; survey table")
     fm.add_argument("root", metavar="DIR_OF_DATASETS", help="folder whose sub-directories are datasets")
     fm.add_argument("--out", required=True, help="output folder (runs/, survey.csv, survey.parquet)")
@@ -585,7 +591,7 @@ def cmd_extract(args: argparse.Namespace) -> int:
     from ..api import extract
 
     _prepare_out(args)
-    res = extract(args.dataset, progress=_progress(args))
+    res = extract(args.dataset, progress=_progress(args), width_colour_model=args.width_colour_model)
     res.save(args.out, overwrite=args.force)
     if args.json:
         _emit_json({"out": str(args.out), **res.to_dict()})

@@ -81,6 +81,8 @@ class SimConfig:
     diameter_taper: float | None = None
     # frames draw each pixel's exact coverage of the true width (the diameter study); default whole-pixel widths
     exact_width: bool = False
+    # with exact_width: "flat" (one stem colour) or "shaded" (a round stem's limb darkening, a defocused lens)
+    render_style: str = "flat"
 
     @property
     def rendered_diameter(self) -> tuple[float, float]:

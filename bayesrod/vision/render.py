@@ -76,7 +76,7 @@ def _background(rng: np.random.Generator, Z0: float):
     return rgb, depth
 
 
-def stem_coverage(u, v, width_px, shape, step_px: float = 0.2):
+def stem_coverage(u, v, width_px, shape, step_px: float = 0.2, return_limb: bool = False):
     """Fraction of each pixel the stem covers: its true width, anti-aliased exactly.
 
     The stem is the union of discs' cross-sections along the centerline (u, v) (n,) with the local
@@ -84,6 +84,9 @@ def stem_coverage(u, v, width_px, shape, step_px: float = 0.2):
     is covered by the overlap of [t - 1/2, t + 1/2] with [-r, r] (a 1-px box filter across the
     stem). Summed across the stem the coverage is the width, for every width, sub-pixel ones
     included: the truth the width measurement (:mod:`bayesrod.vision.width`) is checked against.
+
+    With ``return_limb`` also returns cos of the surface's tilt at each pixel centre,
+    sqrt(1 - (t / r)^2) (0 beyond the stem): what a round stem's shading follows.
     """
     from scipy.spatial import cKDTree
 
@@ -97,8 +100,9 @@ def stem_coverage(u, v, width_px, shape, step_px: float = 0.2):
     lo_u, hi_u = int(max(np.floor(uf.min() - reach), 0)), int(min(np.ceil(uf.max() + reach), W - 1))
     lo_v, hi_v = int(max(np.floor(vf.min() - reach), 0)), int(min(np.ceil(vf.max() + reach), H - 1))
     alpha = np.zeros(shape)
+    limb = np.zeros(shape)
     if hi_u < lo_u or hi_v < lo_v:
-        return alpha
+        return (alpha, limb) if return_limb else alpha
     vv, uu = np.mgrid[lo_v : hi_v + 1, lo_u : hi_u + 1]
     dist, idx = cKDTree(np.column_stack([uf, vf])).query(
         np.column_stack([uu.ravel(), vv.ravel()]), distance_upper_bound=reach
@@ -109,14 +113,32 @@ def stem_coverage(u, v, width_px, shape, step_px: float = 0.2):
     d = np.where(near, dist, np.inf)
     cov = np.clip(np.minimum(d + 0.5, r) - np.maximum(d - 0.5, -r), 0.0, 1.0)
     alpha[lo_v : hi_v + 1, lo_u : hi_u + 1] = cov.reshape(uu.shape)
-    return alpha
+    if not return_limb:
+        return alpha
+    x = np.where(r > 0, np.minimum(d, r) / np.where(r > 0, r, 1.0), 1.0)
+    limb[lo_v : hi_v + 1, lo_u : hi_u + 1] = np.sqrt(np.clip(1.0 - x**2, 0.0, 1.0)).reshape(uu.shape)
+    return alpha, limb
 
 
 ARMS = ("trailing", "leading")
+STYLES = ("flat", "shaded")
 
 
 def render_frame(
-    bg_rgb, bg_depth, xz_m, s_m, length_m, p, d0, camera, Z0, probe_xz, rng, arm="leading", exact_width=False
+    bg_rgb,
+    bg_depth,
+    xz_m,
+    s_m,
+    length_m,
+    p,
+    d0,
+    camera,
+    Z0,
+    probe_xz,
+    rng,
+    arm="leading",
+    exact_width=False,
+    style="flat",
 ):
     """One RGB (uint8) and depth (uint16 mm) image of the stem centerline ``xz_m`` (2, n).
 
@@ -129,13 +151,25 @@ def render_frame(
     ``exact_width=True`` draws each pixel's exact coverage of the true width (:func:`stem_coverage`, the truth
     of the diameter study); the default draws whole-pixel line widths with a visible sub-pixel tip (what every
     centerline number of docs/vision.md was measured on).
+
+    ``style`` (with ``exact_width``): ``"flat"`` draws the stem in one colour, ``"shaded"`` as a round stem
+    lit from the camera (its colour darkens towards the limbs to 55% of the core's, Lambert) seen through
+    a defocused lens (Gaussian blur of sd 1.2 px instead of 0.6): a second look the width method was not
+    built on (docs/validation.md).
     """
+    if style not in STYLES:
+        raise ValueError(f"style: expected one of {STYLES}, got {style!r}")
+    if style != "flat" and not exact_width:
+        raise ValueError(f"style: expected 'flat' unless exact_width is set, got {style!r}")
     rgb = bg_rgb.copy()
     depth = bg_depth.copy()
     u, v = project(xz_m[0], xz_m[1], camera, Z0)
     diam = d0 * np.clip(1 - s_m / length_m, 0, 1) ** p
+    shade = None
     if exact_width:
-        alpha = stem_coverage(u, v, diam * FOCAL / Z0, (HEIGHT, WIDTH))
+        alpha, limb = stem_coverage(u, v, diam * FOCAL / Z0, (HEIGHT, WIDTH), return_limb=True)
+        if style == "shaded":
+            shade = (0.55 + 0.45 * limb)[..., None]
     else:  # the default: whole-pixel line widths, a faint but visible (>= 35%) sub-pixel tip
         stem = np.zeros((HEIGHT, WIDTH), np.uint8)
         for i in range(len(u) - 1):
@@ -153,6 +187,8 @@ def render_frame(
             )
         alpha = stem / 255.0
     col = STEM_RGB + rng.normal(0, 4, 3)
+    if shade is not None:
+        col = col * shade
     rgb = rgb * (1 - alpha[..., None]) + col * alpha[..., None]
     depth[alpha > 0.5] = Z0
     if probe_xz is not None:  # the probe occludes the stem around the contact, in front of it
@@ -168,7 +204,7 @@ def render_frame(
         depth[max(arm_y0, 0) : max(arm_y1, 0), cols] = Z0 - 0.06
     # Sensor noise.
     rgb = np.clip(rgb + rng.normal(0, 3, rgb.shape), 0, 255).astype(np.uint8)
-    rgb = cv2.GaussianBlur(rgb, (3, 3), 0.6)
+    rgb = cv2.GaussianBlur(rgb, (3, 3), 0.6) if style == "flat" else cv2.GaussianBlur(rgb, (7, 7), 1.2)
     noisy = depth + rng.normal(0, 0.002, depth.shape) * (depth / 1.0) ** 2
     edges = cv2.Canny(np.clip(depth * 200, 0, 255).astype(np.uint8), 20, 60) > 0
     edges = cv2.dilate(edges.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
@@ -209,6 +245,7 @@ def render_push_frames(cfg, sp, folder: Path, camera: dict, rng: np.random.Gener
             rng,
             arm,
             cfg.exact_width,
+            cfg.render_style,
         )
         cv2.imwrite(str(folder / f"rgb_{k:03d}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
         cv2.imwrite(str(folder / f"depth_{k:03d}.png"), dmm)

@@ -39,6 +39,7 @@ from ..dataset.engagement import robust_noise
 
 #: flag names, in the order they are tested (the first that applies is reported)
 FLAGS = ("ok", "occluded", "low_contrast", "edge", "base")
+COLOUR_MODELS = ("projection", "unmixing")
 STEP_PX = 0.25  # sample spacing along the normal [px]
 SPACING_PX = 3.0  # default station spacing along the centerline [px]
 BG_PX = 3.0  # width of each background strip [px]
@@ -56,7 +57,9 @@ class WidthProfile:
     """Stem widths along one centerline: stations at arc length ``s_m`` (k,) [m].
 
     ``width_m`` and ``sd_m`` (k,) [m]; ``width_px`` (k,) [px]; ``flag`` (k,) str from :data:`FLAGS`
-    (only ``"ok"`` stations are measurements); ``uv`` (k, 2) the stations' pixels.
+    (only ``"ok"`` stations are measurements); ``uv`` (k, 2) the stations' pixels; ``contrast_scale`` the
+    factor the widths of stations too narrow for a core colour of their own were divided by
+    (:func:`contrast_scale`; 1 where none).
     """
 
     s_m: NDArray
@@ -65,6 +68,7 @@ class WidthProfile:
     width_px: NDArray
     flag: NDArray
     uv: NDArray
+    contrast_scale: float = 1.0
 
 
 def _sample(img: NDArray, pts: NDArray) -> NDArray:
@@ -88,6 +92,7 @@ def width_profile(
     direction: int = 1,
     s_m: NDArray | None = None,
     spacing_px: float = SPACING_PX,
+    colour_model: str = "projection",
 ) -> WidthProfile:
     """Width of the stem at stations along an extracted centerline (see the module docstring).
 
@@ -105,6 +110,11 @@ def width_profile(
         The push direction of the frame (the sign of x in the image).
     s_m : (k,) array, optional
         Stations [m of arc length]; default every ``spacing_px`` pixels along the centerline.
+    colour_model : {"projection", "unmixing"}
+        How a sample's colour gives the coverage a. ``projection`` (default): onto stem - bg, one stem
+        colour across the stem. ``unmixing``: rgb - bg = a (-bg) + (a k) stem by least squares, so a
+        round stem's shading k (darker limbs) does not read as coverage; needs stem and background of
+        different chromaticity and is noisier (docs/validation.md, "shaded stems").
 
     Returns
     -------
@@ -115,6 +125,8 @@ def width_profile(
 
     from .extract import band_around_centre, in_front_of_plane, mask_across
 
+    if colour_model not in COLOUR_MODELS:
+        raise ValueError(f"colour_model: expected one of {', '.join(COLOUR_MODELS)}, got {colour_model!r}")
     fx, fy = float(camera["fx"]), float(camera["fy"])
     u0, v0 = (float(c) for c in camera["base_px"])
     Z = float(line.plane_depth_m)
@@ -183,7 +195,11 @@ def width_profile(
             dcol = stem - bg
             dd = float(dcol @ dcol)
             contrast.append(np.sqrt(dd))
-            a[side] = (prof[side] - bg) @ dcol / max(dd, 1e-12)
+            if colour_model == "unmixing":  # rgb - bg = a (-bg) + (a k) stem: a free of the shading k
+                X = np.column_stack([-bg, stem])
+                a[side] = np.linalg.lstsq(X, (prof[side] - bg).T, rcond=None)[0][0]
+            else:  # projection onto stem - bg: one stem colour across the stem
+                a[side] = (prof[side] - bg) @ dcol / max(dd, 1e-12)
         # noise of a: the scatter of the background samples (one value per pixel: 1/STEP_PX samples)
         bg_a = a[~inner]
         per_px = 1.4826 * float(np.median(np.abs(bg_a - np.median(bg_a)))) if bg_a.size >= 8 else 0.1
@@ -213,6 +229,7 @@ def width_profile(
         width_px=width_px,
         flag=flag.astype(str),
         uv=np.column_stack([u, v]),
+        contrast_scale=float(scale),
     )
 
 
