@@ -1,6 +1,7 @@
 """Errors of the extracted diameter profile that the stations share: offset and scale (issue 22).
 
     python scripts/width_error_study.py --out width-study --reps 20 [--workers 2] [--style shaded]
+        [--colour-model unmixing]
 
 Per replicate and stem (twig, grass; one contact height, the preset's middle one; frames drawn with
 exact widths, clutter, the probe and depth dropouts), ``bayesrod.extract`` measures the diameter
@@ -31,12 +32,12 @@ import numpy as np
 import bayesrod
 from bayesrod.dataset.io import append_rows, read_rows
 
-FIELDS = ["stem", "style", "seed", "stations_ok", "px_mm", "offset_px", "median_abs_err_px", "z_sd_within"]
-FIELDS += ["depth_rel_err", "seconds"]
+FIELDS = ["stem", "style", "colour_model", "seed", "stations_ok", "px_mm", "offset_px", "median_abs_err_px"]
+FIELDS += ["z_sd_within", "depth_rel_err", "seconds"]
 
 
 def one(job) -> dict:
-    stem, seed, style = job
+    stem, seed, style, colour_model = job
     t0 = time.perf_counter()
     from bayesrod.dataset.simulate import SimConfig
     from bayesrod.vision.render import plane_depth
@@ -47,7 +48,7 @@ def one(job) -> dict:
     sim = bayesrod.simulate(stem, seed=seed, heights_m=[h], config_overrides=over)
     with tempfile.TemporaryDirectory() as tmp:
         sim.save(Path(tmp) / "raw", frames=True)
-        ex = bayesrod.extract(Path(tmp) / "raw", progress=False)
+        ex = bayesrod.extract(Path(tmp) / "raw", progress=False, width_colour_model=colour_model)
     truth = ex.source.extra["truth"]
     d0, q, L = truth["base_diameter_m"], truth["diameter_taper"], ex.dataset.length_m
     dp = ex.diameters
@@ -59,6 +60,7 @@ def one(job) -> dict:
     return {
         "stem": stem,
         "style": style,
+        "colour_model": colour_model,
         "seed": seed,
         "stations_ok": int(ok.sum()),
         "px_mm": 1000 * px,
@@ -72,18 +74,19 @@ def one(job) -> dict:
 
 def table(rows: list[dict]) -> str:
     out = [
-        "| stem | style | reps | offset_px mean | offset_px sd | offset_px rms | depth_rel_err sd "
+        "| stem | style | colour model | reps | offset_px mean | offset_px sd | offset_px rms | depth_rel_err sd "
         "| z_sd_within median |"
     ]
-    out.append("|---|---|---|---|---|---|---|---|")
-    for stem, style in sorted({(r["stem"], r.get("style") or "flat") for r in rows}):
-        sub = [r for r in rows if r["stem"] == stem and (r.get("style") or "flat") == style]
+    out.append("|---|---|---|---|---|---|---|---|---|")
+    for key in sorted({(r["stem"], r["style"], r["colour_model"]) for r in rows}):
+        sub = [r for r in rows if (r["stem"], r["style"], r["colour_model"]) == key]
+        stem, style, colour_model = key
         off = np.array([float(r["offset_px"]) for r in sub])
         dep = np.array([float(r["depth_rel_err"]) for r in sub])
         zs = np.array([float(r["z_sd_within"]) for r in sub])
         sd = off.std(ddof=1) if off.size > 1 else float("nan")
         out.append(
-            f"| {stem} | {style} | {len(sub)} | {off.mean():+.3f} | {sd:.3f} "
+            f"| {stem} | {style} | {colour_model} | {len(sub)} | {off.mean():+.3f} | {sd:.3f} "
             f"| {np.sqrt(np.mean(off**2)):.3f} | {dep.std(ddof=1) if dep.size > 1 else float('nan'):.4f} "
             f"| {np.median(zs):.2f} |"
         )
@@ -97,14 +100,16 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--stems", nargs="+", default=["twig", "grass"])
     ap.add_argument("--style", default="flat", choices=["flat", "shaded"])
+    ap.add_argument("--colour-model", default="projection", choices=["projection", "unmixing"])
     a = ap.parse_args()
     a.out.mkdir(parents=True, exist_ok=True)
     csv_path = a.out / "width_error_study.csv"
     old = read_rows(csv_path)
     if old and list(old[0]) != FIELDS:
         raise SystemExit(f"{csv_path}: columns {', '.join(old[0])}, expected {', '.join(FIELDS)}: use another --out")
-    done = {(r["stem"], int(r["seed"]), r["style"]) for r in old}
-    jobs = [(s, seed, a.style) for seed in range(a.reps) for s in a.stems if (s, seed, a.style) not in done]
+    done = {(r["stem"], int(r["seed"]), r["style"], r["colour_model"]) for r in old}
+    jobs = [(s, seed, a.style, a.colour_model) for seed in range(a.reps) for s in a.stems]
+    jobs = [j for j in jobs if j not in done]
     with ProcessPoolExecutor(a.workers) as pool:
         for row in append_rows(csv_path, FIELDS, pool.map(one, jobs), new_file=not csv_path.exists()):
             print(row["stem"], row["seed"], f"offset {row['offset_px']:+.3f} px", f"depth {row['depth_rel_err']:+.4f}")
