@@ -165,11 +165,11 @@ def render_frame(
     depth = bg_depth.copy()
     u, v = project(xz_m[0], xz_m[1], camera, Z0)
     diam = d0 * np.clip(1 - s_m / length_m, 0, 1) ** p
-    shade = None
+    limb_shade = None  # (H, W, 1) brightness of a shaded stem's colour
     if exact_width:
         alpha, limb = stem_coverage(u, v, diam * FOCAL / Z0, (HEIGHT, WIDTH), return_limb=True)
         if style == "shaded":
-            shade = (0.55 + 0.45 * limb)[..., None]
+            limb_shade = (0.55 + 0.45 * limb)[..., None]
     else:  # the default: whole-pixel line widths, a faint but visible (>= 35%) sub-pixel tip
         stem = np.zeros((HEIGHT, WIDTH), np.uint8)
         for i in range(len(u) - 1):
@@ -187,8 +187,8 @@ def render_frame(
             )
         alpha = stem / 255.0
     col = STEM_RGB + rng.normal(0, 4, 3)
-    if shade is not None:
-        col = col * shade
+    if limb_shade is not None:
+        col = col * limb_shade
     rgb = rgb * (1 - alpha[..., None]) + col * alpha[..., None]
     depth[alpha > 0.5] = Z0
     if probe_xz is not None:  # the probe occludes the stem around the contact, in front of it
