@@ -23,13 +23,14 @@ from __future__ import annotations
 import argparse
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+from _study import run_pending
 
 import bayesrod
-from bayesrod.dataset.io import append_rows, read_rows
+from bayesrod.dataset.io import read_rows
+from bayesrod.physics import stem_diameter
 
 FIELDS = ["stem", "seed", "graded", "stations_ok", "median_abs_err_px", "z_sd", "z_cover90"]
 FIELDS += ["d0_true", "d0", "d0_q05", "d0_q95", "E_true", "E", "E_q05", "E_q95"]
@@ -56,7 +57,7 @@ def one(job) -> dict:
         d0, q, L = truth["base_diameter_m"], truth["diameter_taper"], ds.length_m
         dp = ex.diameters
         ok = dp.ok
-        true = d0 * np.clip(1 - dp.s_m / L, 0, 1) ** q
+        true = stem_diameter(dp.s_m, d0, q, L)
         px = ex.doc["pushes"][ds.pushes[0].id]["plane_depth_m"] / ds.camera.fx  # metres per pixel
         z = (dp.d_m[ok] - true[ok]) / dp.sd_m[ok]
         row.update(
@@ -128,13 +129,14 @@ def main(argv=None) -> None:
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     csv = out / "diameter_study.csv"
-    done = {(r["stem"], int(float(r["seed"])), int(float(r["graded"]))) for r in read_rows(csv)}
     jobs = [(s, k, False) for k in range(a.reps) for s in ("twig", "grass")]
     jobs += [(s, 100 + k, True) for k in range(a.graded_reps) for s in ("twig", "grass")]
-    jobs = [j for j in jobs if (j[0], j[1], int(j[2])) not in done]
-    with ProcessPoolExecutor(a.workers) as pool:
-        for row in append_rows(csv, FIELDS, pool.map(one, jobs), new_file=not done):
-            print(row["stem"], row["seed"], row["graded"], row.get("verdict"), row["seconds"], flush=True)
+
+    def done_key(r):
+        return r["stem"], int(float(r["seed"])), bool(int(float(r["graded"])))
+
+    for row in run_pending(csv, FIELDS, jobs, one, done_key=done_key, workers=a.workers):
+        print(row["stem"], row["seed"], row["graded"], row.get("verdict"), row["seconds"], flush=True)
     (out / "diameter_study.md").write_text(table(read_rows(csv)))
     print(table(read_rows(csv)))
 

@@ -24,13 +24,16 @@ from __future__ import annotations
 import argparse
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+from _study import run_pending
 
 import bayesrod
-from bayesrod.dataset.io import append_rows, read_rows
+from bayesrod.dataset.io import read_rows
+from bayesrod.physics import stem_diameter
+from bayesrod.vision.render import STYLES
+from bayesrod.vision.width import COLOUR_MODELS
 
 FIELDS = ["stem", "style", "colour_model", "seed", "stations_ok", "px_mm", "offset_px", "median_abs_err_px"]
 FIELDS += ["z_sd_within", "depth_rel_err", "seconds"]
@@ -55,7 +58,7 @@ def one(job) -> dict:
     ok = dp.ok
     Z = ex.doc["pushes"][ex.dataset.pushes[0].id]["plane_depth_m"]
     px = Z / ex.dataset.camera.fx  # metres per pixel at the plane the extraction used
-    err = dp.d_m[ok] - d0 * np.clip(1 - dp.s_m[ok] / L, 0, 1) ** q
+    err = dp.d_m[ok] - stem_diameter(dp.s_m[ok], d0, q, L)
     offset = float(np.median(err))
     return {
         "stem": stem,
@@ -99,20 +102,18 @@ def main() -> None:
     ap.add_argument("--reps", type=int, default=20)
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--stems", nargs="+", default=["twig", "grass"])
-    ap.add_argument("--style", default="flat", choices=["flat", "shaded"])
-    ap.add_argument("--colour-model", default="projection", choices=["projection", "unmixing"])
+    ap.add_argument("--style", default=STYLES[0], choices=STYLES)
+    ap.add_argument("--colour-model", default=COLOUR_MODELS[0], choices=COLOUR_MODELS)
     a = ap.parse_args()
     a.out.mkdir(parents=True, exist_ok=True)
     csv_path = a.out / "width_error_study.csv"
-    old = read_rows(csv_path)
-    if old and list(old[0]) != FIELDS:
-        raise SystemExit(f"{csv_path}: columns {', '.join(old[0])}, expected {', '.join(FIELDS)}: use another --out")
-    done = {(r["stem"], int(r["seed"]), r["style"], r["colour_model"]) for r in old}
     jobs = [(s, seed, a.style, a.colour_model) for seed in range(a.reps) for s in a.stems]
-    jobs = [j for j in jobs if j not in done]
-    with ProcessPoolExecutor(a.workers) as pool:
-        for row in append_rows(csv_path, FIELDS, pool.map(one, jobs), new_file=not csv_path.exists()):
-            print(row["stem"], row["seed"], f"offset {row['offset_px']:+.3f} px", f"depth {row['depth_rel_err']:+.4f}")
+
+    def done_key(r):
+        return r["stem"], int(r["seed"]), r["style"], r["colour_model"]
+
+    for row in run_pending(csv_path, FIELDS, jobs, one, done_key=done_key, workers=a.workers):
+        print(row["stem"], row["seed"], f"offset {row['offset_px']:+.3f} px", f"depth {row['depth_rel_err']:+.4f}")
     (a.out / "width_error_study.md").write_text(table(read_rows(csv_path)))
     print(table(read_rows(csv_path)))
 

@@ -87,6 +87,47 @@ def test_unmixing_reads_a_shaded_stem_that_projection_reads_too_wide():
         width_profile(img, None, line, cam, colour_model="ratio")
 
 
+def test_shaded_render_darkens_the_limbs_and_keeps_the_coverage():
+    """render_style "shaded": the stem's colour falls towards its limbs (a row projects to more than the
+    stem's width against the core colour), the coverage drawn is the same; "flat" keeps one colour."""
+    from bayesrod.vision.render import HEIGHT, STEM_RGB, WIDTH, default_camera, plane_depth, render_frame
+
+    L = 0.8
+    cam, Z0 = default_camera(L), plane_depth(L)
+    bg = np.array([150.0, 160.0, 150.0])
+    s = np.linspace(0, L, 200)
+    xz = np.stack([np.zeros_like(s), s])
+    reads = {}
+    for style in ("flat", "shaded"):
+        rgb, _ = render_frame(
+            np.broadcast_to(bg, (HEIGHT, WIDTH, 3)).copy(),
+            np.full((HEIGHT, WIDTH), Z0 + 1.0),
+            xz,
+            s,
+            L,
+            0.0,  # a stem of constant width
+            0.02,
+            cam,
+            Z0,
+            None,
+            np.random.default_rng(0),
+            exact_width=True,
+            style=style,
+        )
+        u0 = int(round(cam["base_px"][0]))
+        row = rgb[200, u0 - 20 : u0 + 21].astype(float)  # the stem and 15 px of background on either side
+        d = STEM_RGB - bg
+        reads[style] = float(np.sum((row - bg) @ d / (d @ d)))
+    w = 0.02 * cam["fx"] / Z0
+    assert reads["flat"] == pytest.approx(w, rel=0.05), (reads, w)
+    assert reads["shaded"] > 1.1 * w, (reads, w)
+    args = (np.zeros((HEIGHT, WIDTH, 3)), np.ones((HEIGHT, WIDTH)), xz, s, L, 0.0, 0.02, cam, Z0, None, None)
+    with pytest.raises(ValueError, match="style: expected one of"):
+        render_frame(*args, exact_width=True, style="glossy")
+    with pytest.raises(ValueError, match="unless exact_width"):
+        render_frame(*args, style="shaded")
+
+
 def test_combined_profile_sd_is_calibrated_when_frames_share_their_errors():
     """Frames of one push share the background: the combined sd must not shrink as 1/sqrt(frames)."""
     rng = np.random.default_rng(3)

@@ -77,6 +77,8 @@ def _moduli(fits) -> tuple[list[SpecimenPosterior] | None, list[str]]:
             f"Young's modulus not compared: {', '.join(missing)} fitted without diameters "
             '(fit with measured diameters: docs/inference.md, "Young\'s modulus")'
         ]
+    # "narrow against its prior": log E0 = log EI0 - 4 log d0 + const has a fit prior far wider than log EI0's
+    # 1.5 (docs/priors.md); half the species prior's sd (1.5) is the stricter test
     return moduli, [w for m in moduli for w in check_reduction(m, prior_sd=PRIOR_LOG_E["sd"] / 2, names=("log E",))]
 
 

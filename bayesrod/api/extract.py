@@ -24,7 +24,7 @@ from types import MappingProxyType
 import numpy as np
 from numpy.typing import NDArray
 
-from ..dataset.model import Dataset, Diameters, ShapeFrame
+from ..dataset.model import Dataset, ShapeFrame
 from ..vision.width import DiameterProfile
 from ._common import DocResult, plain_json
 
@@ -81,17 +81,7 @@ class Extraction(DocResult):
         out = replace(self.source, pushes=tuple(pushes))
         dp = self.diameters
         if dp is not None and dp.ok.any():
-            out = replace(
-                out,
-                diameters=Diameters(
-                    dp.s_m[dp.ok],
-                    dp.d_m[dp.ok],
-                    dp.sd_m[dp.ok],
-                    "frames",
-                    shared_offset_sd_m=dp.shared_offset_sd_m,
-                    shared_scale_sd=dp.shared_scale_sd,
-                ),
-            )
+            out = replace(out, diameters=dp.to_diameters())
         return out
 
     def plot(self, push_id: str | None = None, ax=None):
@@ -139,19 +129,7 @@ class Extraction(DocResult):
             (tmp / "figures").mkdir(exist_ok=True)
             dp = self.diameters
             if dp is not None and np.isfinite(dp.d_m).any():
-                rec = np.isfinite(dp.d_m)
-                write_csv(
-                    tmp / "diameters_extracted.csv",
-                    {
-                        "s_m": dp.s_m[rec],
-                        "d_m": dp.d_m[rec],
-                        "sd_m": dp.sd_m[rec],
-                        "n_frames": dp.n_frames[rec],
-                        "flag": dp.flag[rec].astype(object),
-                        "shared_offset_sd_m": np.full(int(rec.sum()), dp.shared_offset_sd_m),
-                        "shared_scale_sd": np.full(int(rec.sum()), dp.shared_scale_sd),
-                    },
-                )
+                write_csv(tmp / "diameters_extracted.csv", dp.columns())
                 if doc.get("diameters") is not None:
                     doc["diameters_original"] = doc["diameters"]
                 doc["diameters"] = "diameters_extracted.csv"
@@ -262,6 +240,12 @@ def extract(dataset, *, progress: bool = True, width_colour_model: str = "projec
             "stations": int(diameters.s_m.size),
             "flags": {str(f): int(n) for f, n in zip(flags, counts, strict=True)},
             "frames": len(widths),
+            # the factor each frame's narrow stations were divided by (vision.width.contrast_scale): its spread
+            # over frames is an error the stations of a frame share
+            "contrast_scale": {
+                "median": float(np.median([w.contrast_scale for w in widths])),
+                "sd": float(np.std([w.contrast_scale for w in widths])),
+            },
         }
         log.info("diameter profile: %d of %d stations measured", int(diameters.ok.sum()), diameters.s_m.size)
     report = plain_json(report)

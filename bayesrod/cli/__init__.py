@@ -22,6 +22,7 @@ from pathlib import Path
 from .._version import __version__
 from ..physics.effects import parse_effect_assignments
 from ..physics.presets import PRESETS
+from ..vision.width import COLOUR_MODELS
 from .parse import parse_values
 
 EXIT_BAD_INPUT = 2
@@ -92,8 +93,8 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
     ex.add_argument(
         "--width-colour-model",
-        choices=["projection", "unmixing"],
-        default="projection",
+        choices=COLOUR_MODELS,
+        default=COLOUR_MODELS[0],
         help="how the diameter profile reads coverage from colour: unmixing for round stems with strong shading",
     )
     fm = sub.add_parser("fit-many", help="fit every dataset of a folder on a Dask cluster; survey table")

@@ -113,6 +113,10 @@ class Push:
     files: dict = field(default_factory=dict, compare=False)
 
 
+#: the errors every diameter station shares (fields of :class:`Diameters`; CSV columns or inline keys)
+SHARED_DIAMETER_ERRORS = ("shared_offset_sd_m", "shared_scale_sd")
+
+
 @dataclass(frozen=True)
 class Diameters:
     """Measured stem diameters [m] at arc lengths ``s_m`` (k,) from the base, with their sd (k,).
@@ -145,7 +149,7 @@ class Diameters:
             )
         if not (np.all(self.d_m > 0) and np.all(self.sd_m > 0) and np.all(self.s_m >= 0)):
             raise ValueError("diameters: expected d_m > 0, sd_m > 0 and s_m >= 0 [m] in every row")
-        for k in ("shared_offset_sd_m", "shared_scale_sd"):
+        for k in SHARED_DIAMETER_ERRORS:
             v = getattr(self, k)
             if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v >= 0):
                 raise ValueError(f"diameters.{k}: expected a finite number >= 0, got {v!r}")

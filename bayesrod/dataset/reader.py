@@ -17,7 +17,18 @@ from pathlib import Path
 import numpy as np
 
 from ..physics.lumped import wire_dx_from_elongation
-from .model import FORMAT, Camera, Diameters, ForceSeries, FrameRecord, Push, Sensor, ShapeFrame, Specimen
+from .model import (
+    FORMAT,
+    SHARED_DIAMETER_ERRORS,
+    Camera,
+    Diameters,
+    ForceSeries,
+    FrameRecord,
+    Push,
+    Sensor,
+    ShapeFrame,
+    Specimen,
+)
 
 MAX_PER_COLUMN = 5  # row-level problems listed per file and column before summarising
 MM_HINT = 20.0  # metres: a stem or height beyond this is almost surely in millimetres
@@ -393,10 +404,6 @@ def _check_png(path: Path, kind: str):
 # --------------------------------------------------------------------------- #
 # Entry points
 # --------------------------------------------------------------------------- #
-#: optional columns (CSV) or keys (inline object) of ``diameters``: the errors every station shares
-SHARED_DIAMETER_ERRORS = ("shared_offset_sd_m", "shared_scale_sd")
-
-
 def _read_diameters(c: _Collector, name: str, root: Path, value, length: float | None) -> Diameters | None:
     """``diameters``: a CSV path (s_m, d_m, sd_m[, flag]) or an object of equal-length lists (docs/format.md)."""
     source = "caliper"
@@ -415,17 +422,13 @@ def _read_diameters(c: _Collector, name: str, root: Path, value, length: float |
         where = c.rel(fp)
         used = np.array([f == "ok" for f in cols["flag"]]) if "flag" in cols else np.ones(cols["s_m"].size, bool)
         source = cols["source"][0] if "source" in cols and cols["source"] else "frames"
-        shared = {}
+        raw_shared = {}  # per error: (value, field, row); the value of the first row not finite or not the first's
         for k in SHARED_DIAMETER_ERRORS:
             if k in cols:
                 v = cols[k]
-                if not (np.all(np.isfinite(v)) and np.all(v >= 0) and np.all(v == v[0])):
-                    bad = int(np.flatnonzero(~(np.isfinite(v) & (v >= 0) & (v == v[0])))[0])
-                    c.add(
-                        where, f"column {k}", "one finite value >= 0 repeated in every row", _fmt(v[bad]), row=bad + 1
-                    )
-                    return None
-                shared[k] = float(v[0])
+                off = np.flatnonzero(~(np.isfinite(v) & (v == v[0])))
+                row = int(off[0]) + 1 if off.size else None
+                raw_shared[k] = (float(v[off[0]] if off.size else v[0]), f"column {k}", row)
     elif isinstance(value, dict):
         where = f"{name}: diameters"
         cols = {}
@@ -442,14 +445,7 @@ def _read_diameters(c: _Collector, name: str, root: Path, value, length: float |
             return None
         used = np.ones(cols["s_m"].size, bool)
         source = str(value.get("source", "caliper"))
-        shared = {}
-        for k in SHARED_DIAMETER_ERRORS:
-            if k in value:
-                v = value[k]
-                if not (_is_number(v) and v >= 0):
-                    c.add(name, f"diameters.{k}", "a finite number >= 0", _fmt(v))
-                    return None
-                shared[k] = float(v)
+        raw_shared = {k: (value[k], f"diameters.{k}", None) for k in SHARED_DIAMETER_ERRORS if k in value}
     else:
         c.add(name, "diameters", "a CSV path or an object with s_m, d_m, sd_m lists", _fmt(value))
         return None
@@ -489,10 +485,30 @@ def _read_diameters(c: _Collector, name: str, root: Path, value, length: float |
         ok = False
     if not ok:
         return None
-    if shared.get("shared_scale_sd", 0.0) >= 0.5:
-        c.add(where, "shared_scale_sd", "a relative sd below 0.5 (0.01 = 1%)", _fmt(shared["shared_scale_sd"]))
+    shared = _shared_diameter_errors(c, where, raw_shared)
+    if shared is None:
         return None
     return Diameters(cols["s_m"][used], cols["d_m"][used], cols["sd_m"][used], source, **shared)
+
+
+def _shared_diameter_errors(c: _Collector, where: str, raw: dict) -> dict | None:
+    """The diameters' shared error sds (docs/format.md): each one finite value >= 0 (a CSV repeats it in every
+    row; ``raw`` maps the name to (value, field, row): a row is given where a CSV's value is not finite or not
+    the first row's), the scale below 0.5."""
+    out = {}
+    for k, (v, fld, row) in raw.items():
+        if row is not None:
+            expected = "one finite value repeated in every row" if row > 1 or np.isfinite(v) else "a finite number"
+            c.add(where, fld, expected, _fmt(v), row=row)
+        elif not (_is_number(v) and v >= 0):
+            c.add(where, fld, "a finite number >= 0", _fmt(v))
+        elif k == "shared_scale_sd" and v >= 0.5:
+            c.add(where, fld, "a relative sd below 0.5 (0.01 = 1%)", _fmt(v))
+        else:
+            out[k] = float(v)
+            continue
+        return None
+    return out
 
 
 def _read(path, check_images=True) -> tuple[Specimen | None, list[Problem]]:

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from .io import atomic_dir, write_csv, write_json
-from .model import FORMAT
+from .model import FORMAT, SHARED_DIAMETER_ERRORS
 
 
 def dataset_document(ds) -> dict:
@@ -69,7 +69,7 @@ def write_dataset(ds, path, *, overwrite: bool = False) -> Path:
             dm = ds.diameters
             source = np.array([dm.source] * dm.s_m.size, dtype=object)
             cols = {"s_m": dm.s_m, "d_m": dm.d_m, "sd_m": dm.sd_m, "source": source}
-            for k in ("shared_offset_sd_m", "shared_scale_sd"):
+            for k in SHARED_DIAMETER_ERRORS:
                 if getattr(dm, k):
                     cols[k] = np.full(dm.s_m.size, getattr(dm, k))
             write_csv(tmp / "diameters.csv", cols)

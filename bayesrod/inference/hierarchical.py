@@ -166,22 +166,24 @@ def modulus_contrasts(fit: dict) -> list[dict]:
     """Every pair of species of a log-E species model (:data:`PRIOR_LOG_E`): the ratio of their
     typical Young's moduli E_a / E_b and P(E_a > E_b)."""
     sp, mu = fit["species"], fit["mu"]
-    out = []
-    for ia, ib in combinations(range(len(sp)), 2):
-        dlog = mu[:, ia, 0] - mu[:, ib, 0]
-        r = _q(np.exp(dlog))
-        out.append(
-            {
-                "a": sp[ia],
-                "b": sp[ib],
-                "parameter": "E",
-                "ratio_median": r["median"],
-                "ratio_q05": r["q05"],
-                "ratio_q95": r["q95"],
-                "prob_a_greater": float(np.mean(dlog > 0)),
-            }
-        )
-    return out
+    return [
+        _log_ratio_contrast(sp[ia], sp[ib], "E", mu[:, ia, 0] - mu[:, ib, 0])
+        for ia, ib in combinations(range(len(sp)), 2)
+    ]
+
+
+def _log_ratio_contrast(a: str, b: str, parameter: str, dlog: NDArray) -> dict:
+    """A contrast of compare.json from draws of log(a's value) - log(b's): the ratio a / b and P(a > b)."""
+    r = _q(np.exp(dlog))
+    return {
+        "a": a,
+        "b": b,
+        "parameter": parameter,
+        "ratio_median": r["median"],
+        "ratio_q05": r["q05"],
+        "ratio_q95": r["q95"],
+        "prob_a_greater": float(np.mean(dlog > 0)),
+    }
 
 
 def _q(x) -> dict:
@@ -199,19 +201,7 @@ def contrasts(fit: dict, specimens: list[SpecimenPosterior], height_m: float | N
     lengths = {s: float(np.mean([x.length_m for x in specimens if x.species == s])) for s in sp}
     for ia, ib in combinations(range(len(sp)), 2):
         a, b = sp[ia], sp[ib]
-        dlog = mu[:, ia, 0] - mu[:, ib, 0]
-        r = _q(np.exp(dlog))
-        out.append(
-            {
-                "a": a,
-                "b": b,
-                "parameter": "EI0",
-                "ratio_median": r["median"],
-                "ratio_q05": r["q05"],
-                "ratio_q95": r["q95"],
-                "prob_a_greater": float(np.mean(dlog > 0)),
-            }
-        )
+        out.append(_log_ratio_contrast(a, b, "EI0", mu[:, ia, 0] - mu[:, ib, 0]))
         dp = mu[:, ia, 1] - mu[:, ib, 1]
         rp = _q(mu[:, ia, 1] / np.where(mu[:, ib, 1] == 0, np.nan, mu[:, ib, 1]))
         d = _q(dp)

@@ -39,6 +39,7 @@ from scipy.interpolate import PchipInterpolator
 from ..dataset.engagement import detect_engagement
 from ..dataset.model import Specimen
 from ..physics.elastica import centerline_at, contact_from_force_nd
+from ..physics.lumped import stem_diameter
 from .priors import ParameterSpace
 
 _LOG_2PI = math.log(2 * math.pi)
@@ -452,11 +453,11 @@ class RodLikelihood:
         d0 = np.atleast_1d(np.asarray(params["d0_m"], float))[:, None]
         pg = np.atleast_1d(np.asarray(params["p_geom" if self.diameter == "free" else "p"], float))[:, None]
         L = np.atleast_1d(np.asarray(params.get("length_m", self.L), float))[:, None]
-        return d0 * np.clip(1.0 - s[None, :] / L, 0.0, None) ** pg
+        return stem_diameter(s[None, :], d0, pg, L)
 
     def diameter_start(self, p_geom: float) -> dict:
         """Least-squares d0 [m] at taper ``p_geom`` (the given L) and the sd scale of its residuals."""
-        g = np.clip(1.0 - self.d_s / self.L, 0.0, None) ** p_geom
+        g = stem_diameter(self.d_s, 1.0, p_geom, self.L)
         w = 1.0 / self.d_sd**2
         d0 = float(np.sum(w * g * self.d_obs) / max(np.sum(w * g * g), 1e-300))
         z = (self.d_obs - d0 * g) / self.d_sd

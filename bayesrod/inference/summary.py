@@ -7,7 +7,7 @@ import warnings
 import numpy as np
 from numpy.typing import NDArray
 
-from ..physics import flexural_rigidity, k_theta
+from ..physics import flexural_rigidity, k_theta, stem_diameter
 
 
 def import_arviz():
@@ -72,8 +72,8 @@ def diameter_draws(samples: dict, length_m: float, s_m) -> NDArray:
     if "d0_m" not in samples:
         raise ValueError("diameter: expected a fit with measured diameters, got a fit without")
     q = np.asarray(samples.get("p_geom", samples["p"]), float)[:, None]
-    x = np.clip(1.0 - np.asarray(s_m, float)[None, :] / draw_lengths(samples, length_m), 0.0, None)
-    return np.asarray(samples["d0_m"], float)[:, None] * x**q
+    d0 = np.asarray(samples["d0_m"], float)[:, None]
+    return stem_diameter(np.asarray(s_m, float)[None, :], d0, q, draw_lengths(samples, length_m))
 
 
 def youngs_modulus_summary(samples: dict, length_m: float, source: str | None = None) -> dict:

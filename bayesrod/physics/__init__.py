@@ -9,7 +9,7 @@ from .elastica import (
     force_from_displacement,
     force_from_displacement_nd,
 )
-from .lumped import flexural_rigidity, k_theta, k_x, ktheta_nd, kx_nd
+from .lumped import flexural_rigidity, k_theta, k_x, ktheta_nd, kx_nd, stem_diameter
 
 __all__ = [
     "EFFECT_NAMES",
@@ -21,6 +21,7 @@ __all__ = [
     "force_from_displacement",
     "force_from_displacement_nd",
     "flexural_rigidity",
+    "stem_diameter",
     "k_theta",
     "k_x",
     "ktheta_nd",

@@ -22,6 +22,7 @@ __all__ = [
     "k_theta",
     "k_x",
     "flexural_rigidity",
+    "stem_diameter",
     "wire_dx_from_elongation",
     "wire_elongation_from_dx",
     "seed_angle_solution",
@@ -35,6 +36,13 @@ def flexural_rigidity(s_m: ArrayLike, EI0: ArrayLike, p: ArrayLike, length_m: Ar
     s = np.asarray(s_m, float)
     one_minus = np.clip(1.0 - s / np.asarray(length_m, float), 0.0, None)
     return np.asarray(EI0, float) * one_minus ** (4.0 * np.asarray(p, float))
+
+
+def stem_diameter(s_m: ArrayLike, d0: ArrayLike, q: ArrayLike, length_m: ArrayLike) -> NDArray:
+    """d(s) = d0 (1 - s/L)^q [m]: the solid round stem whose EI(s) = E pi d^4 / 64 follows the taper law
+    (q = p under a uniform modulus E); broadcasts over all arguments (L too)."""
+    one_minus = np.clip(1.0 - np.asarray(s_m, float) / np.asarray(length_m, float), 0.0, None)
+    return np.asarray(d0, float) * one_minus ** np.asarray(q, float)
 
 
 def ktheta_nd(eta: ArrayLike, p: ArrayLike) -> NDArray:

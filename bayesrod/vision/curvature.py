@@ -144,7 +144,7 @@ def _marginal_nll_reference(logp, s, y, cov, trend) -> float:
     s2, ell = np.exp(logp[:2])
     noise = cov if cov is not None else np.exp(logp[2]) * np.eye(s.size)
     K = s2 * Matern(ell, nu=1.5)(s[:, None]) + trend + noise
-    sign, logdet = np.linalg.slogdet(K)
+    _, logdet = np.linalg.slogdet(K)
     return 0.5 * y @ np.linalg.solve(K, y) + 0.5 * logdet
 
 

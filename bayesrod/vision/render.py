@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from ..dataset.io import write_csv
+from ..physics.lumped import stem_diameter
 
 WIDTH, HEIGHT = 640, 480
 FOCAL = 600.0
@@ -164,7 +165,7 @@ def render_frame(
     rgb = bg_rgb.copy()
     depth = bg_depth.copy()
     u, v = project(xz_m[0], xz_m[1], camera, Z0)
-    diam = d0 * np.clip(1 - s_m / length_m, 0, 1) ** p
+    diam = stem_diameter(s_m, d0, p, length_m)
     limb_shade = None  # (H, W, 1) brightness of a shaded stem's colour
     if exact_width:
         alpha, limb = stem_coverage(u, v, diam * FOCAL / Z0, (HEIGHT, WIDTH), return_limb=True)

@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..dataset.engagement import robust_noise
+from ..dataset.model import SHARED_DIAMETER_ERRORS, Diameters
 
 #: flag names, in the order they are tested (the first that applies is reported)
 FLAGS = ("ok", "occluded", "low_contrast", "edge", "base")
@@ -319,6 +320,20 @@ class DiameterProfile:
     @property
     def ok(self) -> NDArray:
         return self.flag == "ok"
+
+    def to_diameters(self) -> Diameters:
+        """The ``ok`` stations as the dataset's :class:`~bayesrod.dataset.model.Diameters` (source
+        ``frames``), with the shared errors."""
+        ok = self.ok
+        shared = {k: getattr(self, k) for k in SHARED_DIAMETER_ERRORS}
+        return Diameters(self.s_m[ok], self.d_m[ok], self.sd_m[ok], "frames", **shared)
+
+    def columns(self) -> dict[str, NDArray]:
+        """``diameters_extracted.csv``'s columns (docs/format.md): every station with a number, any flag."""
+        rec = np.isfinite(self.d_m)
+        cols = {"s_m": self.s_m[rec], "d_m": self.d_m[rec], "sd_m": self.sd_m[rec], "n_frames": self.n_frames[rec]}
+        cols["flag"] = self.flag[rec].astype(object)
+        return cols | {k: np.full(int(rec.sum()), getattr(self, k)) for k in SHARED_DIAMETER_ERRORS}
 
 
 def combine_profiles(
