@@ -300,6 +300,7 @@ def test_posterior_width_matches_the_laplace_width_and_the_noise_is_recovered(po
     off-centre one."""
     from scipy.optimize import minimize
 
+    from bayesrod.api.calibration import _hessian
     from bayesrod.inference.likelihood import LogPosterior
     from bayesrod.inference.priors import load_prior
 
@@ -307,18 +308,7 @@ def test_posterior_width_matches_the_laplace_width_and_the_noise_is_recovered(po
     theta = lp.to_sample({k: post.samples[k] for k in lp.names})
     best = theta[np.argmax(lp.log_prob(theta[:: max(1, len(theta) // 4000)]))]
     mode = minimize(lambda t: -lp.log_prob(t), best, method="Nelder-Mead", options={"xatol": 1e-9, "fatol": 1e-9}).x
-    n = mode.size
-    h = 1e-4 * np.maximum(np.abs(mode), 1.0)
-    H = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            ei, ej = np.eye(n)[i] * h[i], np.eye(n)[j] * h[j]
-            H[i, j] = (
-                lp.log_prob(mode + ei + ej)
-                - lp.log_prob(mode + ei - ej)
-                - lp.log_prob(mode - ei + ej)
-                + lp.log_prob(mode - ei - ej)
-            ) / (4 * h[i] * h[j])
+    H = _hessian(lambda t: float(np.squeeze(lp.log_prob(t))), mode, 1e-4 * np.maximum(np.abs(mode), 1.0))
     laplace_sd = np.sqrt(np.diag(np.linalg.inv(-H)))
     sd = np.std(theta, axis=0)
     for i, name in enumerate(lp.names[:2]):  # log EI0 and p in the sampling space

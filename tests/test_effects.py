@@ -92,9 +92,10 @@ def test_force_offset_is_additive_on_measured_force():
     np.testing.assert_allclose(off.true_force_N, plain.force_N, rtol=1e-12)
 
 
-def test_self_weight_first_order_p_delta():
-    """Uniform rod, uniform weight w: x_c = F/k_x + w F C, C from linear beam theory."""
-    EI, h, Lr = 1.0, 0.5, 1.0
+@pytest.mark.parametrize("EI, h, Lr", [(1.0, 0.5, 1.0), (2.5, 0.35, 0.8)])
+def test_self_weight_first_order_p_delta(EI, h, Lr):
+    """Uniform rod, uniform weight w: x_c = F/k_x + w F C, C from linear beam theory (the second case
+    is not in unit length and stiffness, so the weight's scaling w L^3 / EI0 is checked too)."""
 
     def x1(s):  # linear shape per unit force; straight above the contact
         return s**2 * (3 * h - s) / (6 * EI) if s <= h else h**3 / (3 * EI) + h**2 / (2 * EI) * (s - h)
@@ -160,3 +161,49 @@ def test_effect_mapping_roundtrip():
     eff = parse_effect_assignments(["yield=0.3", "base_tilt=0.02"])
     assert eff.to_mapping() == {"base_tilt": 0.02, "yield": 0.3}
     assert Effects.from_mapping(eff.to_mapping()) == eff
+
+
+@pytest.mark.parametrize(
+    "kwargs, error, msg",
+    [
+        ({"base_compliance": "5"}, TypeError, "effect base_compliance: expected a number, got '5'"),
+        ({"yield_moment": True}, TypeError, "effect yield_moment: expected a number, got True"),
+        ({"rest_curvature": float("nan")}, ValueError, "effect rest_curvature: expected a number, got NaN"),
+        ({"base_compliance": 0.0}, ValueError, "effect base_compliance: expected a stiffness > 0"),
+        ({"yield_moment": 0.0}, ValueError, "effect yield: expected a moment > 0 N m"),
+        ({"self_weight": -0.1}, ValueError, r"effect self_weight: expected >= 0 N/m"),
+        ({"contact_friction": -1.0}, ValueError, r"effect contact_friction: expected a coefficient in \(-1, 1\)"),
+        ({"contact_friction": 1.0}, ValueError, "effect contact_friction"),
+        ({"contact_friction": 1.5}, ValueError, "effect contact_friction"),
+        ({"base_tilt": np.pi / 4}, ValueError, r"effect base_tilt: expected \|tilt\| < pi/4 rad"),
+        ({"base_tilt": -0.8}, ValueError, "effect base_tilt"),
+    ],
+)
+def test_effect_values_are_checked_at_their_bounds(kwargs, error, msg):
+    with pytest.raises(error, match=msg):
+        Effects(**kwargs)
+
+
+def test_effect_values_just_inside_their_bounds_are_accepted():
+    eff = Effects(base_compliance=0.5, yield_moment=0.5, self_weight=0.0, contact_friction=-0.99, base_tilt=0.7)
+    assert eff.base_tilt == 0.7 and Effects(contact_friction=0.99).contact_friction == 0.99
+    # the nondimensional groups have the shape of EI0 (one per draw), each with its scaling in L and EI0
+    EI = np.array([1.5, 3.0])
+    nd = Effects(rest_curvature=0.4, base_tilt=0.1, contact_friction=0.2, self_weight=2.0).nondim(0.8, EI)
+    assert all(np.shape(v) == (2,) for v in nd.values())
+    np.testing.assert_allclose(nd["kappa0"], [0.32, 0.32])
+    np.testing.assert_allclose(nd["w0"], 2.0 * 0.8**3 / EI)
+
+
+@pytest.mark.parametrize(
+    "items, msg",
+    [
+        (["yield=1=2"], "effect yield: expected a number, got '1=2'"),
+        (["base_tilt="], "effect: expected NAME=VALUE, got 'base_tilt='"),
+        (["=0.1"], "effect: expected NAME=VALUE, got '=0.1'"),
+        (["foo=1", "bar=2"], "effect name: expected one of base_compliance, .*, got bar, foo"),
+    ],
+)
+def test_effect_assignment_messages_name_what_was_given(items, msg):
+    with pytest.raises(ValueError, match=msg):
+        parse_effect_assignments(items)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..inference.priors import load_prior
+from ..inference.summary import QUANTILES
 from ..physics.presets import get_preset
 from .data import simulate
 from .fitting import fit
@@ -67,7 +68,7 @@ def fit_for_calibration(
     idx = rng.permutation(n)[:n_rank]  # random thinning: ranks need (nearly) independent draws
     out = {"rhat_max": float(post.doc["convergence"]["rhat_max"]), "names": list(post.doc["parameters"])}
     for k, v in post.samples.items():
-        out[k] = {"draws": np.asarray(v)[idx], "q": np.quantile(v, [0.05, 0.5, 0.95])}
+        out[k] = {"draws": np.asarray(v)[idx], "q": np.quantile(v, QUANTILES)}
     return out
 
 
@@ -83,3 +84,73 @@ def sbc_replicate(seed: int, prior_name: str = "woody", *, use_shapes: bool = Tr
         row[f"{k}_rank"] = int(np.sum(res[k]["draws"] < truth[k]))
         row[f"{k}_covered"] = bool(q05 <= truth[k] <= q95)
     return row
+
+
+#: the noise levels the table study holds fixed (the twig preset's): force sd [N], centerline sd [m]
+TABLE_STUDY_NOISE = (0.03, 0.0015)
+
+
+def table_shift(
+    effect: str | None = None,
+    value: float = 0.0,
+    *,
+    use_shapes: bool = False,
+    seed: int = 1,
+    n_effect: int | None = None,
+) -> dict:
+    """How far the likelihood tables move the maximum-likelihood estimate, in Laplace standard deviations.
+
+    A noise-free twig (three heights; every recorded force and centerline an exact solve, with ``effect``
+    at ``value`` switched on) has the truth as its exact-model MLE. The table likelihood (the one the fit
+    samples) is maximised over (log EI0, p[, the effect]) with the noise held at
+    :data:`TABLE_STUDY_NOISE`; its shift from the truth is divided by the Laplace sd (central
+    finite-difference Hessian of the same log likelihood at its maximum). ``n_effect``: nodes on the
+    effect's table axis (default: the fit's, :func:`~bayesrod.inference.likelihood.build_likelihood`).
+
+    Returns
+    -------
+    dict
+        ``names`` (log EI0, p[, effect]), ``truth``, ``mle``, ``laplace_sd`` and ``shift_in_sd`` (k,) each.
+    """
+    from scipy.optimize import minimize
+
+    from ..dataset.simulate import NoiseModel
+    from ..inference.likelihood import build_likelihood
+    from ._common import as_dataset
+
+    effects = {effect: value} if effect else {}
+    ds = simulate("twig", seed=seed, noise_model=NoiseModel(force_sd_N=0.0, shape_sd_m=0.0), effects=effects)
+    truth = ds.extra["truth"]
+    spec = as_dataset(ds)
+    lik = build_likelihood(spec, load_prior("woody"), tuple(effects), use_shapes=use_shapes, n_effect=n_effect)
+    fixed = {"sigma_force_N": TABLE_STUDY_NOISE[0], "sigma_shape_m": TABLE_STUDY_NOISE[1]}
+
+    def loglik(x) -> float:
+        params = {"EI0": np.exp(x[:1]), "p": x[1:2], **{k: np.array([v]) for k, v in fixed.items()}}
+        if effect:
+            params[effect] = x[2:3]
+        return float(lik.log_likelihood(params)[0]) if lik.in_table(params)[0] else -np.inf
+
+    x_true = np.array([np.log(truth["EI0"]), truth["p"]] + ([value] if effect else []))
+    res = minimize(lambda x: -loglik(x), x_true, method="Nelder-Mead", options={"xatol": 1e-10, "fatol": 1e-10})
+    step = np.array([1e-4, 1e-4] + ([1e-4 * max(abs(value), 1.0)] if effect else []))
+    sd = np.sqrt(np.diag(np.linalg.inv(-_hessian(loglik, res.x, step))))
+    return {
+        "names": ["log EI0", "p"] + ([effect] if effect else []),
+        "truth": x_true,
+        "mle": res.x,
+        "laplace_sd": sd,
+        "shift_in_sd": (res.x - x_true) / sd,
+    }
+
+
+def _hessian(f, x: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Central finite-difference Hessian of the scalar ``f`` at ``x`` with steps ``h``."""
+    n = x.size
+    H = np.zeros((n, n))
+    for i in range(n):
+        for j in range(i, n):
+            ei, ej = np.eye(n)[i] * h[i], np.eye(n)[j] * h[j]
+            d = f(x + ei + ej) - f(x + ei - ej) - f(x - ei + ej) + f(x - ei - ej)
+            H[i, j] = H[j, i] = d / (4 * h[i] * h[j])
+    return H

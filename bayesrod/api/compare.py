@@ -24,6 +24,7 @@ from ..inference.hierarchical import (
     modulus_contrasts,
     sample_species,
 )
+from ..inference.summary import credible_interval
 from ._common import DocResult, plain_json
 
 log = logging.getLogger("bayesrod")
@@ -171,13 +172,16 @@ def compare(posteriors, *, height_m: float | None = None, seed: int = 0) -> Comp
         "contrasts": contrasts(fit, specimens, height_m),
         "species": {
             sp: {
-                "EI0": _qd(np.exp(fit["mu"][:, g, 0])),
-                "p": _qd(fit["mu"][:, g, 1]),
+                "EI0": credible_interval(np.exp(fit["mu"][:, g, 0])),
+                "p": credible_interval(fit["mu"][:, g, 1]),
                 "n_specimens": len(groups[sp]),
             }
             for g, sp in enumerate(fit["species"])
         },
-        "between_specimen_sd": {"log_EI0": _qd(fit["tau"][:, 0]), "p": _qd(fit["tau"][:, 1])},
+        "between_specimen_sd": {
+            "log_EI0": credible_interval(fit["tau"][:, 0]),
+            "p": credible_interval(fit["tau"][:, 1]),
+        },
         "convergence": {"rhat_max": fit["rhat_max"], "ess_bulk_min": fit["ess_bulk_min"]},
         "warnings": warnings,
         "method": "normal-normal hierarchical model on per-specimen posteriors (docs/compare.md)",
@@ -188,16 +192,11 @@ def compare(posteriors, *, height_m: float | None = None, seed: int = 0) -> Comp
         fit_E = sample_species(with_E, seed=seed + 1, prior=PRIOR_LOG_E, n_steps=1500)
         result["contrasts"] += modulus_contrasts(fit_E)
         for g, sp in enumerate(fit_E["species"]):
-            result["species"][sp]["E_Pa"] = _qd(np.exp(fit_E["mu"][:, g, 0]))
-        result["between_specimen_sd"]["log_E"] = _qd(fit_E["tau"][:, 0])
+            result["species"][sp]["E_Pa"] = credible_interval(np.exp(fit_E["mu"][:, g, 0]))
+        result["between_specimen_sd"]["log_E"] = credible_interval(fit_E["tau"][:, 0])
         result["convergence"] = {
             "rhat_max": max(fit["rhat_max"], fit_E["rhat_max"]),
             "ess_bulk_min": min(fit["ess_bulk_min"], fit_E["ess_bulk_min"]),
         }
     result = plain_json(result)
     return Comparison(MappingProxyType(result), MappingProxyType(fit), tuple(specimens))
-
-
-def _qd(x) -> dict:
-    q05, q50, q95 = np.quantile(x, [0.05, 0.5, 0.95])
-    return {"median": float(q50), "q05": float(q05), "q95": float(q95)}

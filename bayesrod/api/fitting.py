@@ -35,7 +35,13 @@ from ..inference.likelihood import (
 )
 from ..inference.priors import load_prior
 from ..inference.sampler import find_start, run_ensembles
-from ..inference.summary import build_summary, draw_lengths, predictive_forces, to_inference_data
+from ..inference.summary import (
+    build_summary,
+    credible_interval,
+    draw_lengths,
+    predictive_forces,
+    to_inference_data,
+)
 from ..physics import flexural_rigidity, k_theta, k_x
 from ._common import as_dataset, interval, plain_json, progress_enabled, readonly
 from .bands import Band, ForceBand
@@ -491,13 +497,7 @@ class Posterior:
                 "specimen": path.name,
                 "length_m": length,
                 "effects": [],
-                "parameters": {
-                    k: {
-                        q: float(v)
-                        for q, v in zip(("q05", "median", "q95"), np.quantile(x, [0.05, 0.5, 0.95]), strict=True)
-                    }
-                    for k, x in samples.items()
-                },
+                "parameters": {k: credible_interval(x) for k, x in samples.items()},
             }
         effects = tuple(doc.get("effects", ()))
         spec = None

@@ -32,17 +32,11 @@ from ..inference.group import (
 )
 from ..inference.priors import load_prior
 from ..inference.sampler import run_ensembles
+from ..inference.summary import LEVEL, credible_interval
 from ..physics import k_theta
-from ._common import as_dataset, interval, plain_json, progress_enabled, readonly
+from ._common import as_dataset, plain_json, progress_enabled, readonly
 
 log = logging.getLogger("bayesrod")
-
-LEVEL = 0.9
-
-
-def _q(x: NDArray) -> dict:
-    lo, med, hi = interval(np.asarray(x, float), LEVEL)
-    return {"median": float(med), "q05": float(lo), "q95": float(hi)}
 
 
 @dataclass(frozen=True, eq=False)
@@ -248,7 +242,7 @@ def fit_group(
 
 def _summary(sid, lik: GroupLikelihood, nat, per, samples, res, pr, check, seconds) -> dict:
     conds = lik.conditions
-    shared = {n: _q(nat[n]) for n in lik.shared}
+    shared = {n: credible_interval(nat[n]) for n in lik.shared}
     out_conds = {}
     warnings = []
     for c in conds:
@@ -257,18 +251,18 @@ def _summary(sid, lik: GroupLikelihood, nat, per, samples, res, pr, check, secon
         heights = sorted({float(d.height_m) for d in lik.liks[c].data if d.D_m.size})
         kt = k_theta(np.array(heights)[None, :], EI0[:, None], p[:, None], lik.liks[c].L, kb[:, None])
         row = {
-            "base_compliance_rad_per_Nm": _q(samples[f"base_compliance_rad_per_Nm__{c}"]),
+            "base_compliance_rad_per_Nm": credible_interval(samples[f"base_compliance_rad_per_Nm__{c}"]),
             "prob_rigid_clamp": float(np.mean(clamp_or_u(nat[loc["u_base"]]) == 0.0)),
-            "k_theta": [{"height_m": h, **_q(kt[:, i])} for i, h in enumerate(heights)],
-            "sigma_force_N": _q(nat[loc["sigma_force_N"]]),
+            "k_theta": [{"height_m": h, **credible_interval(kt[:, i])} for i, h in enumerate(heights)],
+            "sigma_force_N": credible_interval(nat[loc["sigma_force_N"]]),
         }
         for n in STEM_PARAMETERS:
             if n not in lik.shared:
-                row[n] = _q(nat[loc[n]])
+                row[n] = credible_interval(nat[loc[n]])
         if "rho_force" in loc:
-            row["rho_force"] = _q(nat[loc["rho_force"]])
+            row["rho_force"] = credible_interval(nat[loc["rho_force"]])
         if "force_offset" in loc:
-            row["force_offset_N"] = _q(nat[loc["force_offset"]])
+            row["force_offset_N"] = credible_interval(nat[loc["force_offset"]])
         out_conds[c] = row
     contrasts = []
     for a, b in itertools.permutations(conds, 2):
@@ -278,7 +272,7 @@ def _summary(sid, lik: GroupLikelihood, nat, per, samples, res, pr, check, secon
             {
                 "a": a,
                 "b": b,
-                "compliance_difference_rad_per_Nm": _q(Cb - Ca),
+                "compliance_difference_rad_per_Nm": credible_interval(Cb - Ca),
                 "prob_b_softer": float(np.mean(Cb > Ca)),
             }
         )

@@ -41,6 +41,7 @@ from scipy.special import logsumexp
 from ..physics import Effects
 from ..physics.lumped import ktheta_nd
 from .likelihood import TABLE_EFFECTS, ForceCurves, _lagrange4
+from .summary import credible_interval
 
 TARGETS = ("params", "ei", "k_theta")
 
@@ -279,10 +280,11 @@ def feasibility(F: NDArray, mask: NDArray, slip_m: NDArray, sigma: NDArray, plan
     Fm = np.where(mask, F, -np.inf)
     peak = np.max(Fm, axis=1)
     peak = np.where(np.isfinite(peak), peak, 0.0)  # slipped before the first sample
-    q05, q50, q95 = np.quantile(peak, [0.05, 0.5, 0.95])
+    q = credible_interval(peak)
+    q05, q50, q95 = q["q05"], q["median"], q["q95"]
     slip_med = float(np.median(slip_m))
     out = {
-        "peak_force_N": {"median": float(q50), "q05": float(q05), "q95": float(q95)},
+        "peak_force_N": q,
         "slip_displacement_m": slip_med if np.isfinite(slip_med) else None,
         "prob_in_range": None,
         "feasible": True,

@@ -33,6 +33,8 @@ from itertools import combinations
 import numpy as np
 from numpy.typing import NDArray
 
+from .summary import credible_interval
+
 PRIOR_MU = {"mean": np.array([0.0, 1.0]), "sd": np.array([5.0, 1.5])}
 PRIOR_TAU_SCALE = np.array([0.5, 0.3])
 #: the species model of log Young's modulus [log Pa] (``compare`` when every fit has diameters):
@@ -174,7 +176,7 @@ def modulus_contrasts(fit: dict) -> list[dict]:
 
 def _log_ratio_contrast(a: str, b: str, parameter: str, dlog: NDArray) -> dict:
     """A contrast of compare.json from draws of log(a's value) - log(b's): the ratio a / b and P(a > b)."""
-    r = _q(np.exp(dlog))
+    r = credible_interval(np.exp(dlog))
     return {
         "a": a,
         "b": b,
@@ -184,11 +186,6 @@ def _log_ratio_contrast(a: str, b: str, parameter: str, dlog: NDArray) -> dict:
         "ratio_q95": r["q95"],
         "prob_a_greater": float(np.mean(dlog > 0)),
     }
-
-
-def _q(x) -> dict:
-    q05, q50, q95 = np.quantile(x, [0.05, 0.5, 0.95])
-    return {"median": float(q50), "q05": float(q05), "q95": float(q95)}
 
 
 def contrasts(fit: dict, specimens: list[SpecimenPosterior], height_m: float | None = None) -> list[dict]:
@@ -203,8 +200,8 @@ def contrasts(fit: dict, specimens: list[SpecimenPosterior], height_m: float | N
         a, b = sp[ia], sp[ib]
         out.append(_log_ratio_contrast(a, b, "EI0", mu[:, ia, 0] - mu[:, ib, 0]))
         dp = mu[:, ia, 1] - mu[:, ib, 1]
-        rp = _q(mu[:, ia, 1] / np.where(mu[:, ib, 1] == 0, np.nan, mu[:, ib, 1]))
-        d = _q(dp)
+        rp = credible_interval(mu[:, ia, 1] / np.where(mu[:, ib, 1] == 0, np.nan, mu[:, ib, 1]))
+        d = credible_interval(dp)
         out.append(
             {
                 "a": a,
@@ -222,7 +219,7 @@ def contrasts(fit: dict, specimens: list[SpecimenPosterior], height_m: float | N
         if height_m is not None and height_m < min(lengths[a], lengths[b]):
             ka = k_theta(height_m, np.exp(mu[:, ia, 0]), np.clip(mu[:, ia, 1], 0, None), lengths[a])
             kb = k_theta(height_m, np.exp(mu[:, ib, 0]), np.clip(mu[:, ib, 1], 0, None), lengths[b])
-            rk = _q(ka / kb)
+            rk = credible_interval(ka / kb)
             out.append(
                 {
                     "a": a,

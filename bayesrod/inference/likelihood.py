@@ -929,7 +929,8 @@ def _uniform_prior(name: str, lo: float, hi: float):
 def ar1_innovations(r: NDArray, rho: NDArray, first: NDArray) -> tuple[NDArray, NDArray]:
     """Innovations of stationary AR(1) noise and their variance factors, O(n).
 
-    ``r`` (W, N) residuals, ``rho`` (W, 1), ``first`` (N,) True where a chain (a push) starts. Returns
+    ``r`` (..., N) residuals (any leading batch axes, e.g. walkers W), ``rho`` (..., 1), ``first`` (N,) True
+    where a chain (a push) starts. Returns
     ``e`` = r_t - rho r_{t-1} (r_t at a chain's start) and ``v`` = 1 - rho^2 (1 at a start): given the
     marginal sd sigma, e_t ~ N(0, sigma^2 v_t) independently.
     """
@@ -945,7 +946,8 @@ def ar1_loglik(r: NDArray, sigma: NDArray, rho: NDArray, first: NDArray) -> NDAr
     """Exact log density of residuals under stationary AR(1) noise per chain (marginal sd ``sigma``), O(n).
 
     With e_t = r_t - rho r_{t-1}: log p = sum_t [-log(2 pi)/2 - log sigma - log(v_t)/2 - e_t^2 / (2 sigma^2 v_t)],
-    v_t = 1 - rho^2 (1 at each chain's first sample). Shapes: r (W, N), sigma and rho (W, 1); returns (W,).
+    v_t = 1 - rho^2 (1 at each chain's first sample). Shapes: r (..., N), sigma and rho (..., 1) (any leading
+    batch axes, e.g. walkers W); returns (...,).
     """
     e, v = ar1_innovations(r, rho, first)
     n = r.shape[-1]

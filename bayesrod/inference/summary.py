@@ -19,14 +19,24 @@ def import_arviz():
     return arviz
 
 
+#: The credible level of every interval bayesrod writes to a file (summary.json, compare.json,
+#: design.json, the group summaries, predict's JSON): equal-tailed, so ``q05`` and ``q95`` are the
+#: 5% and 95% posterior quantiles. The API's bands take any level (``level=``).
+LEVEL = 0.9
+#: The quantiles behind ``q05``, ``median``, ``q95``: (1 - LEVEL)/2, 1/2, (1 + LEVEL)/2.
+QUANTILES = (0.05, 0.5, 0.95)
+
+
 def quantiles(x, axis=0) -> dict:
+    """``median``, ``q05``, ``q95`` of draws ``x`` over ``axis`` (the LEVEL interval); NaN draws are ignored."""
     with warnings.catch_warnings():  # all-NaN columns (beyond every draw's slip) give NaN, silently
         warnings.filterwarnings("ignore", "All-NaN slice encountered", RuntimeWarning)
-        q = np.nanquantile(np.asarray(x, float), [0.05, 0.5, 0.95], axis=axis)
+        q = np.nanquantile(np.asarray(x, float), QUANTILES, axis=axis)
     return {"median": q[1], "q05": q[0], "q95": q[2]}
 
 
-def _scalar_q(x) -> dict:
+def credible_interval(x) -> dict:
+    """``{median, q05, q95}`` of 1-D draws ``x`` as floats: the form of every interval in the JSON files."""
     return {k: float(v) for k, v in quantiles(x).items()}
 
 
@@ -82,12 +92,12 @@ def youngs_modulus_summary(samples: dict, length_m: float, source: str | None = 
     out = {
         "model": "graded" if "p_geom" in samples else "uniform",
         "source": source,
-        "E_Pa": _scalar_q(youngs_modulus(samples)),
-        "d0_m": _scalar_q(samples["d0_m"]),
+        "E_Pa": credible_interval(youngs_modulus(samples)),
+        "d0_m": credible_interval(samples["d0_m"]),
     }
     if "p_geom" in samples:
         dq = np.asarray(samples["p"], float) - np.asarray(samples["p_geom"], float)
-        q = _scalar_q(dq)
+        q = credible_interval(dq)
         out["modulus_taper"] = q
         out["uniform_modulus"] = "consistent" if q["q05"] <= 0.0 <= q["q95"] else "rejected"
         s = np.linspace(0.0, 0.9, 10) * float(length_m)
@@ -113,8 +123,8 @@ def predictive_forces(
     already made when D = 0 (the model is evaluated at D + preload); ``height_error_m`` (n,): each
     draw's contact-height error (evaluated at h + error); ``force_offset_N`` (n,): each draw's
     load-cell offset of this push (added to the force). A sampled ``length_m`` in ``samples`` is used
-    draw by draw. Returns ``force_N`` (n, m)
-    with NaN after the slip, ``slipped`` and ``contact_s_m`` (n, m).
+    draw by draw. Returns ``force_N`` (n, m) with NaN after the slip (as the solver returns it),
+    ``slipped`` and ``contact_s_m`` (n, m).
     """
     from ..physics import Effects, force_from_displacement
     from ..physics.effects import EFFECT_NAMES
@@ -143,7 +153,7 @@ def predictive_forces(
         s_c = np.stack([r.contact_s_m for r in rows])
     if force_offset_N is not None:
         F = F + np.asarray(force_offset_N, float)[:, None]
-    return {"force_N": np.where(slipped, np.nan, F), "slipped": slipped, "contact_s_m": s_c}
+    return {"force_N": F, "slipped": slipped, "contact_s_m": s_c}
 
 
 def thin(samples: dict, n: int, rng: np.random.Generator) -> dict:
@@ -167,7 +177,7 @@ def to_inference_data(chain: np.ndarray, log_prob: np.ndarray, post, spec, attrs
 def build_summary(spec, post, samples: dict, diag: dict, fit_error: dict, effects, extra: dict) -> dict:
     """summary.json (docs/format.md, section 3), plus extensions under their own keys."""
     L = spec.length_m
-    params = {name: _scalar_q(samples[name]) for name in post.names}
+    params = {name: credible_interval(samples[name]) for name in post.names}
     heights = [p.height_m for p in spec.pushes]
     kb = samples.get("base_compliance")
     kt = k_theta_band(samples["EI0"], samples["p"], draw_lengths(samples, L), heights, kb)

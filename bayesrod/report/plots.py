@@ -9,6 +9,7 @@ import numpy as np
 from ..inference.diagnose import CATALOG
 from ..inference.likelihood import force_offset_name, height_error_name, preload_name
 from ..inference.summary import (
+    QUANTILES,
     diameter_draws,
     draw_lengths,
     ei_band,
@@ -187,7 +188,7 @@ def plot_corner(samples: dict, names=("EI0", "p"), truth: dict | None = None, fi
     data = np.column_stack([samples[n] for n in names])
     truths = [truth.get(n) for n in names] if truth else None
     return corner.corner(
-        data, labels=list(names), quantiles=[0.05, 0.5, 0.95], show_titles=True, truths=truths, fig=fig, title_fmt=".4g"
+        data, labels=list(names), quantiles=list(QUANTILES), show_titles=True, truths=truths, fig=fig, title_fmt=".4g"
     )
 
 
@@ -298,13 +299,13 @@ def plot_forest(fit: dict, specimens: list[SpecimenPosterior], ax=None):
     y = 0
     ticks, labels = [], []
     for g, sp in enumerate(fit["species"]):
-        q05, q50, q95 = np.exp(np.quantile(fit["mu"][:, g, 0], [0.05, 0.5, 0.95]))
+        q05, q50, q95 = np.exp(np.quantile(fit["mu"][:, g, 0], QUANTILES))
         artists["species"].append(ax.errorbar(q50, y, xerr=[[q50 - q05], [q95 - q50]], fmt="D", color=f"C{g}", ms=7))
         ticks.append(y)
         labels.append(f"{sp} (species)")
         y -= 1
         for s in [s for s in specimens if s.species == sp]:
-            lo, med, hi = np.exp(np.quantile(s.draws[:, 0], [0.05, 0.5, 0.95]))
+            lo, med, hi = np.exp(np.quantile(s.draws[:, 0], QUANTILES))
             artists["specimens"].append(
                 ax.errorbar(med, y, xerr=[[med - lo], [hi - med]], fmt="o", color=f"C{g}", ms=4, alpha=0.7)
             )

@@ -1,0 +1,205 @@
+"""Mutation testing of the numerical core (issue 21), run outside the default CI: it is slow.
+
+For each target module, mutmut (docs/dependencies.md) makes every single-token change it knows (an
+operator, a constant, an argument dropped, a comparison flipped, ...) and runs, for each mutant, the
+unit tests of that module that call the mutated function. A mutant is *killed* when a test fails (or
+times out), *survives* when all of them pass, *no tests* when none of the selected tests reaches its
+function. The score is killed / (killed + survived + no tests); only the module's fast unit test files
+are selected (listed below), so the score is a lower bound on what the whole default suite catches.
+
+Each target is mutated in its own copy of the tracked files under ``--work`` (mutmut keeps its
+results in ``mutants/`` there, so an interrupted run resumes where it stopped). The results go to
+``--out`` (JSON: per target, the counts and every surviving mutant's diff) and a table is printed.
+docs/validation.md ("Mutation testing") holds the latest numbers and, for every survivor, the test
+that now kills it or the reason it cannot change a number a user reads.
+
+Usage::
+
+    pip install mutmut==3.8.1
+    python scripts/mutation.py                         # every target (about 15 min on 2 cores)
+    python scripts/mutation.py --only lumped summary   # some targets
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from fnmatch import fnmatch
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: target -> (the file mutated, the unit test files that may kill its mutants, the functions mutated:
+#: mutmut's mutant-name patterns, None for every function of the file)
+TARGETS: dict[str, tuple[str, list[str], list[str] | None]] = {
+    "lumped": ("bayesrod/physics/lumped.py", ["tests/test_lumped.py"], None),
+    "effects": ("bayesrod/physics/effects.py", ["tests/test_effects.py"], None),
+    "summary": ("bayesrod/inference/summary.py", ["tests/test_summary.py"], None),
+    "noise": (
+        "bayesrod/inference/likelihood.py",
+        [  # the exact-density tests (the fits in these files would make each mutant take minutes)
+            "tests/test_noise.py::test_ar1_loglik_is_the_exact_gaussian_density",
+            "tests/test_noise.py::test_ar1_and_shared_error_densities_batch_over_leading_axes",
+            "tests/test_width.py::test_width_term_matches_a_dense_gaussian_reference",
+        ],
+        ["*.x_ar1_innovations__mutmut_*", "*.x_ar1_loglik__mutmut_*", "*.x_shared_error_loglik__mutmut_*"],
+    ),
+    "curvature": ("bayesrod/vision/curvature.py", ["tests/test_curvature.py"], None),
+    "priors": ("bayesrod/inference/priors.py", ["tests/test_priors.py"], None),
+    "compare": ("bayesrod/inference/hierarchical.py", ["tests/test_compare.py"], None),
+    "design": ("bayesrod/inference/design.py", ["tests/test_design.py"], None),
+    "direct": ("bayesrod/inference/direct.py", ["tests/test_direct.py"], None),
+}
+
+STATUSES = ("killed", "timeout", "survived", "no tests", "suspicious", "skipped", "segfault")
+
+
+def classify(diff: list[str]) -> str:
+    """Why a surviving mutant cannot change a number, where that is mechanical to see; else "open".
+
+    ``dtype``: only a ``dtype=float`` argument was dropped or set to None (np.asarray of the float arrays that
+    reach these functions is the same array either way); ``message``: only the text of a string (an error
+    message or a warning filter's text) changed."""
+    minus = [ln[1:] for ln in diff if ln.startswith("-")]
+    plus = [ln[1:] for ln in diff if ln.startswith("+")]
+    if len(minus) != len(plus) or not minus:
+        return "open"
+
+    def no_dtype(line: str) -> str:
+        return re.sub(r",\s*(dtype=)?(float|None)?\s*\)", ")", line)
+
+    def no_strings(line: str) -> str:
+        return re.sub(r"(\"[^\"]*\"|'[^']*')", '""', line)
+
+    pairs = list(zip(minus, plus, strict=True))
+    if all("np.asarray(" in a and no_dtype(a) == no_dtype(b) for a, b in pairs):
+        return "dtype"
+    if all(no_strings(a) == no_strings(b) for a, b in pairs):
+        return "message"
+    return "open"
+
+
+def _copy_tree(dest: Path) -> None:
+    files = subprocess.run(
+        ["git", "ls-files", "--cached", "--others", "--exclude-standard"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.split()
+    for f in files:
+        target = dest / f
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(ROOT / f, target)
+
+
+def _configure(dest: Path, module: str, tests: list[str]) -> None:
+    cfg = (
+        "\n[tool.mutmut]\n"
+        'source_paths = ["bayesrod"]\n'
+        f'only_mutate = ["{module}"]\n'
+        # one process per mutant run (the default addopts ask xdist for 2), no cache writes
+        'pytest_add_cli_args = ["-n0", "-p", "no:cacheprovider"]\n'
+        f"pytest_add_cli_args_test_selection = {json.dumps(tests)}\n"
+    )
+    py = dest / "pyproject.toml"
+    text = py.read_text()
+    if "[tool.mutmut]" not in text:
+        py.write_text(text + cfg)
+
+
+def _mutmut(dest: Path, *args: str, log=None) -> str:
+    env = {**os.environ, "PYTHONDONTWRITEBYTECODE": "1"}
+    res = subprocess.run(
+        [sys.executable, "-m", "mutmut", *args],
+        cwd=dest,
+        env=env,
+        stdout=log or subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    return "" if log else res.stdout
+
+
+def run_target(name: str, work: Path, workers: int) -> dict:
+    module, tests, patterns = TARGETS[name]
+    dest = work / name
+    if not dest.exists():
+        _copy_tree(dest)
+    _configure(dest, module, tests)
+    t0 = time.perf_counter()
+    with open(dest / "mutmut.log", "w") as log:
+        _mutmut(dest, "run", "--max-children", str(workers), *(patterns or []), log=log)
+    seconds = time.perf_counter() - t0
+    status: dict[str, str] = {}
+    for line in _mutmut(dest, "results", "--all", "true").splitlines():
+        key, _, value = line.strip().rpartition(": ")
+        if key.startswith("bayesrod.") and (patterns is None or any(fnmatch(key, pat) for pat in patterns)):
+            status[key] = value
+    counts = {s: sum(v == s for v in status.values()) for s in STATUSES}
+    killed = counts["killed"] + counts["timeout"]
+    tried = killed + counts["survived"] + counts["no tests"] + counts["suspicious"] + counts["segfault"]
+    survivors = {}
+    for key, value in status.items():
+        if value in ("survived", "no tests", "suspicious"):
+            diff = _mutmut(dest, "show", key)
+            lines = [ln for ln in diff.splitlines() if ln[:1] in "+-" and not ln.startswith(("+++", "---"))]
+            survivors[key] = {
+                "status": value,
+                "class": classify(lines) if value == "survived" else value,
+                "diff": lines,
+            }
+    return {
+        "module": module,
+        "functions": patterns or "all",
+        "tests": tests,
+        "counts": counts,
+        "tried": tried,
+        "killed": killed,
+        "score": killed / tried if tried else float("nan"),
+        "seconds": seconds,
+        "survivors": survivors,
+    }
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--only", nargs="*", choices=sorted(TARGETS), help="targets to run (default: all)")
+    ap.add_argument("--work", type=Path, default=Path("/tmp/bayesrod-mutation"), help="working copies")
+    ap.add_argument("--out", type=Path, default=ROOT / "docs" / "results" / "mutation.json")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--reclassify", action="store_true", help="only classify the survivors in --out again")
+    args = ap.parse_args(argv)
+    if shutil.which("mutmut") is None and subprocess.run([sys.executable, "-m", "mutmut", "--version"]).returncode:
+        raise SystemExit("mutmut is not installed: pip install mutmut==3.8.1")
+    old = json.loads(args.out.read_text()) if args.out.exists() else {}
+    results = dict(old)
+    for name in [] if args.reclassify else args.only or list(TARGETS):
+        print(f"{name}: mutating {TARGETS[name][0]} ...", flush=True)
+        results[name] = run_target(name, args.work, args.workers)
+        r = results[name]
+        left = len(r["survivors"])
+        print(f"  {r['killed']}/{r['tried']} killed ({100 * r['score']:.1f}%), {left} left, {r['seconds']:.0f} s")
+    for r in results.values():  # the classes as this version of classify() sees them
+        for s in r["survivors"].values():
+            s["class"] = classify(s["diff"]) if s["status"] == "survived" else s["status"]
+        r["classes"] = {c: sum(s["class"] == c for s in r["survivors"].values()) for c in ("dtype", "message", "open")}
+    tmp = args.out.with_suffix(".tmp")
+    tmp.write_text(json.dumps(results, indent=1) + "\n")
+    tmp.replace(args.out)
+    print(f"\n{'target':10s} {'tried':>6s} {'killed':>7s} {'survived':>9s} {'no tests':>9s} {'score':>7s}")
+    for name, r in results.items():
+        c = r["counts"]
+        score = 100 * r["score"]
+        print(f"{name:10s} {r['tried']:6d} {r['killed']:7d} {c['survived']:9d} {c['no tests']:9d} {score:6.1f}%")
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
