@@ -29,7 +29,7 @@ CASES = [
     ("base_tilt", "base_tilt", 0.05),
     ("contact_friction", "contact_friction", 0.3),
 ]
-FIELDS = ["case", "shapes", "parameter", "truth", "mle", "laplace_sd", "shift_in_sd", "seconds"]
+FIELDS = ["case", "shapes", "effect_nodes", "parameter", "truth", "mle", "laplace_sd", "shift_in_sd", "seconds"]
 
 
 def case_rows(name: str, effect: str | None, value: float, shapes: bool, n_effect: int | None = None) -> list[dict]:
@@ -39,6 +39,7 @@ def case_rows(name: str, effect: str | None, value: float, shapes: bool, n_effec
     return [
         {
             "case": name,
+            "effect_nodes": out["effect_nodes"],
             "shapes": shapes,
             "parameter": n,
             "truth": out["truth"][i],

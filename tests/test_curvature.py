@@ -190,6 +190,16 @@ def test_bad_input():
         fit_curvature_gp([0, 1, 2], [0, 1])
     with pytest.raises(ValueError, match="finite"):
         fit_curvature_gp([0, 1, 2, 3], [0, np.nan, 1, 2])
+    with pytest.raises(ValueError, match="^s_m, theta_rad: expected two 1-D arrays of equal length >= 4"):
+        fit_curvature_gp([0, 1, 2], [0, 1, 2])  # too few
+    with pytest.raises(ValueError, match="^s_m, theta_rad: expected two 1-D arrays"):
+        fit_curvature_gp([0, 1, 2, 3, 4], [0, 1, 2, 3])  # enough, but unequal
+    with pytest.raises(ValueError, match="^s_m, theta_rad: expected finite values, got NaN or inf"):
+        fit_curvature_gp([0, 1, 2, 3], [0, np.inf, 1, 2])
+    with pytest.raises(ValueError, match=r"^noise_cov: expected a finite \(5, 5\) matrix, got shape \(3, 3\)"):
+        fit_curvature_gp(np.arange(5.0), np.arange(5.0), noise_cov=np.eye(3))
+    with pytest.raises(ValueError, match="^noise_cov"):
+        fit_curvature_gp(np.arange(5.0), np.arange(5.0), noise_cov=np.full((5, 5), np.nan))
 
 
 def _dense_posterior(gp, q, y, cov):
@@ -238,7 +248,8 @@ def test_posterior_means_and_variances_match_the_dense_gaussian_process():
     y = 0.4 + 0.5 * s + 0.3 * np.sin(5 * s) + rng.normal(0, 0.01, s.size)
     gp = fit_curvature_gp(s, y, noise_sd_rad=0.01)
     np.testing.assert_allclose(gp.noise_cov, 1e-4 * np.eye(s.size), rtol=1e-12)
-    assert gp.mean == pytest.approx(np.mean(y))
+    assert gp.mean == pytest.approx(np.mean(y)) and gp.centre == pytest.approx(0.3) and gp.span == pytest.approx(0.6)
+    assert gp.degree == 1 and gp.pilot.degree == 2 and gp.pilot.pilot is None  # the pilot: one degree more
     q = np.array([0.0, 0.07, 0.31, 0.55, 0.6])
     got = gp.predict(q)
     want = _dense_posterior(gp, q, y, 1e-4 * np.eye(s.size))
@@ -296,4 +307,12 @@ def test_fitted_hyperparameters_maximise_the_marginal_likelihood():
         for db in (-0.2, 0.0, 0.2):
             f = _marginal_nll_reference(best + [da, db], s, y - np.mean(y), cov, trend)
             assert f >= f0 - 1e-9, (da, db, f, f0)
+    # and the optimum itself: the reference's gradient vanishes there (central differences)
+    for i in range(2):
+        e = np.eye(2)[i] * 1e-4
+        g = (
+            _marginal_nll_reference(best + e, s, y - np.mean(y), cov, trend)
+            - _marginal_nll_reference(best - e, s, y - np.mean(y), cov, trend)
+        ) / 2e-4
+        assert abs(g) < 1e-2, (i, g)
     assert 0.012 * 0.6 < gp.length_scale < 0.9 * 10 * 0.6  # an interior optimum (measured 3.7 m), not a bound

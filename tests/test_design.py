@@ -162,3 +162,34 @@ def test_design_cli_exits_1_when_nothing_is_feasible(fake_run, tmp_path, capsys)
     doc = json.loads((tmp_path / "z" / "design.json").read_text())
     assert doc["recommended_height_m"] is None
     assert all(not c["feasible"] and c["reason"] for c in doc["candidates"])
+
+
+def test_target_gradients_are_the_derivatives_of_the_quantities_they_name():
+    """d log k_theta(h) / d(log EI0, p) and d log EI(s) / d(log EI0, p) at each draw, against central
+    differences of bayesrod.physics (eq. kdist, eq. EI_taper); bad targets and heights are named."""
+    from bayesrod.inference.design import _functional_gradients
+    from bayesrod.physics import flexural_rigidity, k_theta
+
+    theta = np.array([[np.log(2.0), 0.3], [np.log(5.0), 0.8], [np.log(1.0), 0.0]])
+    L, h, e = 0.9, 0.5, 1e-6
+    g = _functional_gradients("k_theta", theta, L, h)
+    assert g.shape == (3, 1, 2)
+    for i, (le, p) in enumerate(theta):
+        lk = lambda le_, p_: np.log(k_theta(h, np.exp(le_), p_, L))  # noqa: E731
+        assert g[i, 0, 0] == pytest.approx((lk(le + e, p) - lk(le - e, p)) / (2 * e), rel=1e-6)
+        lo = max(p - e, 0.0)
+        assert g[i, 0, 1] == pytest.approx((lk(le, p + e) - lk(le, lo)) / (p + e - lo), rel=1e-3)
+    ge = _functional_gradients("ei", theta, L, None)
+    s = np.linspace(0.0, 0.9, 10)
+    assert ge.shape == (3, 10, 2)
+    le, p = theta[1]
+    num = (np.log(flexural_rigidity(s * L, 2.0, p + e, L)) - np.log(flexural_rigidity(s * L, 2.0, p - e, L))) / (2 * e)
+    np.testing.assert_allclose(ge[1, :, 1], num, rtol=1e-6, atol=1e-9)
+    np.testing.assert_array_equal(ge[:, :, 0], 1.0)
+    for bad in (None, 0.0, L, 1.2):
+        with pytest.raises(
+            ValueError, match=r"^target_height_m: expected a height in \(0, L = 0.9\) m for target k_theta"
+        ):
+            _functional_gradients("k_theta", theta, L, bad)
+    with pytest.raises(ValueError, match=r"^target: expected one of params, ei, k_theta, got 'x'"):
+        _functional_gradients("x", theta, L, None)

@@ -36,7 +36,15 @@ def test_draws_and_quantiles_follow_the_distribution(dist, args, ref):
     for q in (0.05, 0.5, 0.9):
         assert pr.quantile(q) == pytest.approx(ref.ppf(q), rel=1e-12)
     x = pr.draw(np.random.default_rng(4), 20_000)
-    assert stats.kstest(x, ref.cdf).pvalue > 0.01
+    assert x.shape == (20_000,) and stats.kstest(x, ref.cdf).pvalue > 0.01
+    # the generator given is the one used: the same seed gives the same draws (studies are reproducible)
+    np.testing.assert_array_equal(pr.draw(np.random.default_rng(9), 5), pr.draw(np.random.default_rng(9), 5))
+    z = np.random.default_rng(9).standard_normal(5)  # and the draws are the documented transform of it
+    if dist == "lognormal":
+        np.testing.assert_allclose(pr.draw(np.random.default_rng(9), 5), args[0] * np.exp(args[1] * z))
+    if dist == "normal":
+        np.testing.assert_allclose(pr.draw(np.random.default_rng(9), 5), args[0] + args[1] * z)
+    assert not np.array_equal(pr.draw(np.random.default_rng(9), 5), pr.draw(np.random.default_rng(10), 5))
     lo, hi = pr.bounds()
     assert np.all((x >= lo) & (x <= hi))
     assert (lo, hi) == pytest.approx(tuple(ref.support()))
@@ -63,3 +71,130 @@ def test_parameter_space_maps_every_parameter_with_its_own_transform():
     np.testing.assert_allclose(back["p"], nat["p"])
     one = space.to_natural(np.array([0.0, 0.2]))  # a single point is a batch of one
     assert one["EI0"].shape == (1,) and one["p"][0] == 0.2
+
+
+GOOD = {
+    "EI0": {"dist": "lognormal", "median": 2.0, "sigma_log": 1.0, "unit": "N m^2"},
+    "p": {"dist": "truncnormal", "mean": 0.5, "sd": 0.4, "low": 0.0, "high": 3.0},
+    "sigma_force_N": {"dist": "halfnormal", "scale": 0.1},
+    "sigma_shape_m": {"dist": "halfnormal", "scale": 0.005},
+    "shape_sd_scale": {"dist": "lognormal", "median": 1.0, "sigma_log": 0.3},
+}
+
+
+def _write(tmp_path, doc, name="pr.json"):
+    import json
+
+    f = tmp_path / name
+    f.write_text(json.dumps(doc) if not isinstance(doc, str) else doc)
+    return str(f)
+
+
+def test_a_prior_file_loads_with_every_value_where_it_belongs(tmp_path):
+    from bayesrod.inference.priors import available_priors, load_prior
+
+    doc = {
+        "name": "mine",
+        "justification": "test",
+        "parameters": {**GOOD, "x_norm": {"dist": "normal", "mean": -1.0, "sd": 2.0}},
+        "effects": {"base_tilt": {"dist": "uniform", "low": -0.1, "high": 0.2, "unit": "rad"}},
+    }
+    pr = load_prior(_write(tmp_path, doc))
+    assert pr.name == "mine" and pr.source.endswith("pr.json") and pr.doc["justification"] == "test"
+    assert pr.get("EI0") == ParamPrior("EI0", "lognormal", (2.0, 1.0), "N m^2")
+    assert pr.get("p").args == (0.5, 0.4, 0.0, 3.0) and pr.get("x_norm").args == (-1.0, 2.0)
+    assert pr.get("base_tilt") == ParamPrior("base_tilt", "uniform", (-0.1, 0.2), "rad")
+    assert pr.get("rho_force").dist == "uniform"  # a nuisance default when the file has none
+    with pytest.raises(ValueError, match=r"^prior mine: expected a prior for nope, got none in .*pr.json$"):
+        pr.get("nope")
+    unnamed = load_prior(_write(tmp_path, {"parameters": GOOD}, "other.json"))
+    assert unnamed.name == "other" and unnamed.effects == {} and unnamed.get("sigma_force_N").unit == ""
+    bad_effect = {"parameters": GOOD, "effects": {"base_tilt": {"dist": "normal", "mean": 0.0, "sd": -1.0}}}
+    with pytest.raises(ValueError, match=r"^.*bad.json: base_tilt.sd: expected a value > 0, got -1.0$"):
+        load_prior(_write(tmp_path, bad_effect, "bad.json"))
+    assert available_priors() == sorted(available_priors()) and "woody" in available_priors()
+    assert load_prior(None).source == "priors/default.json" and load_prior("woody").source == "priors/woody.json"
+
+
+@pytest.mark.parametrize(
+    "change, msg",
+    [
+        (
+            {"EI0": {"dist": "gamma"}},
+            r"pr.json: EI0.dist: expected one of halfnormal, lognormal, normal, truncnormal, uniform, got 'gamma'",
+        ),
+        ({"EI0": 3.0}, r"EI0.dist: expected one of .*, got 3.0"),
+        (
+            {"EI0": {"dist": "lognormal", "median": 2.0}},
+            r"EI0.sigma_log: expected a finite number for a lognormal prior, got None",
+        ),
+        ({"EI0": {"dist": "lognormal", "median": True, "sigma_log": 1}}, r"EI0.median: expected a finite number"),
+        ({"EI0": {"dist": "lognormal", "median": "2", "sigma_log": 1}}, r"EI0.median: expected a finite number"),
+        ({"EI0": {"dist": "lognormal", "median": 0.0, "sigma_log": 1}}, r"EI0.median: expected a value > 0, got 0.0"),
+        ({"EI0": {"dist": "lognormal", "median": 1.0, "sigma_log": 0}}, r"EI0.sigma_log: expected a value > 0"),
+        ({"p": {"dist": "normal", "mean": 0.0, "sd": 0.0}}, r"p.sd: expected a value > 0"),
+        ({"p": {"dist": "normal", "mean": -1.0, "sd": 1.0}}, None),  # a negative mean is fine
+        ({"sigma_force_N": {"dist": "halfnormal", "scale": -1.0}}, r"sigma_force_N.scale: expected a value > 0"),
+        ({"p": {"dist": "truncnormal", "mean": 0.5, "sd": 0.0, "low": 0, "high": 1}}, r"p.sd: expected a value > 0"),
+        (
+            {"p": {"dist": "truncnormal", "mean": 0.5, "sd": 1.0, "low": 1, "high": 1}},
+            r"p: expected low < high, got 1.0 and 1.0",
+        ),
+        ({"p": {"dist": "uniform", "low": 2.0, "high": 1.0}}, r"p: expected low < high, got 2.0 and 1.0"),
+        ({"p": {"dist": "truncnormal", "mean": 0.5, "sd": 1.0, "low": 0.5, "high": 0.4}}, r"p: expected low < high"),
+        ({"p": {"dist": "uniform", "low": -2.0, "high": 1.0}}, None),
+        ({"p": {"dist": "uniform", "low": 0.0, "high": float("inf")}}, r"p.high: expected a finite number"),
+    ],
+)
+def test_each_bad_prior_value_is_named(tmp_path, change, msg):
+    from bayesrod.inference.priors import load_prior
+
+    f = _write(tmp_path, {"parameters": {**GOOD, **change}})  # json.dumps writes inf as Infinity
+    if msg is None:
+        load_prior(f)
+        return
+    with pytest.raises(ValueError, match=msg):
+        load_prior(f)
+
+
+@pytest.mark.parametrize(
+    "text, msg",
+    [
+        ("{not json", r"pr.json: expected valid JSON, got Expecting property name enclosed in double quotes at line 1"),
+        ('{"parameters": []}', r"pr.json: parameters: expected an object of parameter priors, got none"),
+        ("[1, 2]", r"parameters: expected an object"),
+        (
+            '{"parameters": {"EI0": {"dist": "lognormal", "median": 2.0, "sigma_log": 1.0}}}',
+            r"pr.json: parameters.p: expected a prior, got none",
+        ),
+    ],
+)
+def test_unreadable_prior_files_say_why(tmp_path, text, msg):
+    from bayesrod.inference.priors import load_prior
+
+    with pytest.raises(ValueError, match=msg):
+        load_prior(_write(tmp_path, text))
+
+
+def test_unknown_effects_and_missing_files_are_named(tmp_path):
+    import json
+
+    from bayesrod.inference.priors import load_prior
+
+    doc = {
+        "parameters": GOOD,
+        "effects": {"zz": {"dist": "normal", "mean": 0, "sd": 1}, "yy": {"dist": "normal", "mean": 0, "sd": 1}},
+    }
+    with pytest.raises(
+        ValueError, match=r"pr.json: effects.yy: expected one of base_compliance, rest_curvature, .*, got it"
+    ):
+        load_prior(_write(tmp_path, json.dumps(doc)))
+    with pytest.raises(
+        ValueError,
+        match=r"^prior: expected a prior name \(default, grass, .*\) or a JSON file, got '.*missing.json' \(no such",
+    ):
+        load_prior(str(tmp_path / "missing.json"))
+    with pytest.raises(
+        ValueError, match=r"^prior: expected one of default, grass, .* or a JSON file, got 'nonexistent'"
+    ):
+        load_prior("nonexistent")

@@ -109,6 +109,9 @@ def test_modulus_and_diameter_draws_follow_the_taper_laws():
     x = 1 - s[None] / L
     want = E0[:, None] * x ** (4 * (graded["p"] - graded["p_geom"])[:, None])
     np.testing.assert_allclose(S.modulus_draws(graded, L, s), want, rtol=1e-12)
+    # beyond the tip: 0 where the modulus tapers (4 (p - p_geom) > 0), not NaN from a negative base
+    tapering = {**graded, "p_geom": graded["p"] - 0.1}
+    np.testing.assert_array_equal(S.modulus_draws(tapering, L, [L, 1.2 * L]), 0.0)
     d_g = stem_diameter(s[None], samples["d0_m"][:, None], graded["p_geom"][:, None], L)
     np.testing.assert_allclose(S.diameter_draws(graded, L, s), d_g, rtol=1e-12)
     # beyond the tip the stem has no width (clipped, not negative powers of negative numbers)

@@ -110,7 +110,8 @@ def table_shift(
     Returns
     -------
     dict
-        ``names`` (log EI0, p[, effect]), ``truth``, ``mle``, ``laplace_sd`` and ``shift_in_sd`` (k,) each.
+        ``names`` (log EI0, p[, effect]), ``truth``, ``mle``, ``laplace_sd`` and ``shift_in_sd`` (k,) each;
+        ``effect_nodes`` the nodes of the effect's table axis (0 without one).
     """
     from scipy.optimize import minimize
 
@@ -141,6 +142,7 @@ def table_shift(
         "mle": res.x,
         "laplace_sd": sd,
         "shift_in_sd": (res.x - x_true) / sd,
+        "effect_nodes": 0 if lik.axis is None else int(lik.axis.grid.size),
     }
 
 

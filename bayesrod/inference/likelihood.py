@@ -1087,11 +1087,12 @@ def build_likelihood(
     Walkers outside the table get zero density (docs/inference.md). ``length`` ``"unknown"`` samples the
     stem length under the prior's ``length_m`` entry or :func:`default_length_prior`; ``"auto"`` does so
     when the dataset marks its length approximate (``length_m_approximate``). ``n_effect`` nodes on the
-    effect axis: 13 for forces only, 25 with shapes (their posteriors are ~10x narrower; with 13
-    nodes the interpolation shifted a rest-curvature fit by one posterior sd, with 25 by < 0.1 sd).
+    effect axis, default 25: with 13, the tables moved the maximum-likelihood estimate of a forces-only
+    twig by 0.16 sd (base compliance, rest curvature); with 25 by at most 0.049 sd
+    (``scripts/table_accuracy.py``, docs/validation.md). The tables take about twice as long to build.
     """
     if n_effect is None:
-        n_effect = 25 if use_shapes and any(p.shapes for p in spec.pushes) else 13
+        n_effect = 25
     lo, hi = prior.get("p").bounds()
     p_range = (lo, min(hi, 3.0))
     tabled = [e for e in effects if e in TABLE_EFFECTS]

@@ -73,14 +73,7 @@ class CurvatureGP:
 
     def _k(self, a: NDArray, b: NDArray):
         """k(a, b) and d k / d a, Matern-3/2 plus the linear trend."""
-        r = a[:, None] - b[None, :]
-        c = np.sqrt(3.0) / self.length_scale
-        e = np.exp(-c * np.abs(r))
-        pa, dpa = _trend_basis(a, self.centre, self.span, self.degree)
-        pb, _ = _trend_basis(b, self.centre, self.span, self.degree)
-        k = self.signal_var * (1 + c * np.abs(r)) * e + TREND_SD**2 * pa @ pb.T
-        ks = -self.signal_var * c**2 * r * e + TREND_SD**2 * dpa @ pb.T
-        return k, ks
+        return _kernel(a, b, self.signal_var, self.length_scale, self.centre, self.span, self.degree)
 
     def _mean(self, q: NDArray) -> tuple[NDArray, NDArray]:
         """Posterior means of theta and kappa at ``q`` (m,)."""
@@ -125,6 +118,19 @@ class CurvatureGP:
             "kappa_bias2": bias2,
             "kappa_sd": np.sqrt(se2 + bias2),
         }
+
+
+def _kernel(a: NDArray, b: NDArray, s2: float, ell: float, centre: float, span: float, degree: int):
+    """cov(theta(a), theta(b)) and cov(theta'(a), theta(b)): Matern-3/2 (variance ``s2``, length ``ell``)
+    plus the polynomial trend of prior sd TREND_SD; (len(a), len(b)) each."""
+    r = a[:, None] - b[None, :]
+    c = np.sqrt(3.0) / ell
+    e = np.exp(-c * np.abs(r))
+    pa, dpa = _trend_basis(a, centre, span, degree)
+    pb, _ = _trend_basis(b, centre, span, degree)
+    k = s2 * (1 + c * np.abs(r)) * e + TREND_SD**2 * pa @ pb.T
+    ks = -s2 * c**2 * r * e + TREND_SD**2 * dpa @ pb.T
+    return k, ks
 
 
 def _trend_basis(s: NDArray, centre: float, span: float, degree: int):
@@ -252,8 +258,7 @@ def fit_curvature_gp(
     s2, ell = float(hyper[0]), float(hyper[1])
     if cov is None:
         cov = float(hyper[2]) * np.eye(s.size)
-    gp = CurvatureGP(s, np.zeros(s.size), np.eye(s.size), mean, s2, ell, cov, centre, span, degree)
-    K = gp._k(s, s)[0] + cov
+    K = _kernel(s, s, s2, ell, centre, span, degree)[0] + cov
     chol = np.linalg.cholesky(K)
     pilot = None
     if bias:
