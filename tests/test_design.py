@@ -193,3 +193,65 @@ def test_target_gradients_are_the_derivatives_of_the_quantities_they_name():
             _functional_gradients("k_theta", theta, L, bad)
     with pytest.raises(ValueError, match=r"^target: expected one of params, ei, k_theta, got 'x'"):
         _functional_gradients("x", theta, L, None)
+
+
+def test_push_plan_checks_each_field_at_its_bound():
+    from bayesrod.inference.design import PushPlan
+
+    PushPlan(0.1, n_samples=2, force_range_N=(0.0, 1.0), confidence=0.5)  # every bound just allowed
+    for kwargs, msg in (
+        ({"displacement_m": 0.0}, r"^displacement_m: expected a positive number \[m\], got 0.0"),
+        ({"displacement_m": float("inf")}, r"^displacement_m: expected a positive number"),
+        ({"n_samples": 1}, r"^n_samples: expected at least 2, got 1"),
+        (
+            {"force_range_N": (1.0, 1.0)},
+            r"^force_range_N: expected \[low, high\] with 0 <= low < high, got \(1.0, 1.0\)",
+        ),
+        ({"force_range_N": (-0.1, 1.0)}, r"^force_range_N"),
+        ({"confidence": 0.0}, r"^confidence: expected a probability in \(0, 1\), got 0.0"),
+        ({"confidence": 1.0}, r"^confidence"),
+    ):
+        args = {"displacement_m": 0.1, **kwargs}
+        with pytest.raises(ValueError, match=msg):
+            PushPlan(**args)
+    np.testing.assert_allclose(PushPlan(0.1, n_samples=4).D_m, [0.025, 0.05, 0.075, 0.1])
+
+
+def test_feasibility_by_hand_at_each_threshold():
+    """Peak forces of 10 draws 1..10 N: range, slip and noise checks, each at its boundary."""
+    from bayesrod.inference.design import PushPlan, feasibility
+
+    K = 10
+    peak = np.arange(1.0, K + 1)
+    F = np.stack([np.linspace(0, pk, 5) for pk in peak])
+    F[:, -1] = -5.0  # a sample the mask drops: the peak is over recorded samples only
+    F[:, -2] = peak
+    mask = np.ones_like(F, bool)
+    mask[:, -1] = False
+    slip = np.full(K, 0.05)
+    sig = np.full(K, 0.1)
+    ok = feasibility(F, mask, slip, sig, PushPlan(0.1, force_range_N=(1.0, 10.0), confidence=0.9))
+    assert ok["feasible"] is True and ok["reason"] is None and ok["prob_in_range"] == 1.0  # ends inclusive
+    assert ok["slip_displacement_m"] == 0.05 and ok["peak_force_N"]["median"] == pytest.approx(5.5)
+    high = feasibility(F, mask, slip, sig, PushPlan(0.1, force_range_N=(0.5, 9.0), confidence=0.95))
+    assert high["feasible"] is False and high["prob_in_range"] == pytest.approx(0.9)
+    assert "above the sensor maximum 9 N: P(in range) = 0.90 < 0.95" in high["reason"]
+    assert feasibility(F, mask, slip, sig, PushPlan(0.1, force_range_N=(0.5, 9.0), confidence=0.9))["feasible"]
+    low = feasibility(F, mask, slip, sig, PushPlan(0.1, force_range_N=(2.0, 20.0), confidence=0.95))
+    assert low["feasible"] is False and "below the sensor minimum 2 N" in low["reason"]
+    tie = feasibility(F, mask, slip, sig, PushPlan(0.1, force_range_N=(1.5, 9.5), confidence=0.95))
+    assert "above the sensor maximum" in tie["reason"]  # one draw out on each side: said as above
+    # slip: at exactly min_fraction of the plan it is still feasible, just below it is not
+    assert feasibility(F, mask, np.full(K, 0.1), sig, PushPlan(0.5))["feasible"] is True  # 0.2 x 0.5 m
+    early = feasibility(F, mask, np.full(K, 0.0999), sig, PushPlan(0.5))
+    assert early["feasible"] is False and early["reason"].startswith("slips almost at once")
+    nan_slip = feasibility(F, mask, np.full(K, np.nan), sig, PushPlan(0.1))
+    assert nan_slip["slip_displacement_m"] is None
+    # noise: the median peak (5.5 N) against min_snr x sd, at the boundary
+    assert feasibility(F, mask, slip, np.full(K, 5.5 / 3), PushPlan(0.1))["feasible"] is True
+    small = feasibility(F, mask, slip, np.full(K, 2.0), PushPlan(0.1))
+    assert small["feasible"] is False and small["reason"].startswith("too small to measure")
+    # a draw that slipped before its first recorded sample peaks at 0 N
+    none = mask.copy()
+    none[0] = False
+    assert feasibility(F, none, slip, sig, PushPlan(0.1))["peak_force_N"]["q05"] < 1.0
