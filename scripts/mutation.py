@@ -184,7 +184,7 @@ def main(argv=None) -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--reclassify", action="store_true", help="only classify the survivors in --out again")
     args = ap.parse_args(argv)
-    if shutil.which("mutmut") is None and subprocess.run([sys.executable, "-m", "mutmut", "--version"]).returncode:
+    if subprocess.run([sys.executable, "-m", "mutmut", "--version"], capture_output=True).returncode:
         raise SystemExit("mutmut is not installed: pip install mutmut==3.8.1")
     old = json.loads(args.out.read_text()) if args.out.exists() else {}
     results = dict(old)

@@ -33,11 +33,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _study import run_pending  # noqa: E402
 
-from bayesrod import fit, simulate  # noqa: E402
+from bayesrod import simulate  # noqa: E402
+from bayesrod.api.calibration import fit_for_calibration, rank_columns  # noqa: E402
 from bayesrod.dataset.model import ShapeFrame  # noqa: E402
 from bayesrod.dataset.simulate import NoiseModel  # noqa: E402
 from bayesrod.inference.priors import load_prior  # noqa: E402
-from bayesrod.inference.summary import QUANTILES  # noqa: E402
 from bayesrod.physics import force_from_displacement  # noqa: E402
 from bayesrod.physics import reference as R  # noqa: E402
 
@@ -124,38 +124,28 @@ def replicate(seed: int) -> dict:
     try:
         ds = simulate(stem, seed=seed, noise_model=noise, effects=effects, config_overrides=extra)
         ds, worst, n_fallback = reference_dataset(ds, case)
-        post = fit(
+        res = fit_for_calibration(
             ds,
-            prior=PRIOR,
-            effects=(case["effect"],) if case["effect"] else (),
-            use_shapes=case["shapes"],
+            PRIOR,
             seed=seed,
-            progress=False,
+            use_shapes=case["shapes"],
             target_ess=400,
+            n_rank=N_RANK,
+            effects=(case["effect"],) if case["effect"] else (),
             max_steps=8000,
         )
     except Exception as e:  # a failed replicate is recorded (a row without numbers), never dropped
         print(f"seed {seed}: {type(e).__name__}: {e}", file=sys.stderr)
         return row | {"rhat_max": float("nan"), "max_ref_vs_fast_N": float("nan"), "error": f"{type(e).__name__}: {e}"}
-    row |= {"rhat_max": float(post.doc["convergence"]["rhat_max"]), "max_ref_vs_fast_N": worst}
+    row |= {"rhat_max": res["rhat_max"], "max_ref_vs_fast_N": worst}
     row |= {"n_fast_fallback": n_fallback, "error": ""}
-    rng = np.random.default_rng(seed)
-    idx = rng.permutation(post.samples["EI0"].size)[:N_RANK]
     truth = {"EI0": case["EI0"], "p": case["p"], "sigma_force_N": case["sigma_force_N"]}
     names = {"EI0": "EI0", "p": "p", "sigma_force_N": "sigma_force_N", "effect": case["effect"]}
     if case["effect"]:
         truth["effect"] = case["effect_value"]
     for k in PARAMS:
-        if k not in truth or names[k] not in post.samples:
-            continue
-        x = np.asarray(post.samples[names[k]])
-        q05, q50, q95 = np.quantile(x, QUANTILES)
-        row |= {
-            f"{k}_true": truth[k],
-            f"{k}_median": float(q50),
-            f"{k}_rank": int(np.sum(x[idx] < truth[k])),
-            f"{k}_covered": bool(q05 <= truth[k] <= q95),
-        }
+        if k in truth and names[k] in res:
+            row |= rank_columns(res[names[k]], truth[k], k)
     return row
 
 

@@ -51,17 +51,26 @@ def simulate_from_prior(prior_name: str, seed: int, *, preset: str = "twig", use
 
 
 def fit_for_calibration(
-    dataset, prior_name: str, *, seed: int, use_shapes: bool = True, target_ess: float = 400.0, n_rank: int = 99
+    dataset,
+    prior_name: str,
+    *,
+    seed: int,
+    use_shapes: bool = True,
+    target_ess: float = 400.0,
+    n_rank: int = 99,
+    effects=(),
+    max_steps: int = 6000,
 ) -> dict:
-    """Fit (in memory) and return thinned draws and 5/50/95% quantiles per parameter."""
+    """Fit (in memory, ``effects`` fitted) and return thinned draws and 5/50/95% quantiles per parameter."""
     post = fit(
         dataset,
         prior=prior_name,
+        effects=effects,
         seed=seed,
         progress=False,
         use_shapes=use_shapes,
         target_ess=target_ess,
-        max_steps=6000,
+        max_steps=max_steps,
     )
     rng = np.random.default_rng(seed)
     n = post.samples["EI0"].size
@@ -78,12 +87,20 @@ def sbc_replicate(seed: int, prior_name: str = "woody", *, use_shapes: bool = Tr
     res = fit_for_calibration(ds, prior_name, seed=seed, use_shapes=use_shapes, target_ess=target_ess)
     row = {"seed": seed, "rhat_max": res["rhat_max"]}
     for k in ("EI0", "p"):
-        q05, q50, q95 = res[k]["q"]
-        row[f"{k}_true"] = truth[k]
-        row[f"{k}_median"] = float(q50)
-        row[f"{k}_rank"] = int(np.sum(res[k]["draws"] < truth[k]))
-        row[f"{k}_covered"] = bool(q05 <= truth[k] <= q95)
+        row |= rank_columns(res[k], truth[k], k)
     return row
+
+
+def rank_columns(res_k: dict, truth: float, key: str) -> dict:
+    """An SBC row's columns for one parameter (``res_k`` one entry of :func:`fit_for_calibration`):
+    ``{key}_true``, ``_median``, ``_rank`` (of the truth among the thinned draws) and ``_covered`` (by 90%)."""
+    q05, q50, q95 = res_k["q"]
+    return {
+        f"{key}_true": truth,
+        f"{key}_median": float(q50),
+        f"{key}_rank": int(np.sum(res_k["draws"] < truth)),
+        f"{key}_covered": bool(q05 <= truth <= q95),
+    }
 
 
 #: the noise levels the table study holds fixed (the twig preset's): force sd [N], centerline sd [m]
