@@ -39,3 +39,49 @@ def test_the_tables_move_the_plain_rods_estimate_by_under_a_twentieth_of_its_sd(
     assert np.all(np.abs(out["shift_in_sd"]) <= 0.05), out
     # the sd is the twig's (0.03 N force noise, three heights): a wrong Hessian would not pass
     assert 5e-4 < out["laplace_sd"][0] < 5e-3 and 5e-4 < out["laplace_sd"][1] < 5e-3, out
+
+
+def test_force_tables_stay_smooth_past_a_branch_that_ends_rising():
+    """With contact friction the stem slides off while the force still rises (the plain rod ends in a
+    fold), so a node whose branch ended before d must not hold its end force: the 2-D table (4-point
+    Lagrange in p and in mu, the likelihood's spacing) against an exact curve at an off-node (p, mu),
+    over the last half of the push. Measured 1.1e-5 of the peak; holding the end value gives 9.5e-3
+    (a 2-5 sd bias of mu, docs/validation.md "Likelihood tables against exact solves")."""
+    from bayesrod.inference.likelihood import ForceCurves, _lagrange4
+
+    eta, p0, mu0 = 0.65 / 0.8, 0.43, 0.3
+    p_grid, mu_grid = np.linspace(0.3, 0.6, 7), np.linspace(-0.87, 0.87, 25)  # 0.05 in p as in the fit
+    ip, wp = _lagrange4(p_grid, np.array([p0]))
+    ie, we = _lagrange4(mu_grid, np.array([mu0]))
+    curves = ForceCurves.batch(np.full(4, eta), p_grid, n_f=80, effects_nd={"mu": mu_grid[ie[0]]})
+    (exact,) = ForceCurves.batch(np.array([eta]), np.array([p0]), n_f=80, effects_nd={"mu": np.array([mu0])})
+    assert exact.end_slope[0] > 1.0  # the case this guards: a branch that ends rising
+    d = np.linspace(0.5, 1.0, 40) * exact.d_end[0]
+    f_exact = exact.force(d)[0]
+    table = np.stack([c.force(d)[ip[0]] for c in curves])  # (4 mu, 4 p, n)
+    f = np.einsum("e,p,epn->n", we[0], wp[0], table)
+    assert np.abs(f - f_exact).max() < 1e-4 * f_exact.max()
+
+
+def test_frames_before_the_second_engaged_sample_are_not_used():
+    """A frame's contact displacement is interpolated in time from the force record; before the second
+    engaged sample D(t) bends too hard (the simulated twig's first frame was 12% off, which a tilt or a
+    rest curvature absorbed). Every frame used lies between the second and the last engaged sample, and
+    its interpolated D is within 1% of the simulator's exact one."""
+    from bayesrod.api._common import as_dataset
+    from bayesrod.api.data import simulate
+    from bayesrod.dataset.engagement import detect_engagement
+    from bayesrod.dataset.simulate import NoiseModel
+    from bayesrod.inference.likelihood import prepare_data
+
+    ds = simulate("twig", seed=1, noise_model=NoiseModel(force_sd_N=0.0, shape_sd_m=0.0))
+    spec = as_dataset(ds)
+    _, sims = ds.simulation  # (config, one SimulatedPush per push)
+    for push, data, sim in zip(spec.pushes, prepare_data(spec), sims, strict=True):
+        t = push.force.time_s[detect_engagement(push.force.force_N).mask]
+        times = np.array([fr.time_s for fr in push.shapes])
+        used = (times >= t[1]) & (times <= t[-1])
+        assert 0 < used.sum() < times.size  # the first frame is dropped, the rest kept
+        assert data.frame_D_m.size == used.sum()
+        exact = sim.frame_contact_x_m[used]
+        np.testing.assert_allclose(data.frame_D_m, exact, rtol=0.01)

@@ -11,9 +11,9 @@ dataset, exact tables over a grid of p:
 
 A log-likelihood evaluation is then a 4-point Lagrange interpolation in p and
 a scale by EI0, batched over walkers. Where the model's branch ends before an
-engaged displacement (it would have slipped), force and shape are held at the
-branch end: the force curve is flat there, and the slip is not used as a hard
-constraint (see ``RodLikelihood.predict_nd_force``).
+engaged displacement (it would have slipped), force and shape go on along their
+tangent at the branch end (flat where the branch ends in a fold), and the slip is not
+used as a hard constraint (see ``RodLikelihood.predict_nd_force``).
 
 Shape residuals are the normal distance from each observed point to the
 predicted curve, (x_obs - x_pred(z_obs)) cos(phi_pred(z_obs)).
@@ -132,8 +132,13 @@ def prepare_data(spec: Specimen, use_forces: bool = True, use_shapes: bool = Tru
             # moves uniformly but the wire's deflection grows with the force)
             D_of_t = PchipInterpolator(t, D) if t.size >= 2 else None
             for fr in push.shapes:
-                if t.size < 2 or not (t[0] <= fr.time_s <= t[-1]):
-                    continue  # before contact or after the slip: not engaged
+                if t.size < 3 or not (t[1] <= fr.time_s <= t[-1]):
+                    # before contact or after the slip: not engaged. A frame before the second engaged
+                    # sample is not used either: D(t) bends hardest where the load starts (slack, the
+                    # wire taking up), and the interpolated D of such a frame was 12% off on the
+                    # simulated twig, an error that a tilt or a rest curvature absorbs (0.2-0.5 sd,
+                    # docs/validation.md "Likelihood tables against exact solves")
+                    continue
                 k = len(fD)
                 fD.append(float(D_of_t(fr.time_s)))
                 keep = fr.z_m >= 0
@@ -163,8 +168,8 @@ class ForceCurves:
 
     For each p: the branch end f_end (bisection on the existence of contact),
     forward solves at n_f forces clustered toward f_end, and a monotone cubic
-    (PCHIP) of f against d. ``force`` clamps d at each node's slip displacement
-    ``d_end`` so that tables stay continuous in p; slip is decided separately.
+    (PCHIP) of f against d. ``force`` continues each node's curve past its slip displacement
+    ``d_end`` along its end tangent so that tables stay smooth in p; slip is decided separately.
     :meth:`batch` builds the curves of several heights in one set of solves.
     """
 
@@ -238,6 +243,7 @@ class ForceCurves:
             c.effects_nd = effects_nd
             d = d_all[q]
             c.d_end = d[:, -1].copy()
+            c.end_slope = np.zeros(P)
             c._interp = []
             for k in range(P):
                 dk, fk = d[k], f[q, k]
@@ -248,15 +254,36 @@ class ForceCurves:
                     c.d_end[k] = 0.0
                     c._interp.append(PchipInterpolator([0.0, 1.0], [0.0, 0.0], extrapolate=True))
                     continue
-                c._interp.append(PchipInterpolator(dk[keep], fk[keep], extrapolate=True))
+                spline = PchipInterpolator(dk[keep], fk[keep], extrapolate=True)
+                c.end_slope[k] = max(float(spline.derivative()(c.d_end[k])), 0.0)
+                c._interp.append(spline)
             out.append(c)
         return out
 
-    def force(self, d: NDArray) -> NDArray:
-        """f at displacements d (M,) for every p: (P, M), clamped at each node's d_end."""
-        d = np.asarray(d, float)
-        return np.stack([fn(np.minimum(d, de)) for fn, de in zip(self._interp, self.d_end, strict=True)])
+    def force(self, d: NDArray, *, continued: bool = True) -> NDArray:
+        """f at displacements d (M,) for every p: (P, M), continued past each node's d_end.
 
+        Past the branch end the curve goes on along its tangent there (slope clipped at zero). Where
+        the branch ends in a fold (the plain rod: the slope there is ~0) that is the flat hold; where it
+        ends with the force still rising (contact friction: the stem slides off at a finite slope) a
+        flat hold would put a kink into the table that interpolation in p and in the effect smears
+        over the samples near the slip (a 2-5 sd bias of mu; docs/validation.md). ``continued=False``
+        holds the end value instead (the force at which a shape can still be solved).
+        """
+        d = np.asarray(d, float)
+        return np.stack(
+            [
+                fn(np.minimum(d, de)) + (s if continued else 0.0) * np.maximum(d - de, 0.0)
+                for fn, de, s in zip(self._interp, self.d_end, self.end_slope, strict=True)
+            ]
+        )
+
+
+#: effect-axis nodes of a fit with shapes, where 25 are not enough (build_likelihood)
+SHAPE_EFFECT_NODES = {"rest_curvature": 49, "base_tilt": 49}
+
+#: nondimensional step before a curve's end over which a shape's slope in d is taken (RodLikelihood)
+SHAPE_END_STEP = 0.01
 
 #: force curves kept per process (each ~0.3 MB at 61 p nodes x 160 solves): enough for one stem's
 #: heights x effect nodes, so that the conditions of a stem (issue 23) share their solves
@@ -607,8 +634,14 @@ class RodLikelihood:
 
     def _shape_table(self, d: PushData, eta: float, curves: ForceCurves):
         L, pg = self.L, self.p_grid
-        f_t = curves.force(d.frame_D_m / L)  # (P, M), clamped at each node's slip
-        P, M = f_t.shape
+        d_nd = d.frame_D_m / L
+        # shapes past a node's slip go on along their tangent in d (as the force does, ForceCurves.force):
+        # two extra columns, the shape at d_end and DELTA before it, give the slope
+        d_end = curves.d_end
+        step = np.minimum(SHAPE_END_STEP, 0.5 * d_end)
+        f_end = [fn(np.array([de, de - st])) for fn, de, st in zip(curves._interp, d_end, step, strict=True)]
+        f_t = np.concatenate([curves.force(d_nd, continued=False), np.array(f_end)], axis=1)  # (P, M + 2)
+        P, M = f_t.shape[0], d_nd.size
         r = contact_from_force_nd(f_t, eta, pg[:, None], curves.effects_nd, keep_shape=True)
         sig = np.linspace(0.0, 1.0, 961)  # 0.5 mm spacing on a 0.47 m stem: x(z) error < 1 um
         xz = centerline_at(r["grid"], sig)  # (2, 961, P, M)
@@ -617,13 +650,21 @@ class RodLikelihood:
         cos_phi = dz / np.maximum(np.hypot(dx, dz), 1e-12)
         xp = np.empty((P, d.x_m.size))
         cp = np.empty((P, d.x_m.size))
+
+        def at(k, col, z):
+            zeta = np.maximum.accumulate(xz[1, :, k, col])
+            return np.interp(z, zeta, xz[0, :, k, col]) * L, np.interp(z, zeta, cos_phi[:, k, col])
+
         for m in range(M):
             sel = d.frame_index == m
             z = d.z_m[sel] / L
             for k in range(P):
-                zeta = np.maximum.accumulate(xz[1, :, k, m])
-                xp[k, sel] = np.interp(z, zeta, xz[0, :, k, m]) * L
-                cp[k, sel] = np.interp(z, zeta, cos_phi[:, k, m])
+                xp[k, sel], cp[k, sel] = at(k, m, z)
+                past = d_nd[m] - d_end[k]
+                if past > 0.0 and step[k] > 0.0:
+                    (x1, c1), (x0, c0) = at(k, M, z), at(k, M + 1, z)
+                    xp[k, sel] += past / step[k] * (x1 - x0)
+                    cp[k, sel] += past / step[k] * (c1 - c0)
         return xp, cp
 
     # -------------------------------------------------------------- evaluation
@@ -680,8 +721,8 @@ class RodLikelihood:
     def predict_nd_force(self, p: NDArray, u: NDArray | None = None) -> NDArray:
         """Nondimensional force at every engaged sample, (W, N).
 
-        The slip is not used as a hard constraint: past a p's branch end the force is held at its
-        end value (the curve is flat there). A hard "slipped means zero" rule would say only "not
+        The slip is not used as a hard constraint: past a p's branch end the force goes on along
+        the curve's end tangent (:meth:`ForceCurves.force`). A hard "slipped means zero" rule would say only "not
         yet slipped" for engaged samples and bias p; the end of the branch is also where the model
         is most sensitive to what it leaves out (friction, the probe's shape).
         """
@@ -1090,12 +1131,15 @@ def build_likelihood(
     effect axis, default 25: with 13, the tables moved the maximum-likelihood estimate of a forces-only
     twig by 0.16 sd (base compliance, rest curvature); with 25 by at most 0.049 sd
     (``scripts/table_accuracy.py``, docs/validation.md). The tables take about twice as long to build.
+    With shapes, rest curvature and base tilt get 49 nodes (:data:`SHAPE_EFFECT_NODES`): the centerline
+    above the contact, nearly level late in a push, moves steeply with either, and 25 nodes moved the
+    estimate by up to 0.50 sd (49: at most 0.015 sd).
     """
+    tabled = [e for e in effects if e in TABLE_EFFECTS]
     if n_effect is None:
-        n_effect = 25
+        n_effect = SHAPE_EFFECT_NODES.get(tabled[0], 25) if (tabled and use_shapes) else 25
     lo, hi = prior.get("p").bounds()
     p_range = (lo, min(hi, 3.0))
-    tabled = [e for e in effects if e in TABLE_EFFECTS]
     axis = None
     if tabled:
         plain = RodLikelihood(spec, p_range=p_range, use_forces=use_forces, use_shapes=False)
