@@ -159,3 +159,30 @@ def test_impossible_inputs_raise_value_error(kwargs, field):
     args.update(kwargs)
     with pytest.raises(ValueError, match=field):
         force_from_displacement(**args)
+
+
+@pytest.mark.parametrize("points", [(1, 1), (4, 7)])
+def test_root_search_finds_roots_next_to_the_branch_end(points, monkeypatch):
+    """The bracketing of direction (b) (several points per round, or plain expansion and bisection)
+    finds a root just short of the branch end and reports none just past it, to machine precision."""
+    from bayesrod.physics import elastica as el
+
+    monkeypatch.setattr(el, "EXPAND_POINTS", points[0])
+    monkeypatch.setattr(el, "BOUNDARY_SECTIONS", points[1])
+    x_end = 1.7  # the branch ends here (NaN beyond); t(x) = sqrt-fold-like rise to t(x_end) = 1
+    t_end = 1.0
+    gap = np.array([0.5, 1e-3, 1e-6, -1e-9, -1e-3])  # target below (+) or above (-) t_end; root 1e-12 from it
+    target = t_end - gap
+    rounds = []
+
+    def fun(x, i):
+        rounds.append(x.size)
+        t = t_end - np.sqrt(np.maximum(x_end - x, 0.0) / x_end)
+        return np.where(x <= x_end, t - target[i], np.nan)
+
+    x, ok = el._bracket_and_solve(fun, np.full(gap.size, 0.01))
+    np.testing.assert_array_equal(ok, gap > 0)
+    exact = x_end * (1.0 - gap[gap > 0] ** 2)
+    np.testing.assert_allclose(x[ok], exact, rtol=1e-12, atol=0)
+    if points != (1, 1):  # each round does the work of several: fewer rounds than bisection's ~60
+        assert len(rounds) < 35

@@ -416,6 +416,12 @@ def _illinois(fun, lo, hi, glo, ghi, xtol=1e-13, maxiter=80):
     return x
 
 
+# Points per round of :func:`_bracket_and_solve`: growth steps of the bracket expansion, and
+# interior points of the boundary search (1 and 1: the plain expansion and bisection).
+EXPAND_POINTS = 4
+BOUNDARY_SECTIONS = 7
+
+
 def _bracket_and_solve(fun, x_guess, x_max=np.inf, grow=1.6, max_expand=80, boundary_rtol=4e-16):
     """Solve fun(x) = 0 for x >= 0 where fun(0) < 0, fun increasing, NaN past a branch end.
 
@@ -427,36 +433,51 @@ def _bracket_and_solve(fun, x_guess, x_max=np.inf, grow=1.6, max_expand=80, boun
     glo = fun(lo, np.arange(B))
     hi = np.maximum(x_guess, 1e-12)
     ghi = np.full(B, np.nan)
-    state = np.zeros(B, int)  # 0 expanding, 1 bracketed, 2 boundary bisection, 3 no root
+    state = np.zeros(B, int)  # 0 expanding, 1 bracketed, 2 boundary search, 3 no root
+
+    def advance(i, pts):
+        """Evaluate the rows of increasing points ``pts`` (n, m) of elements ``i``; move ``lo`` up to
+        the last point below the first that stops (reaches 0: bracketed; NaN: branch end); return
+        the first stopping index per row (m: none stopped) and whether it reached 0."""
+        n, m = pts.shape
+        g = fun(pts.ravel(), np.repeat(i, m)).reshape(n, m)
+        stop = np.isnan(g) | (g >= 0)  # fun rises until it reaches 0 or the branch ends
+        first = np.where(stop.any(axis=1), np.argmax(stop, axis=1), m)
+        rows = np.arange(n)
+        below = first > 0
+        lo[i[below]], glo[i[below]] = pts[rows, first - 1][below], g[rows, first - 1][below]
+        at = np.minimum(first, m - 1)
+        x_stop, g_stop = pts[rows, at], g[rows, at]
+        hit = (first < m) & ~np.isnan(g_stop)
+        state[i[hit]] = 1
+        hi[i[hit]], ghi[i[hit]] = x_stop[hit], g_stop[hit]
+        end = (first < m) & np.isnan(g_stop)
+        hi[i[end]] = x_stop[end]
+        return first, end
+
+    # Every round tries several points of each element at once (one march costs about the same for 1
+    # or 100 problems, so rounds are what count). Expansion: EXPAND_POINTS successive growths.
+    powers = grow ** np.arange(EXPAND_POINTS)
     for _ in range(max_expand):
         i = np.flatnonzero(state == 0)
         if i.size == 0:
             break
-        g = fun(hi[i], i)
-        ok = g >= 0
-        state[i[ok]] = 1
-        ghi[i[ok]] = g[ok]
-        nan = np.isnan(g)
-        state[i[nan]] = 2
-        grow_ = ~ok & ~nan
-        lo[i[grow_]], glo[i[grow_]] = hi[i[grow_]], g[grow_]
-        hi[i[grow_]] = np.minimum(hi[i[grow_]] * grow, x_max)
-        capped = grow_ & (hi[i] >= x_max) & (lo[i] >= x_max)
-        state[i[capped]] = 3
+        pts = np.minimum(hi[i, None] * powers, x_max)
+        first, end = advance(i, pts)
+        state[i[end]] = 2
+        none = first == EXPAND_POINTS
+        hi[i[none]] = np.minimum(pts[none, -1] * grow, x_max)
+        state[i[none & (lo[i] >= x_max)]] = 3
     state[state == 0] = 3
-    for _ in range(56):  # brackets grow by 1.6x, so 56 halvings reach 2e-16 relative
+    # Boundary search: BOUNDARY_SECTIONS evenly spaced points per bracket and round, so the bracket
+    # shrinks (BOUNDARY_SECTIONS + 1)x per round, to the tolerance of plain bisection. Taking the
+    # first point that stops also keeps the loading branch where the force-displacement curve folds.
+    frac = np.arange(1, BOUNDARY_SECTIONS + 1) / (BOUNDARY_SECTIONS + 1.0)
+    for _ in range(56):  # 56 halvings reach 2e-16 relative; each round here is at least 3 of them
         i = np.flatnonzero(state == 2)
         if i.size == 0:
             break
-        mid = 0.5 * (lo[i] + hi[i])
-        g = fun(mid, i)
-        nan = np.isnan(g)
-        hit = ~nan & (g >= 0)
-        state[i[hit]] = 1
-        hi[i[hit]], ghi[i[hit]] = mid[hit], g[hit]
-        hi[i[nan]] = mid[nan]
-        low = ~nan & ~hit
-        lo[i[low]], glo[i[low]] = mid[low], g[low]
+        advance(i, lo[i, None] + (hi[i] - lo[i])[:, None] * frac)
         narrow = (hi[i] - lo[i]) <= boundary_rtol * hi[i]
         state[i[narrow & (state[i] == 2)]] = 3
     x = np.full(B, np.nan)
