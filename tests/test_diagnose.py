@@ -134,3 +134,28 @@ def test_diagnose_cli_bad_candidates_in_one_line(datasets, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--candidates: expected effects from" in err and "Traceback" not in err
     assert not (tmp_path / "x").exists()
+
+
+def test_candidate_start_is_pulled_back_until_it_fits_no_worse(datasets):
+    """A candidate fit starts no worse than the current model (else its short fit may end below it)."""
+    from bayesrod.inference.diagnose import _no_worse_start
+
+    dg = Diagnoser(_model(datasets["clean"]))
+    cur = dg.fit((), dg.start())
+    noise = (cur.sigma_force, cur.rho_force, cur.shape_scale)
+    far = np.array([20 * cur.sigma_force])  # a force offset 20 noise sd off
+    assert dg.loglik(*dg.raw_residuals(np.concatenate([cur.x, far]), ("force_offset",)), noise) < cur.loglik
+    x0 = _no_worse_start(dg, cur, ("force_offset",), far)
+    assert dg.loglik(*dg.raw_residuals(x0, ("force_offset",)), noise) >= cur.loglik - 1e-9
+    assert abs(x0[-1]) < abs(far[0])
+
+
+def test_diagnosis_does_not_depend_on_the_number_of_workers(datasets):
+    m = _model(datasets["offset"])
+    one = diagnose(m, candidates=("force_offset",))
+    two = diagnose(m, candidates=("force_offset",), workers=2)
+    assert one["added_effects"] == two["added_effects"] == ["force_offset"]
+    for key in ("before", "after", "candidates", "fitted", "noise"):
+        assert json.dumps(one[key], sort_keys=True, default=str) == json.dumps(two[key], sort_keys=True, default=str)
+    with pytest.raises(ValueError, match="workers"):
+        diagnose(m, candidates=("force_offset",), workers=0)

@@ -99,6 +99,7 @@ def diagnose(
     min_heldout_gain: float = 0.10,
     heldout_alpha: float = 0.05,
     force_noise: str = "ar1",
+    n_workers: int = 1,
 ) -> Diagnosis:
     """Residual analysis: which missing effect explains the misfit, refit, error before and after.
 
@@ -120,6 +121,10 @@ def diagnose(
     force_noise : {"ar1", "iid"}
         Force noise of every fit and test: AR(1) per push (default; real pushes are autocorrelated) or
         independent.
+    n_workers : int
+        Processes the candidate fits and the held-out refits are spread over (default 1: none
+        started; the result does not depend on it). A 3-height twig takes 149 s with 1 and 87 s
+        with 2 on two cores (docs/performance.md).
     """
     from ._common import as_dataset
 
@@ -135,6 +140,8 @@ def diagnose(
             raise ValueError(f"{name}: expected a level in (0, 1), got {v}")
     if force_noise not in ("ar1", "iid"):
         raise ValueError(f"force_noise: expected 'ar1' or 'iid', got {force_noise!r}")
+    if not (isinstance(n_workers, int) and not isinstance(n_workers, bool) and n_workers >= 1):
+        raise ValueError(f"n_workers: expected an integer of at least 1, got {n_workers!r}")
     model = ForwardModel(prepare_data(spec, use_forces=True, use_shapes=use_shapes), spec.length_m)
     res = diagnose_model(
         model,
@@ -143,6 +150,7 @@ def diagnose(
         min_heldout_gain=min_heldout_gain,
         heldout_alpha=heldout_alpha,
         force_noise=force_noise,
+        workers=n_workers,
         log=lambda msg: log.info("%s", msg),
     )
     fit_after, plain = res.pop("_fit"), res.pop("_plain")

@@ -331,6 +331,9 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["ar1", "iid"],
         help="force noise of every fit and test: AR(1) per push (default) or independent",
     )
+    dg.add_argument(
+        "--workers", type=int, default=2, help="processes for the candidate fits and held-out refits (default 2)"
+    )
     dg.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
 
     dm = sub.add_parser("demo", help="the whole story on the bundled dataset: fit, bands, report")
@@ -1054,6 +1057,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         min_heldout_gain=args.min_heldout_gain,
         heldout_alpha=args.heldout_alpha,
         force_noise=args.force_noise,
+        n_workers=args.workers,
     )
     res.save(out, overwrite=args.force)
     doc = res.to_dict()
