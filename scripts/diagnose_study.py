@@ -19,6 +19,7 @@ import argparse
 import json
 import time
 from concurrent.futures import ProcessPoolExecutor
+from itertools import zip_longest
 from pathlib import Path
 
 import bayesrod
@@ -144,7 +145,7 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--forces-only", action="store_true")
     ap.add_argument("--effects", help='comma list (default: the whole catalog; "" for clean replicates only)')
-    ap.add_argument("--effects-first", action="store_true", help="run the effect cases before the clean ones")
+    ap.add_argument("--effects-first", action="store_true", help="in each round-robin turn, the effect cases before the clean ones")
     ap.add_argument("--size", action="append", default=[], help="EFFECT=VALUE: another size (case EFFECT@VALUE)")
     ap.add_argument("--noise-rho", type=float, default=0.0, help="AR(1) correlation of the simulated force noise")
     ap.add_argument("--replicates", type=int, default=1, help="seeds per effect case (default 1)")
@@ -164,14 +165,21 @@ def main() -> None:
             ap.error(f"--size {item}: unknown effect {name!r}; expected one of {sorted(EFFECTS)}")
         sizes[name] = float(value)
     rho = args.noise_rho
-    jobs = [
-        (f"{e if v == EFFECTS[e] else f'{e}@{v:g}'}" + (f"-{k}" if k else ""), e, v, 11 + k, args.forces_only, rho)
-        for k in range(args.replicates)
+    groups = [
+        [(f"clean-{s}", None, 0.0, 100 + s, args.forces_only, rho) for s in range(args.clean)],
+        [(f"outside-{s}", "yield", EFFECTS["yield"], 200 + s, args.forces_only, rho) for s in range(args.outside)],
+    ]
+    effect_jobs = [
+        [
+            (f"{e if v == EFFECTS[e] else f'{e}@{v:g}'}" + (f"-{k}" if k else ""), e, v, 11 + k, args.forces_only, rho)
+            for k in range(args.replicates)
+        ]
         for e, v in sizes.items()
     ]
-    clean = [(f"clean-{s}", None, 0.0, 100 + s, args.forces_only, rho) for s in range(args.clean)]
-    clean += [(f"outside-{s}", "yield", EFFECTS["yield"], 200 + s, args.forces_only, rho) for s in range(args.outside)]
-    jobs = jobs if args.effects_first else clean + jobs
+    # round-robin over the groups (clean, outside, each effect): a study cut short (it resumes) has
+    # some replicates of every case; --effects-first: the effect cases, then the rest
+    groups = effect_jobs + groups if args.effects_first else groups + effect_jobs
+    jobs = [j for row in zip_longest(*groups) for j in row if j is not None]
     todo = [j for j in jobs if j[0] not in done]
     with ProcessPoolExecutor(args.workers) as ex:
         for r in append_rows(csv, FIELDS, ex.map(one, todo), new_file=not done):
