@@ -39,7 +39,7 @@ def one(job) -> dict:
         "cane": Path(ds).name,
         "heights": " ".join(f"{p['height_m']:g}" for p in b["per_push"]),
         "added": ",".join(doc["added_effects"]),
-        "fitted": json.dumps({k: round(v, 4) for k, v in doc["fitted"].items()}),
+        "fitted": json.dumps({k: np.round(v, 4).tolist() for k, v in doc["fitted"].items()}),
         "force_before": b["force_rmse_N"],
         "force_after": a["force_rmse_N"],
         "heldout_before": b["heldout_force_rmse_N"],

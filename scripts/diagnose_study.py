@@ -22,6 +22,8 @@ from concurrent.futures import ProcessPoolExecutor
 from itertools import zip_longest
 from pathlib import Path
 
+import numpy as np
+
 import bayesrod
 from bayesrod.dataset.io import append_rows, read_rows
 from bayesrod.inference.diagnose import CATALOG, ForwardModel, diagnose
@@ -68,7 +70,7 @@ def one(job) -> dict:
         "value": value,
         "seed": seed,
         "added": ",".join(r["added_effects"]),
-        "fitted": json.dumps({k: round(v, 5) for k, v in r["fitted"].items()}),
+        "fitted": json.dumps({k: np.round(v, 5).tolist() for k, v in r["fitted"].items()}),
         "force_before": b["force_rmse_N"],
         "force_after": a["force_rmse_N"],
         "heldout_before": b["heldout_force_rmse_N"],
@@ -145,7 +147,9 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--forces-only", action="store_true")
     ap.add_argument("--effects", help='comma list (default: the whole catalog; "" for clean replicates only)')
-    ap.add_argument("--effects-first", action="store_true", help="in each round-robin turn, the effect cases before the clean ones")
+    ap.add_argument(
+        "--effects-first", action="store_true", help="in each round-robin turn, the effect cases before the clean ones"
+    )
     ap.add_argument("--size", action="append", default=[], help="EFFECT=VALUE: another size (case EFFECT@VALUE)")
     ap.add_argument("--noise-rho", type=float, default=0.0, help="AR(1) correlation of the simulated force noise")
     ap.add_argument("--replicates", type=int, default=1, help="seeds per effect case (default 1)")

@@ -15,6 +15,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
+from ..dataset.plausibility import starts_loaded
 from ..inference.diagnose import CATALOG, ForwardModel
 from ..inference.diagnose import diagnose as diagnose_model
 from ..inference.likelihood import prepare_data
@@ -99,6 +100,7 @@ def diagnose(
     min_heldout_gain: float = 0.10,
     heldout_alpha: float = 0.05,
     force_noise: str = "ar1",
+    preload: bool | str = "auto",
     n_workers: int = 1,
 ) -> Diagnosis:
     """Residual analysis: which missing effect explains the misfit, refit, error before and after.
@@ -121,6 +123,11 @@ def diagnose(
     force_noise : {"ar1", "iid"}
         Force noise of every fit and test: AR(1) per push (default; real pushes are autocorrelated) or
         independent.
+    preload : {"auto", True, False}
+        Fit each push's preload (the contact displacement already made when recording began; a
+        nuisance in [0, 0.1 L], docs/diagnose.md). ``"auto"`` (default): when some push starts
+        loaded (its first force above 5 noise sd and 2% of its peak, the dataset check's rule) and
+        the diagnosis uses forces only.
     n_workers : int
         Processes the candidate fits and the held-out refits are spread over (default 1: none
         started; the result does not depend on it). A 3-height twig takes 149 s with 1 and 87 s
@@ -142,7 +149,24 @@ def diagnose(
         raise ValueError(f"force_noise: expected 'ar1' or 'iid', got {force_noise!r}")
     if not (isinstance(n_workers, int) and not isinstance(n_workers, bool) and n_workers >= 1):
         raise ValueError(f"n_workers: expected an integer of at least 1, got {n_workers!r}")
-    model = ForwardModel(prepare_data(spec, use_forces=True, use_shapes=use_shapes), spec.length_m)
+    if preload not in ("auto", True, False):
+        raise ValueError(f"preload: expected 'auto', True or False, got {preload!r}")
+    data = prepare_data(spec, use_forces=True, use_shapes=use_shapes)
+    shapes_used = any(d.x_m.size for d in data)
+    if preload is True and shapes_used:
+        raise ValueError(
+            "preload: expected a force-only diagnosis (use_shapes=False): the shapes of a preloaded push "
+            "are not modelled yet"
+        )
+    loaded = [p.id for p in spec.pushes if starts_loaded(p.force.force_N)]
+    use_preload = bool(loaded) and not shapes_used if preload == "auto" else bool(preload)
+    if loaded and not use_preload:
+        log.warning(
+            "pushes %s start loaded but their preload is not fitted (%s): expect structure at the start",
+            ", ".join(loaded),
+            "preload=False" if preload is False else "centerlines are used; diagnose with forces only to fit it",
+        )
+    model = ForwardModel(data, spec.length_m, preload=use_preload)
     res = diagnose_model(
         model,
         candidates=candidates,
@@ -166,6 +190,8 @@ def diagnose(
             "heldout_alpha": heldout_alpha,
             "force_noise": force_noise,
             "candidates": list(candidates),
+            "preload": use_preload,
+            "pushes_starting_loaded": loaded,
         },
     }
     truth = spec.extra.get("truth")

@@ -332,6 +332,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="force noise of every fit and test: AR(1) per push (default) or independent",
     )
     dg.add_argument(
+        "--preload",
+        choices=["auto", "yes", "no"],
+        default="auto",
+        help="fit each push's preload (forces only; auto: when a push starts loaded)",
+    )
+    dg.add_argument(
         "--workers", type=int, default=2, help="processes for the candidate fits and held-out refits (default 2)"
     )
     dg.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
@@ -1057,6 +1063,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         min_heldout_gain=args.min_heldout_gain,
         heldout_alpha=args.heldout_alpha,
         force_noise=args.force_noise,
+        preload={"auto": "auto", "yes": True, "no": False}[args.preload],
         n_workers=args.workers,
     )
     res.save(out, overwrite=args.force)
@@ -1066,6 +1073,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         return 0
     b, a = doc["before"], doc["after"]
     print(f"added effects: {', '.join(doc['added_effects']) or 'none'}")
+    if doc["fitted"].get("preload_m"):
+        print(f"  preload per push [mm]: {', '.join(f'{1000 * v:.3g}' for v in doc['fitted']['preload_m'])}")
     for k in ("force_rmse_N", "shape_rmse_mm", "heldout_force_rmse_N"):
         if b[k] is not None:
             print(f"  {k:>22}: {b[k]:.4g} -> {a[k]:.4g}")

@@ -52,6 +52,13 @@ def first_reversal(x: NDArray, tol: float | None = None) -> int | None:
     return int(bad[0]) if bad.size else None
 
 
+def starts_loaded(force_N: NDArray, floor_N: float = 0.0) -> bool:
+    """A push whose first force sample is already loaded (a preload or a load-cell offset): above
+    NOISE_SDS noise sd, 2% of the peak and the sensor's floor."""
+    F = np.asarray(force_N, float)
+    return bool(F.size >= 3 and F[0] > max(NOISE_SDS * noise_sd(F), 0.02 * F.max(), floor_N))
+
+
 def check_push(where: str, force_N: NDArray, contact_x_m: NDArray, *, length_m: float | None, sensor=None):
     """Problems of one push's samples: list of (field, expected, got, row or None, severity).
 
@@ -135,7 +142,7 @@ def check_push(where: str, force_N: NDArray, contact_x_m: NDArray, *, length_m: 
                 "error",
             )
         )
-    if F[0] > max(NOISE_SDS * sd, 0.02 * F.max(), floor):
+    if starts_loaded(F, floor):
         out.append(
             (
                 "column force_N",

@@ -44,7 +44,7 @@ from scipy.optimize import least_squares
 from ..physics import Effects, force_from_displacement
 from ..physics.effects import EFFECT_NAMES
 from ..physics.elastica import centerline_at, force_from_displacement_nd
-from .likelihood import PushData, ar1_innovations
+from .likelihood import PRELOAD_MAX_L, PushData, ar1_innovations
 
 CATALOG = EFFECT_NAMES  # every effect of the contract's catalog is a candidate
 
@@ -170,11 +170,17 @@ class ForwardModel:
         ``n_nodes`` displacements (relative error below 1e-5 of the peak force, tested against the
         direct solve; a push whose prediction slips is solved at every sample, one that yields between
         nodes is read off a monotone cubic).
+    preload : bool
+        Each push with forces has a preload [m]: the contact displacement already made when recording
+        began, added to its displacements (a nuisance, in [0, PRELOAD_MAX_L L] as in the fit's prior).
+        Parameter vectors are then (log EI0, p, preload of each push with forces, effect coordinates);
+        forces only.
     """
 
     data: list[PushData]
     length_m: float
     n_nodes: int = MAX_NODES
+    preload: bool = False
     n_force: int = field(init=False)
     n_points: int = field(init=False)
 
@@ -201,6 +207,16 @@ class ForwardModel:
         self.first_sample = np.zeros(self.n_force, bool)  # first force sample of each push (AR(1) whitening)
         for sl in self._slices:
             self.first_sample[sl.start] = True
+        if self.preload and self.n_points:
+            raise ValueError(
+                "preload: expected a force-only diagnosis (centerlines not used): the shapes of a preloaded "
+                "push are not modelled yet"
+            )
+
+    @property
+    def n_base(self) -> int:
+        """Parameters before the effect coordinates: log EI0, p and the preloads (if any)."""
+        return 2 + (len(self.force_pushes) if self.preload else 0)
 
     def heldout_splits(self) -> list[tuple[str, ForwardModel, ForwardModel]]:
         """(name, training model, held-out model) of every held-out unit.
@@ -214,8 +230,8 @@ class ForwardModel:
             return [
                 (
                     self.data[k].id,
-                    ForwardModel([d for j, d in enumerate(self.data) if j != k], L, self.n_nodes),
-                    ForwardModel([self.data[k]], L, self.n_nodes),
+                    ForwardModel([d for j, d in enumerate(self.data) if j != k], L, self.n_nodes, self.preload),
+                    ForwardModel([self.data[k]], L, self.n_nodes, self.preload),
                 )
                 for k in fp
             ]
@@ -226,7 +242,13 @@ class ForwardModel:
         n_train, frames = block
         train = [_cut(d, np.arange(n_train), frames) if j == k else e for j, e in enumerate(self.data)]
         held = _cut(d, np.arange(n_train, d.D_m.size), np.zeros(0, int))
-        return [(f"{d.id} (last third)", ForwardModel(train, L, self.n_nodes), ForwardModel([held], L, self.n_nodes))]
+        return [
+            (
+                f"{d.id} (last third)",
+                ForwardModel(train, L, self.n_nodes, self.preload),
+                ForwardModel([held], L, self.n_nodes, self.preload),
+            )
+        ]
 
     def heldout_masks(self) -> list[tuple[NDArray, NDArray, NDArray]]:
         """Row masks (training forces, training points, held-out forces) of each ``heldout_splits`` unit."""
@@ -257,11 +279,14 @@ class ForwardModel:
         if not self.n_force:
             return out
         EI0 = np.exp(np.clip(X[:, 0], -60.0, 60.0))  # a wild trial step must not overflow
-        effs = [effects_from_coords(dict(zip(effects, X[k, 2:], strict=True)), EI0[k], L) for k in range(K)]
+        nb = self.n_base
+        effs = [effects_from_coords(dict(zip(effects, X[k, nb:], strict=True)), EI0[k], L) for k in range(K)]
         nds = [e.nondim(L, EI0[k]) for k, e in enumerate(effs)]
         eff = {key: np.array([float(n[key]) for n in nds])[:, None, None] for key in nds[0]}
         eta = np.array([self.data[k].height_m / L for k in self.force_pushes])[None, :, None]
-        r = force_from_displacement_nd(self._nodes[None] / L, eta, X[:, 1][:, None, None], eff)
+        # each push's preload shifts its nodes and samples alike: the spline weights do not change
+        shift = X[:, 2:nb] if self.preload else np.zeros((K, len(self.force_pushes)))
+        r = force_from_displacement_nd((self._nodes[None] + shift[:, :, None]) / L, eta, X[:, 1][:, None, None], eff)
         scale = EI0 / L**2
         for j, k in enumerate(self.force_pushes):
             d, sl, S = self.data[k], self._slices[j], self._spline[j]
@@ -274,11 +299,11 @@ class ForwardModel:
                 elif np.all(np.isfinite(f)) and (y.all() or not y.any()):
                     out[kk, sl] = S @ f
                 elif np.all(np.isfinite(f)):  # the yield onset (a kink) between nodes
-                    out[kk, sl] = self._yield_branches(j, d, f, y, EI0[kk], X[kk, 1], effs[kk])
+                    out[kk, sl] = self._yield_branches(j, d, f, y, EI0[kk], X[kk, 1], effs[kk], shift[kk, j])
                 elif not (y.any() and not y[np.isfinite(f)].all()):  # slips (no yield onset): hold
                     out[kk, sl] = self._slipped(j, d, f)
                 else:  # slips and yields: solve at every sample, hold past the slip
-                    sol = force_from_displacement(d.D_m, d.height_m, EI0[kk], X[kk, 1], L, effs[kk])
+                    sol = force_from_displacement(d.D_m + shift[kk, j], d.height_m, EI0[kk], X[kk, 1], L, effs[kk])
                     out[kk, sl] = _hold(sol.force_N)
         return out
 
@@ -299,7 +324,9 @@ class ForwardModel:
             out[sel] = _through(nodes[:n_ok], f[:n_ok], D[sel])
         return out
 
-    def _yield_branches(self, j: int, d: PushData, f: NDArray, yielded: NDArray, EI0: float, p: float, eff) -> NDArray:
+    def _yield_branches(
+        self, j: int, d: PushData, f: NDArray, yielded: NDArray, EI0: float, p: float, eff, shift: float = 0.0
+    ) -> NDArray:
         """Forces of a push whose prediction yields between nodes: a spline per branch (elastic, plastic),
         direct solves for the samples between the last elastic and the first plastic node."""
         nodes = self._nodes[j]
@@ -311,7 +338,7 @@ class ForwardModel:
                 out[sel] = _through(nodes[keep], f[keep], D[sel])
         gap = (D > last_e) & (D < first_p)
         if gap.any():
-            out[gap] = force_from_displacement(D[gap], d.height_m, EI0, p, self.length_m, eff).force_N
+            out[gap] = force_from_displacement(D[gap] + shift, d.height_m, EI0, p, self.length_m, eff).force_N
         return out
 
     def predict(
@@ -333,7 +360,7 @@ class ForwardModel:
             return np.zeros(0), np.zeros(0)
         L = self.length_m
         EI0 = float(np.exp(np.clip(x[0], -60.0, 60.0)))
-        eff = effects_from_coords(dict(zip(effects, x[2:], strict=True)), EI0, L)
+        eff = effects_from_coords(dict(zip(effects, x[self.n_base :], strict=True)), EI0, L)
         xs, cs = [], []
         for d in self.data:
             if d.x_m.size:
@@ -383,7 +410,12 @@ class MapFit:
 
     @property
     def coords(self) -> dict[str, float]:
-        return {e: float(v) for e, v in zip(self.effects, self.x[2:], strict=True)}
+        return {e: float(v) for e, v in zip(self.effects, self.x[self.x.size - len(self.effects) :], strict=True)}
+
+    @property
+    def preloads_m(self) -> NDArray:
+        """The preload of each push with forces [m] (empty without the preload nuisance)."""
+        return np.asarray(self.x[2 : self.x.size - len(self.effects)], float)
 
     @property
     def marginal_sigma_force(self) -> float:
@@ -393,6 +425,8 @@ class MapFit:
         EI0 = float(np.exp(self.x[0]))
         out = {"EI0": EI0, "p": float(self.x[1])}
         out.update(effects_from_coords(self.coords, EI0, L).to_mapping())
+        if self.preloads_m.size:
+            out["preload_m"] = [float(v) for v in self.preloads_m]
         return out
 
 
@@ -485,8 +519,11 @@ def null_heldout_gain(dg: Diagnoser, cur: MapFit, new: MapFit, observed_gain: fl
     sd_p = cur.shape_scale * (m.sd_obs if m.sd_obs is not None else np.ones(m.n_points))
     eps_p = rng.standard_normal((m.n_points, n_draws)) * sd_p[:, None]
     sq0, sq1 = 0.0, 0.0
-    for train_f, train_p, held_f in masks:
+    loho = len(m.force_pushes) >= 2
+    for u, (train_f, train_p, held_f) in enumerate(masks):
         first = _first_of(train_f, m.force_push)
+        # as in Diagnoser.heldout: the held-out push's own preload is fitted to it, after the refit
+        own = 2 + u if (m.preload and loho) else None
 
         def w(v, first=first, train_f=train_f, train_p=train_p):
             f = _whiten_rows(v[:nf][train_f], first, cur.rho_force) / cur.sigma_force
@@ -494,8 +531,12 @@ def null_heldout_gain(dg: Diagnoser, cur: MapFit, new: MapFit, observed_gain: fl
 
         y = w(np.concatenate([eps_f, eps_p]))
         for J, acc in ((J0, 0), (J1, 1)):
-            coef, *_ = np.linalg.lstsq(w(J), y, rcond=None)
-            e = eps_f[held_f] - J[:nf][held_f] @ coef
+            keep = np.arange(J.shape[1]) != (own if own is not None else -1)
+            coef, *_ = np.linalg.lstsq(w(J[:, keep]), y, rcond=None)
+            e = eps_f[held_f] - J[:nf][held_f][:, keep] @ coef
+            if own is not None:  # least squares of the push's preload column on what is left
+                col = J[:nf][held_f][:, own]
+                e = e - np.outer(col, col @ e) / max(float(col @ col), 1e-300)
             if acc == 0:
                 sq0 = sq0 + np.sum(e**2, axis=0)
             else:
@@ -620,8 +661,11 @@ class Diagnoser:
         samples, and each Jacobian is one batched solve.
         """
         effects = tuple(effects)
-        lo = np.array([-np.inf, 0.0] + [self._bound(e, 2) for e in effects])
-        hi = np.array([np.inf, P_MAX] + [self._bound(e, 3) for e in effects])
+        n_pre = self.m.n_base - 2
+        lo = np.array([-np.inf, 0.0] + [0.0] * n_pre + [self._bound(e, 2) for e in effects])
+        hi = np.array(
+            [np.inf, P_MAX] + [PRELOAD_MAX_L * self.m.length_m] * n_pre + [self._bound(e, 3) for e in effects]
+        )
         x = np.clip(np.array(x0, float), lo + 1e-9 * np.isfinite(lo), hi - 1e-9 * np.isfinite(hi))
         rf, rs = self.raw_residuals(x, effects)
         noise = self.profile_noise(rf, rs)
@@ -657,44 +701,72 @@ class Diagnoser:
         return _COORD[effect][k]
 
     def start(self, p_grid: NDArray | None = None) -> NDArray:
-        """(log EI0, p) of the plain model: the force tables of the likelihood over a p grid, closed-form EI0.
+        """(log EI0, p[, preloads]) of the plain model: the force tables of the likelihood over a p grid,
+        closed-form EI0.
 
         Forces are linear in EI0, so each p of the grid has a least-squares EI0; the best pair starts
-        the direct fit.
+        the direct fit. With preloads, each push's preload starts where that pair's force reaches the
+        push's first force sample, and the pair is chosen again with those preloads.
         """
+        shift = np.zeros(len(self.m.force_pushes))
+        for _ in range(2 if self.m.preload else 1):
+            g, p_grid = self._unit_forces(p_grid, shift)
+            gg = np.einsum("pn,pn->p", g, g)
+            a = (g @ self.m.F_obs) / np.where(gg > 0, gg, np.inf)
+            rss = np.sum((self.m.F_obs[None, :] - a[:, None] * g) ** 2, axis=1)
+            rss = np.where(a > 0, rss, np.inf)
+            k = int(np.argmin(rss))
+            if not np.isfinite(rss[k]):
+                raise ValueError("diagnose: expected forces that rise with displacement, got none the model can fit")
+            if self.m.preload:
+                shift = self._preload_start(np.log(a[k]), float(p_grid[k]))
+        return np.concatenate([[np.log(a[k]), float(p_grid[k])], shift if self.m.preload else []])
 
-        g, p_grid = self._unit_forces(p_grid)
-        gg = np.einsum("pn,pn->p", g, g)
-        a = (g @ self.m.F_obs) / np.where(gg > 0, gg, np.inf)
-        rss = np.sum((self.m.F_obs[None, :] - a[:, None] * g) ** 2, axis=1)
-        rss = np.where(a > 0, rss, np.inf)
-        k = int(np.argmin(rss))
-        if not np.isfinite(rss[k]):
-            raise ValueError("diagnose: expected forces that rise with displacement, got none the model can fit")
-        return np.array([np.log(a[k]), float(p_grid[k])])
+    def _preload_start(self, log_EI0: float, p: float) -> NDArray:
+        """Per push: the displacement [m] at which the plain model's force reaches the first force sample."""
+        from .likelihood import ForceCurves
 
-    def _unit_forces(self, p_grid: NDArray | None) -> tuple[NDArray, NDArray]:
-        """Plain-model forces per unit EI0 (P, n_force) over a p grid, from the likelihood's force tables."""
+        L, EI0 = self.m.length_m, float(np.exp(log_EI0))
+        out = []
+        for k in self.m.force_pushes:
+            d = self.m.data[k]
+            grid = np.linspace(0.0, PRELOAD_MAX_L, 201)
+            f = ForceCurves(d.height_m / L, np.array([p])).force(grid)[0] * EI0 / L**2
+            out.append(float(np.interp(max(float(d.F_N[0]), 0.0), np.maximum.accumulate(f), grid)) * L)
+        return np.array(out)
+
+    def _unit_forces(self, p_grid: NDArray | None, shift: NDArray | None = None) -> tuple[NDArray, NDArray]:
+        """Plain-model forces per unit EI0 (P, n_force) over a p grid, from the likelihood's force tables;
+        ``shift``: each force push's displacements moved by this much [m] (its preload)."""
         from .likelihood import ForceCurves
 
         p_grid = np.linspace(0.0, P_MAX, 61) if p_grid is None else np.asarray(p_grid, float)
         L = self.m.length_m
+        shift = np.zeros(len(self.m.force_pushes)) if shift is None else np.asarray(shift, float)
         g = (
             np.concatenate(
-                [ForceCurves(d.height_m / L, p_grid).force(d.D_m / L) for d in self.m.data if d.D_m.size], axis=1
+                [
+                    ForceCurves(self.m.data[k].height_m / L, p_grid).force((self.m.data[k].D_m + s) / L)
+                    for k, s in zip(self.m.force_pushes, shift, strict=True)
+                ],
+                axis=1,
             )
             / L**2
         )  # (P, n_force): force per unit EI0
         return g, p_grid
 
-    def yield_start(self) -> NDArray:
-        """(log EI0, p, log M_y) for the yield candidate of the plain model: a grid over p and M_y.
+    def yield_start(self, plain: MapFit | None = None) -> NDArray:
+        """(log EI0, p[, preloads], log M_y) for the yield candidate of the plain model: a grid over p and M_y.
 
         The plain model's optimum can sit far from the yielding stem's (an extreme taper mimics the
         softening), out of reach of a local fit; this start caps the table forces at M_y / h and takes
         EI0 in closed form on the samples below the cap, for every p of the grid and 40 moments.
+        With preloads, those of ``plain`` (the plain fit) are kept.
         """
-        g, p_grid = self._unit_forces(np.linspace(0.0, P_MAX, 31))
+        shift = None
+        if self.m.preload:
+            shift = plain.preloads_m if plain is not None else np.zeros(len(self.m.force_pushes))
+        g, p_grid = self._unit_forces(np.linspace(0.0, P_MAX, 31), shift)
         F = self.m.F_obs
         h = np.array([self.m.data[k].height_m for k in self.m.force_push])
         m_max = float(np.max(F * h))
@@ -710,7 +782,8 @@ class Diagnoser:
             rss = np.where(a > 0, rss, np.inf)
             k = int(np.argmin(rss))
             if rss[k] < best:
-                best, out = rss[k], np.array([np.log(a[k]), p_grid[k], np.log(frac * m_max)])
+                pre = shift if shift is not None else []
+                best, out = rss[k], np.concatenate([[np.log(a[k]), p_grid[k]], pre, [np.log(frac * m_max)]])
         return out
 
     # -------------------------------------------------------------- statistics
@@ -803,9 +876,16 @@ class Diagnoser:
         if not splits:
             return {"heldout_force_rmse_N": None, "heldout": None, "per_push": []}, []
         errs, per = [], []
-        jobs = [(train, self.force_noise, fit.effects, fit.x, max_nfev) for _, train, _ in splits]
+        loho = len(self.m.force_pushes) >= 2
+        jobs = [
+            (train, self.force_noise, fit.effects, self._without_preload(fit.x, u) if loho else fit.x, max_nfev)
+            for u, (_, train, _) in enumerate(splits)
+        ]
         for (name, _, held), refit in zip(splits, _map(pool, _refit, jobs), strict=True):
-            e = held.F_obs - held.forces(refit.x[None], fit.effects)[0]
+            x_held = refit.x
+            if loho and self.m.preload:  # the held-out push's own preload: fitted to it, all else held
+                x_held = _held_preload(held, refit, fit.effects)
+            e = held.F_obs - held.forces(x_held[None], fit.effects)[0]
             errs.append(HeldoutErrors(e, refit.sigma_force, refit.rho_force))
             per.append(
                 {
@@ -818,6 +898,12 @@ class Diagnoser:
         kind = "leave-one-height-out" if len(self.m.force_pushes) >= 2 else "last third of the push"
         rmse = float(np.sqrt(np.mean(np.concatenate([u.errors_N for u in errs]) ** 2)))
         return {"heldout_force_rmse_N": rmse, "heldout": kind, "per_push": per}, errs
+
+    def _without_preload(self, x: NDArray, unit: int) -> NDArray:
+        """``x`` without the preload of the ``unit``-th push with forces (leave-one-height-out training)."""
+        if not self.m.preload:
+            return x
+        return np.delete(x, 2 + unit)
 
     def errors(self, fit: MapFit, pool=None) -> tuple[dict, list[HeldoutErrors]]:
         out = {
@@ -878,6 +964,26 @@ class Diagnoser:
         return {"blocks": blocks, "unexplained_structure": any(b["structured"] for b in blocks)}
 
 
+def _held_preload(held: ForwardModel, refit: MapFit, effects: tuple[str, ...]) -> NDArray:
+    """Parameters predicting a held-out push: the refit's, with the push's own preload fitted to its forces.
+
+    A preload belongs to one push and cannot be learnt from the others; the held-out error then measures
+    how well the model predicts the push's shape of force against displacement, not its unknown start.
+    Least squares on the AR(1)-whitened residuals (the refit's correlation), every other parameter held.
+    """
+    L = held.length_m
+    nb = held.n_base
+    base, coords = refit.x[:2], refit.x[refit.x.size - len(effects) :]
+
+    def fun(v):
+        x = np.concatenate([base, v, coords])
+        return _whiten_rows(held.F_obs - held.forces(x[None], effects)[0], held.first_sample, refit.rho_force)
+
+    v0 = np.clip([float(np.median(refit.preloads_m)) if refit.preloads_m.size else 0.0], 0.0, PRELOAD_MAX_L * L)
+    res = least_squares(fun, v0, bounds=([0.0] * (nb - 2), [PRELOAD_MAX_L * L] * (nb - 2)), max_nfev=20)
+    return np.concatenate([base, res.x, coords])
+
+
 def _refit(model: ForwardModel, force_noise: str, effects: tuple[str, ...], x0: NDArray, max_nfev: int) -> MapFit:
     """A held-out refit (module level: it runs in worker processes)."""
     return Diagnoser(model, force_noise).fit(effects, x0, max_nfev=max_nfev)
@@ -902,7 +1008,7 @@ def _candidate_fit(
     slow = any(e in SLOW for e in effects)
     new = dg.fit(cur.effects + tuple(effects), x0, max_nfev=12 if slow else 40)
     if tuple(effects) == ("yield",) and not cur.effects:  # a second start: the capped-table grid
-        alt = dg.fit(("yield",), dg.yield_start(), max_nfev=40)
+        alt = dg.fit(("yield",), dg.yield_start(cur), max_nfev=40)
         new = alt if alt.loglik > new.loglik else new
     lr = 2.0 * (new.loglik - cur.loglik)
     row = {"lr_statistic": float(lr), "fitted": new.natural(L)}

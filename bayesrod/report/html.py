@@ -171,6 +171,11 @@ the ensembles; the rank plot shows one histogram per ensemble.</p>
     return page(f"bayesrod: {summary['specimen']}", body)
 
 
+def _rounded(v, digits: int = 5):
+    """``v`` (a number or a list of them, e.g. one preload per push) rounded for display."""
+    return [round(x, digits) for x in v] if isinstance(v, list) else round(v, digits)
+
+
 def diagnose_report(doc: dict, pngs: Mapping[str, bytes]) -> str:
     """The diagnose report: error before/after, effect tests, residual structure, figures."""
     b, a = doc["before"], doc["after"]
@@ -206,7 +211,7 @@ def diagnose_report(doc: dict, pngs: Mapping[str, bytes]) -> str:
     truth_html = f"<p>Simulated; the truth: {esc(json.dumps(truth))}</p>" if truth else ""
     body = f"""<h1>Diagnosis: {esc(doc["specimen"])}</h1>
 <p>Effects added: <b>{esc(added)}</b>. {verdict}</p>
-<p>Fitted after: {esc(json.dumps({k: round(v, 5) for k, v in doc["fitted"].items()}))}</p>
+<p>Fitted after: {esc(json.dumps({k: _rounded(v) for k, v in doc["fitted"].items()}))}</p>
 <h2>Error before and after</h2>
 <table><tr><th>error</th><th>plain rod</th><th>after</th></tr>{err}</table>
 <p>Held-out ({esc(b.get("heldout") or "none: too few samples")}): each unit is left out in turn, the model is
