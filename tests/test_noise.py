@@ -123,3 +123,28 @@ def test_ar1_and_shared_error_densities_batch_over_leading_axes():
         cov += np.outer(offset[w], offset[w]) + np.outer(scale[w], scale[w])
         want = multivariate_normal(np.zeros(N), cov).logpdf(z[w])
         assert batch[w] == pytest.approx(want, rel=1e-10)
+
+
+def test_table_log_likelihood_is_the_explicit_gaussian_density_of_its_residuals():
+    """Forces (iid) and shape points (sd = scale x each point's sd) against scipy's normal density."""
+    from scipy.stats import norm
+
+    from bayesrod.dataset import read_dataset
+    from bayesrod.inference.likelihood import build_likelihood
+    from bayesrod.inference.priors import load_prior
+
+    spec = read_dataset(bayesrod.DEMO_DATASET)
+    lik = build_likelihood(spec, load_prior("default"))
+    assert lik.shape_has_sd
+    params = {
+        "EI0": np.array([2.5, 2.7]),
+        "p": np.array([0.41, 0.45]),
+        "sigma_force_N": np.array([0.03, 0.05]),
+        "shape_sd_scale": np.array([0.8, 1.3]),
+    }
+    got = lik.log_likelihood(params)
+    res = lik.residuals(params)
+    for w in range(2):
+        want = norm.logpdf(res["force"][w], 0.0, params["sigma_force_N"][w]).sum()
+        want += lik.shape_weight * norm.logpdf(res["shape"][w], 0.0, params["shape_sd_scale"][w] * lik.sd_obs).sum()
+        assert got[w] == pytest.approx(want, rel=1e-12, abs=1e-8)

@@ -676,13 +676,22 @@ class RodLikelihood:
         ie, we = _lagrange4(self.axis.grid, np.asarray(u, float))
         return ip, wp, ie, we
 
-    def _interp(self, table: NDArray, p: NDArray, u: NDArray | None) -> NDArray:
+    def _interp(self, table: NDArray, p: NDArray, u: NDArray | None, weights=None) -> NDArray:
+        """``table`` (E, P, N) at p (W,) and effect coordinate u: (W, N). ``weights``: from
+        :meth:`_gather_weights` for the same p and u (the tables of one evaluation share them)."""
+        ip, wp, ie, we = weights if weights is not None else self._gather_weights(p, u)
+        if self.axis is None:  # one effect node: a (W, 4) @ (W, 4, N) product
+            return np.matmul(wp[:, None, :], table[0][ip])[:, 0, :]
+        g = table[ie[:, :, None], ip[:, None, :]]  # (W, 4e, 4p, N)
+        w = we[:, :, None] * wp[:, None, :]
+        W, N = g.shape[0], g.shape[-1]
+        return np.matmul(w.reshape(W, 1, -1), g.reshape(W, -1, N))[:, 0, :]
+
+    def _gather_weights(self, p: NDArray, u: NDArray | None):
         p = np.atleast_1d(np.asarray(p, float))
         if self.axis is not None and u is None:
             u = np.zeros(p.shape)  # the neutral value of every tabled effect
-        ip, wp, ie, we = self._weights(p, u)
-        g = table[ie[:, :, None], ip[:, None, :]]  # (W, 4e, 4p, N)
-        return np.einsum("wb,wa,wban->wn", we, wp, g)
+        return self._weights(p, u)
 
     def effect_coordinate(self, params: dict) -> NDArray | None:
         """Table coordinate of the tabled effect (W,), or None."""
@@ -728,8 +737,10 @@ class RodLikelihood:
         """
         return self._interp(self.f_table, p, u)
 
-    def predict_shape_x(self, p: NDArray, u: NDArray | None = None) -> tuple[NDArray, NDArray]:
-        return self._interp(self.x_table, p, u), self._interp(self.cos_table, p, u)
+    def predict_shape_x(self, p: NDArray, u: NDArray | None = None, weights=None) -> tuple[NDArray, NDArray]:
+        """Centerline x and cos(tangent angle) at every observed point, (W, M) each (nondimensional x)."""
+        w = weights if weights is not None else self._gather_weights(p, u)
+        return self._interp(self.x_table, p, u, w), self._interp(self.cos_table, p, u, w)
 
     def residuals(self, params: dict) -> dict:
         """Force and shape residuals (observed - predicted) for parameter arrays of shape (W,)."""
@@ -737,6 +748,7 @@ class RodLikelihood:
         EI0 = np.atleast_1d(np.asarray(params["EI0"], float))
         out = {}
         u = self.effect_coordinate(params)
+        weights = None  # the gather weights in p (and u), shared by the force and shape tables
         if self.n_force:
             heights = self.F_height[None, :]
             if self.preload and all(n in params for n in self.preload_names):
@@ -748,7 +760,8 @@ class RodLikelihood:
                 F = EI0[:, None] / Lw[:, None] ** 2 * self.predict_nd_force_geometry(p, Lw, dh)
                 heights = heights + dh[:, self.F_push]
             else:
-                F = EI0[:, None] / self.L**2 * self.predict_nd_force(p, u)
+                weights = self._gather_weights(p, u)
+                F = EI0[:, None] / self.L**2 * self._interp(self.f_table, p, u, weights)
             if "yield" in params:
                 F = np.minimum(F, np.atleast_1d(params["yield"])[:, None] / heights)
             if "force_offset" in params:
@@ -757,7 +770,7 @@ class RodLikelihood:
                 F = F + self._per_push(params, self.offset_names, p.size)[:, self.F_push]
             out["force"] = self.F_obs[None, :] - F
         if self.n_points:
-            x, c = self.predict_shape_x(p, u)
+            x, c = self.predict_shape_x(p, u, weights)
             out["shape"] = (self.x_obs[None, :] - x) * c
         return out
 
@@ -806,15 +819,28 @@ class RodLikelihood:
             else:
                 ll += np.sum(-0.5 * (res["force"] / s) ** 2 - np.log(s), axis=1) - 0.5 * self.n_force * _LOG_2PI
         if "shape" in res:
+            # sd = scale x sd_obs (or sigma_shape_m): sum log sd = M log scale + sum log sd_obs
             if self.shape_has_sd:
-                s = np.atleast_1d(params["shape_sd_scale"])[:, None] * self.sd_obs[None, :]
+                scale = np.atleast_1d(params["shape_sd_scale"])
+                inv_sd, sum_log_sd = self._shape_sd_terms()
+                q = np.sum((res["shape"] * inv_sd[None, :]) ** 2, axis=1)
             else:
-                s = np.atleast_1d(params["sigma_shape_m"])[:, None]
-            ll_shape = np.sum(-0.5 * (res["shape"] / s) ** 2 - np.log(s), axis=1) - 0.5 * self.n_points * _LOG_2PI
+                scale = np.atleast_1d(params["sigma_shape_m"])
+                sum_log_sd = 0.0
+                q = np.sum(res["shape"] ** 2, axis=1)
+            ll_shape = -0.5 * q / scale**2 - self.n_points * np.log(scale) - sum_log_sd - 0.5 * self.n_points * _LOG_2PI
             ll += self.shape_weight * ll_shape
         if self.diameter != "off":
             ll += self._diameter_loglik(params)
         return ll
+
+    def _shape_sd_terms(self) -> tuple[NDArray, float]:
+        """1 / sd_obs (M,) and sum(log sd_obs), cached for the current ``sd_obs`` array."""
+        cached = self.__dict__.get("_sd_terms")
+        if cached is None or cached[0] is not self.sd_obs:
+            cached = (self.sd_obs, 1.0 / self.sd_obs, float(np.sum(np.log(self.sd_obs))))
+            self.__dict__["_sd_terms"] = cached
+        return cached[1], cached[2]
 
     def fit_error(self, params: dict) -> dict:
         """RMS force error [N] and shape error [mm] at one parameter set (docs/format.md: summary.fit_error)."""
