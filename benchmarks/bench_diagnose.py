@@ -47,6 +47,7 @@ def one_diagnosis(spec, n_nodes: int | None, workers: int = 1, bisection: bool =
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--fit-only", action="store_true", help="only the second table (the AR(1) fit's ESS/s)")
     ap.add_argument("--every-sample", action="store_true", help="also time the every-sample reference (slow)")
     args = ap.parse_args()
     cases = {
@@ -58,7 +59,7 @@ def main() -> None:
         "| bisection, 1 worker: s (ratio) | every sample, 1 worker: s (ratio) |"
     )
     print("|---|---|---|---|---|---|---|")
-    for name, spec in cases.items():
+    for name, spec in cases.items() if not args.fit_only else ():
         one = [one_diagnosis(spec, 32) for _ in range(args.repeat)]
         two = [one_diagnosis(spec, 32, workers=2) for _ in range(args.repeat)]
         med1, med2 = (statistics.median(t for t, _ in r) for r in (one, two))
