@@ -18,7 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from itertools import zip_longest
 from pathlib import Path
 
@@ -186,7 +186,10 @@ def main() -> None:
     jobs = [j for row in zip_longest(*groups) for j in row if j is not None]
     todo = [j for j in jobs if j[0] not in done]
     with ProcessPoolExecutor(args.workers) as ex:
-        for r in append_rows(csv, FIELDS, ex.map(one, todo), new_file=not done):
+        # rows are written as their cases finish (a slow case must not hold back the finished ones: a
+        # run cut short keeps every case it completed)
+        finished = (f.result() for f in as_completed([ex.submit(one, j) for j in todo]))
+        for r in append_rows(csv, FIELDS, finished, new_file=not done):
             print(f"{r['case']}: added [{r['added']}] held-out {r['heldout_before']:.4f} -> {r['heldout_after']:.4f}")
     text = tables(read_rows(csv))
     (out / "diagnose_study.md").write_text(text)
