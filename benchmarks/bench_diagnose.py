@@ -44,12 +44,8 @@ def one_diagnosis(spec, n_nodes: int | None, workers: int = 1, bisection: bool =
         elastica.EXPAND_POINTS, elastica.BOUNDARY_SECTIONS = points
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--fit-only", action="store_true", help="only the second table (the AR(1) fit's ESS/s)")
-    ap.add_argument("--every-sample", action="store_true", help="also time the every-sample reference (slow)")
-    args = ap.parse_args()
+def diagnosis_table(repeat: int, every_sample: bool) -> None:
+    """The first table: diagnoses of the clean and the base-spring twig."""
     cases = {
         "clean": bayesrod.simulate("twig", seed=1, noise_rho=0.9),
         "base spring 8 N m/rad": bayesrod.simulate("twig", seed=2, noise_rho=0.9, effects={"base_compliance": 8.0}),
@@ -59,14 +55,14 @@ def main() -> None:
         "| bisection, 1 worker: s (ratio) | every sample, 1 worker: s (ratio) |"
     )
     print("|---|---|---|---|---|---|---|")
-    for name, spec in cases.items() if not args.fit_only else ():
-        one = [one_diagnosis(spec, 32) for _ in range(args.repeat)]
-        two = [one_diagnosis(spec, 32, workers=2) for _ in range(args.repeat)]
+    for name, spec in cases.items():
+        one = [one_diagnosis(spec, 32) for _ in range(repeat)]
+        two = [one_diagnosis(spec, 32, workers=2) for _ in range(repeat)]
         med1, med2 = (statistics.median(t for t, _ in r) for r in (one, two))
         tb, added_b = one_diagnosis(spec, 32, bisection=True)
         bis = f"{tb:.1f} (x{tb / med1:.2f}){'' if added_b == one[0][1] else ' adds ' + ','.join(added_b)}"
         ref = "-"
-        if args.every_sample:
+        if every_sample:
             tr, _ = one_diagnosis(spec, None)
             ref = f"{tr:.1f} (x{tr / med1:.1f})"
         n = sum(p.force.force_N.size for p in spec.pushes)
@@ -74,7 +70,16 @@ def main() -> None:
         added = ", ".join(one[0][1]) or "none"
         print(f"| {name} | {n} | {med1:.1f} ({t1}) | {med2:.1f} ({t2}) | {added} | {bis} | {ref} |", flush=True)
 
-    print()
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--fit-only", action="store_true", help="only the second table (the AR(1) fit's ESS/s)")
+    ap.add_argument("--every-sample", action="store_true", help="also time the every-sample reference (slow)")
+    args = ap.parse_args()
+    if not args.fit_only:
+        diagnosis_table(args.repeat, args.every_sample)
+        print()
     print("| fit | median wall s | bulk ESS min(EI0, p) | ESS/s |")
     print("|---|---|---|---|")
     for noise in ("ar1", "iid"):

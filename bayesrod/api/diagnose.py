@@ -130,8 +130,8 @@ def diagnose(
         the diagnosis uses forces only.
     n_workers : int
         Processes the candidate fits and the held-out refits are spread over (default 1: none
-        started; the result does not depend on it). A 3-height twig takes 149 s with 1 and 87 s
-        with 2 on two cores (docs/performance.md).
+        started; the result does not depend on it). A 3-height twig with a missing base spring
+        takes 152 s with 1 and 86 s with 2 on two cores (docs/performance.md).
     """
     from ._common import as_dataset
 

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
+from itertools import combinations
 
 import numpy as np
 from numpy.typing import NDArray
@@ -719,19 +720,20 @@ class Diagnoser:
             if not np.isfinite(rss[k]):
                 raise ValueError("diagnose: expected forces that rise with displacement, got none the model can fit")
             if self.m.preload:
-                shift = self._preload_start(np.log(a[k]), float(p_grid[k]))
+                shift = self._preload_start(float(a[k]), p_grid, k)
         return np.concatenate([[np.log(a[k]), float(p_grid[k])], shift if self.m.preload else []])
 
-    def _preload_start(self, log_EI0: float, p: float) -> NDArray:
-        """Per push: the displacement [m] at which the plain model's force reaches the first force sample."""
+    def _preload_start(self, EI0: float, p_grid: NDArray, k: int) -> NDArray:
+        """Per push: the displacement [m] at which the plain model (EI0, p_grid[k]) reaches the push's
+        first force sample, read off the p grid's force curves (the ones :meth:`_unit_forces` built)."""
         from .likelihood import ForceCurves
 
-        L, EI0 = self.m.length_m, float(np.exp(log_EI0))
+        L = self.m.length_m
+        grid = np.linspace(0.0, PRELOAD_MAX_L, 201)
         out = []
-        for k in self.m.force_pushes:
-            d = self.m.data[k]
-            grid = np.linspace(0.0, PRELOAD_MAX_L, 201)
-            f = ForceCurves(d.height_m / L, np.array([p])).force(grid)[0] * EI0 / L**2
+        for j in self.m.force_pushes:
+            d = self.m.data[j]
+            f = ForceCurves(d.height_m / L, p_grid).force(grid)[k] * EI0 / L**2
             out.append(float(np.interp(max(float(d.F_N[0]), 0.0), np.maximum.accumulate(f), grid)) * L)
         return np.array(out)
 
@@ -763,10 +765,10 @@ class Diagnoser:
         EI0 in closed form on the samples below the cap, for every p of the grid and 40 moments.
         With preloads, those of ``plain`` (the plain fit) are kept.
         """
-        shift = None
+        pre = np.zeros(0)  # the preloads, kept at the plain fit's
         if self.m.preload:
-            shift = plain.preloads_m if plain is not None else np.zeros(len(self.m.force_pushes))
-        g, p_grid = self._unit_forces(np.linspace(0.0, P_MAX, 31), shift)
+            pre = plain.preloads_m if plain is not None else np.zeros(len(self.m.force_pushes))
+        g, p_grid = self._unit_forces(np.linspace(0.0, P_MAX, 31), pre if pre.size else None)
         F = self.m.F_obs
         h = np.array([self.m.data[k].height_m for k in self.m.force_push])
         m_max = float(np.max(F * h))
@@ -782,7 +784,6 @@ class Diagnoser:
             rss = np.where(a > 0, rss, np.inf)
             k = int(np.argmin(rss))
             if rss[k] < best:
-                pre = shift if shift is not None else []
                 best, out = rss[k], np.concatenate([[np.log(a[k]), p_grid[k]], pre, [np.log(frac * m_max)]])
         return out
 
@@ -1126,6 +1127,27 @@ def _loop(
     rows: list[dict] = []
     history = [{"effects": [], "errors": before, "loglik": cur.loglik}]
     gate = (min_heldout_gain, heldout_alpha, L, log if pool is None else _quiet)
+
+    def fits(groups, rnd, cur, level, cur_errs, cur_rmse):
+        """(row, ok) of the candidate fit of each group of screen rows (one effect, or a pair)."""
+        if groups:
+            log(f"round {rnd}: fitting with {', '.join(' + '.join(t['effect'] for t in g) for g in groups)}")
+        jobs = [
+            (
+                dg,
+                cur,
+                tuple(t["effect"] for t in g),
+                [_start_coord(t["effect"], t, cur, L) for t in g],
+                level,
+                len(g),
+                cur_errs,
+                cur_rmse,
+                *gate,
+            )
+            for g in groups
+        ]
+        return _map(pool, _candidate_fit, jobs)
+
     for rnd in range(1, max_effects + 1):
         remaining = [c for c in candidates if c not in added]
         if not remaining:
@@ -1140,14 +1162,9 @@ def _loop(
         rows += tests
         cur_rmse = history[-1]["errors"]["heldout_force_rmse_N"]
         accepted = None  # (effects, (fit, errors, error arrays, lr), row)
+        state = (rnd, cur, level, cur_errs, cur_rmse)
         screened = [t for t in tests if t["p_value"] < level]
-        if screened:
-            log(f"round {rnd}: fitting with {', '.join(t['effect'] for t in screened)}")
-        jobs = [
-            (dg, cur, (t["effect"],), [_start_coord(t["effect"], t, cur, L)], level, 1, cur_errs, cur_rmse, *gate)
-            for t in screened
-        ]
-        for t, (row, ok) in zip(screened, _map(pool, _candidate_fit, jobs), strict=True):
+        for t, (row, ok) in zip(screened, fits([(t,) for t in screened], *state), strict=True):
             e = t["effect"]
             t.update(row)
             if ok and (accepted is None or ok[3] > accepted[1][3]):
@@ -1157,24 +1174,8 @@ def _loop(
                 # pairs of the (up to three) singles that moved the likelihood (LR above chi^2_1 at 0.05)
                 moved = [t for t in tests if t.get("lr_statistic", 0.0) > stats.chi2.isf(0.05, 1)]
                 top = sorted(moved, key=lambda t: -t["lr_statistic"])[:3]
-                duos = [(top[i], top[j]) for i in range(len(top)) for j in range(i + 1, len(top))]
-                if duos:
-                    log(f"round {rnd}: fitting with {', '.join(a['effect'] + ' + ' + b['effect'] for a, b in duos)}")
-                jobs = [
-                    (
-                        dg,
-                        cur,
-                        (a["effect"], b["effect"]),
-                        [_start_coord(a["effect"], a, cur, L), _start_coord(b["effect"], b, cur, L)],
-                        level,
-                        2,
-                        cur_errs,
-                        cur_rmse,
-                        *gate,
-                    )
-                    for a, b in duos
-                ]
-                for (a, b), (row, ok) in zip(duos, _map(pool, _candidate_fit, jobs), strict=True):
+                duos = list(combinations(top, 2))
+                for (a, b), (row, ok) in zip(duos, fits(duos, *state), strict=True):
                     effs = (a["effect"], b["effect"])
                     prow = {"effect": "+".join(effs), "round": rnd, "pair": list(effs), "level": level}
                     prow.update(row, selected=False, statistic=float(row["lr_statistic"]))
@@ -1225,16 +1226,14 @@ def _no_worse_start(dg: Diagnoser, cur: MapFit, effects: tuple[str, ...], starts
     A fit started worse than the current model may end worse within its iteration budget: a friction
     step of 0.04 moves the slip of a twig by more than the noise (47 nats below the plain fit).
     """
-    neutral = np.array([_COORD[e][0] if e != "yield" else np.nan for e in effects])
+    # yield has no neutral value (its start comes from a grid): it is kept as given
+    neutral = np.array([starts[i] if e == "yield" else _COORD[e][0] for i, e in enumerate(effects)])
     noise = (cur.sigma_force, cur.rho_force, cur.shape_scale)
-    x = np.concatenate([cur.x, starts])
-    for k in range(tries + 1):
+    for factor in 0.25 ** np.arange(tries):  # 1, 1/4, 1/16: the step, then a quarter of it, ...
+        x = np.concatenate([cur.x, neutral + factor * (starts - neutral)])
         if dg.loglik(*dg.raw_residuals(x, cur.effects + tuple(effects)), noise) >= cur.loglik:
-            break
-        step = np.where(np.isnan(neutral), 0.0, starts - np.nan_to_num(neutral))
-        shrunk = np.nan_to_num(neutral) + step * (0.25 ** (k + 1) if k < tries - 1 else 0.0)
-        x = np.concatenate([cur.x, np.where(np.isnan(neutral), starts, shrunk)])
-    return x
+            return x
+    return np.concatenate([cur.x, neutral])  # the current model itself
 
 
 def _start_coord(effect: str, test: dict, fit: MapFit, L: float) -> float:

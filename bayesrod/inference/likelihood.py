@@ -822,8 +822,8 @@ class RodLikelihood:
             # sd = scale x sd_obs (or sigma_shape_m): sum log sd = M log scale + sum log sd_obs
             if self.shape_has_sd:
                 scale = np.atleast_1d(params["shape_sd_scale"])
-                inv_sd, sum_log_sd = self._shape_sd_terms()
-                q = np.sum((res["shape"] * inv_sd[None, :]) ** 2, axis=1)
+                sum_log_sd = float(np.sum(np.log(self.sd_obs)))
+                q = np.sum((res["shape"] / self.sd_obs[None, :]) ** 2, axis=1)
             else:
                 scale = np.atleast_1d(params["sigma_shape_m"])
                 sum_log_sd = 0.0
@@ -833,14 +833,6 @@ class RodLikelihood:
         if self.diameter != "off":
             ll += self._diameter_loglik(params)
         return ll
-
-    def _shape_sd_terms(self) -> tuple[NDArray, float]:
-        """1 / sd_obs (M,) and sum(log sd_obs), cached for the current ``sd_obs`` array."""
-        cached = self.__dict__.get("_sd_terms")
-        if cached is None or cached[0] is not self.sd_obs:
-            cached = (self.sd_obs, 1.0 / self.sd_obs, float(np.sum(np.log(self.sd_obs))))
-            self.__dict__["_sd_terms"] = cached
-        return cached[1], cached[2]
 
     def fit_error(self, params: dict) -> dict:
         """RMS force error [N] and shape error [mm] at one parameter set (docs/format.md: summary.fit_error)."""

@@ -438,7 +438,7 @@ def _bracket_and_solve(fun, x_guess, x_max=np.inf, grow=1.6, max_expand=80, boun
     def advance(i, pts):
         """Evaluate the rows of increasing points ``pts`` (n, m) of elements ``i``; move ``lo`` up to
         the last point below the first that stops (reaches 0: bracketed; NaN: branch end); return
-        the first stopping index per row (m: none stopped) and whether it reached 0."""
+        the first stopping index per row (m: none stopped) and whether that point is past the end."""
         n, m = pts.shape
         g = fun(pts.ravel(), np.repeat(i, m)).reshape(n, m)
         stop = np.isnan(g) | (g >= 0)  # fun rises until it reaches 0 or the branch ends
