@@ -1,10 +1,11 @@
 """`bayesrod diagnose` on every imported blueberry cane: the before/after table of docs/validation.md.
 
     bayesrod import blueberry ../shared/data/blueberry-canes --out blueberry --length-m 1.6
-    python scripts/diagnose_blueberry.py blueberry --out blueberry-diagnose [--workers 2]
+    python scripts/diagnose_blueberry.py blueberry --out blueberry-diagnose [--workers 2] [--length known]
 
 Runs the whole loop (every catalog effect; forces only: the canes have no
-centerlines) on each cane, writing ``OUT/<cane>/`` (diagnose.json, figures,
+centerlines) on each cane, with the cane length fitted in every model (the importer marks the
+assumed length approximate; ``--length known`` holds it), writing ``OUT/<cane>/`` (diagnose.json, figures,
 report.html), blueberry_diagnose.csv (resumable) and blueberry_diagnose.md.
 """
 
@@ -23,13 +24,13 @@ from bayesrod.dataset.io import append_rows, read_rows
 
 FIELDS = ["cane", "heights", "added", "fitted", "force_before", "force_after", "heldout_before", "heldout_after"]
 FIELDS += ["unexplained", "structured_blocks_after", "top_round1", "lag1_before", "lag1_after", "rho_after"]
-FIELDS += ["heldout_p", "seconds"]
+FIELDS += ["heldout_p", "seconds", "length_m"]
 
 
 def one(job) -> dict:
-    ds, out = job
+    ds, out, length = job
     t0 = time.perf_counter()
-    res = bayesrod.diagnose(ds, use_shapes=False)
+    res = bayesrod.diagnose(ds, use_shapes=False, length=length)
     seconds = time.perf_counter() - t0
     res.save(out, overwrite=True)
     doc = res.to_dict()
@@ -52,13 +53,15 @@ def one(job) -> dict:
         "rho_after": doc["noise"]["rho_force"],
         "heldout_p": " ".join(f"{c['heldout_p_value']:.3g}" for c in doc["candidates"] if c["selected"]),
         "seconds": round(seconds, 1),
+        "length_m": doc["fitted"].get("length_m", doc["length_m"]),
     }
 
 
 def table(rows) -> str:
     out = [
         "| cane | effects added | force RMSE before -> after [N] | held-out force RMSE before -> after [N] | "
-        "change | bootstrap p | residual lag-1 before -> after | EI0 [N m^2], p (MAP) | unexplained structure | s |",
+        "change | bootstrap p | residual lag-1 before -> after | EI0 [N m^2], p, L [m] (MAP) | "
+        "unexplained structure | s |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     hb, ha, fb, fa = [], [], [], []
@@ -73,7 +76,8 @@ def table(rows) -> str:
             f"| {r['cane']} | {r['added'] or 'none'} | {float(r['force_before']):.3f} -> {float(r['force_after']):.3f} "
             f"| {b:.3f} -> {a:.3f} | {100 * (a - b) / b:+.0f}% | {r['heldout_p'] or '-'} "
             f"| {float(r['lag1_before']):.2f} -> {float(r['lag1_after']):.2f} "
-            f"| {fit['EI0']:.3g}, {fit['p']:.2f} | {'yes' if int(r['unexplained']) else 'no'} | {r['seconds']} |"
+            f"| {fit['EI0']:.3g}, {fit['p']:.2f}, {float(r.get('length_m') or 0):.3g} "
+            f"| {'yes' if int(r['unexplained']) else 'no'} | {r['seconds']} |"
         )
     counts: dict[str, int] = {}
     for r in rows:
@@ -95,6 +99,7 @@ def main() -> None:
     ap.add_argument("root", help="folder of imported cane datasets")
     ap.add_argument("--out", default="blueberry-diagnose")
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--length", default="auto", choices=["auto", "known", "unknown"], help="as bayesrod diagnose")
     ap.add_argument("--shard", default="0/1", help="I/N: every N-th cane from the I-th (parallel runs, a CSV each)")
     args = ap.parse_args()
     out = Path(args.out)
@@ -103,7 +108,7 @@ def main() -> None:
     csv = out / ("blueberry_diagnose.csv" if n == 1 else f"blueberry_diagnose.{i}.csv")
     done = {r["cane"] for r in read_rows(csv)}
     canes = sorted(p for p in Path(args.root).iterdir() if (p / "specimen.json").is_file())[i::n]
-    jobs = [(str(p), str(out / p.name)) for p in canes if p.name not in done]
+    jobs = [(str(p), str(out / p.name), args.length) for p in canes if p.name not in done]
     with ProcessPoolExecutor(args.workers) as ex:
         for r in append_rows(csv, FIELDS, ex.map(one, jobs), new_file=not done):
             print(f"{r['cane']}: added [{r['added']}] held-out {r['heldout_before']:.3f} -> {r['heldout_after']:.3f}")

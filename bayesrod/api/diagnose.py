@@ -18,7 +18,7 @@ from typing import Any
 from ..dataset.plausibility import starts_loaded
 from ..inference.diagnose import CATALOG, ForwardModel
 from ..inference.diagnose import diagnose as diagnose_model
-from ..inference.likelihood import prepare_data
+from ..inference.likelihood import default_length_prior, length_is_approximate, prepare_data
 from ._common import DocResult, plain_json
 
 log = logging.getLogger("bayesrod")
@@ -101,6 +101,7 @@ def diagnose(
     heldout_alpha: float = 0.05,
     force_noise: str = "ar1",
     preload: bool | str = "auto",
+    length: str = "auto",
     n_workers: int = 1,
 ) -> Diagnosis:
     """Residual analysis: which missing effect explains the misfit, refit, error before and after.
@@ -128,6 +129,12 @@ def diagnose(
         nuisance in [0, 0.1 L], docs/diagnose.md). ``"auto"`` (default): when some push starts
         loaded (its first force above 5 noise sd and 2% of its peak, the dataset check's rule) and
         the diagnosis uses forces only.
+    length : {"auto", "known", "unknown"}
+        The stem length L: ``"unknown"`` fits it in every model as a nuisance within the support of
+        the fit's default length prior (uniform on [L/1.5, 1.5 L] of the dataset's length, above the
+        highest contact); forces only. ``"known"`` holds it at the dataset's. ``"auto"`` (default):
+        unknown when specimen.json marks the length approximate (``length_m_approximate``, as the
+        blueberry importer does) and the diagnosis uses forces only.
     n_workers : int
         Processes the candidate fits and the held-out refits are spread over (default 1: none
         started; the result does not depend on it). A 3-height twig with a missing base spring
@@ -151,8 +158,24 @@ def diagnose(
         raise ValueError(f"n_workers: expected an integer of at least 1, got {n_workers!r}")
     if preload not in ("auto", True, False):
         raise ValueError(f"preload: expected 'auto', True or False, got {preload!r}")
+    if length not in ("auto", "known", "unknown"):
+        raise ValueError(f"length: expected 'auto', 'known' or 'unknown', got {length!r}")
     data = prepare_data(spec, use_forces=True, use_shapes=use_shapes)
     shapes_used = any(d.x_m.size for d in data)
+    if length == "unknown" and shapes_used:
+        raise ValueError(
+            "length: expected a force-only diagnosis (use_shapes=False) to fit an unknown stem length, got centerlines"
+        )
+    approximate = length_is_approximate(spec)
+    fit_length = length == "unknown" or (length == "auto" and approximate and not shapes_used)
+    if length == "auto" and approximate and shapes_used:
+        log.warning(
+            "warning: %s: length_m %g m is marked approximate but stays fixed (centerlines are used; "
+            "diagnose with forces only to fit it)",
+            spec.specimen,
+            spec.length_m,
+        )
+    length_bounds = default_length_prior(spec).bounds() if fit_length else None
     if preload is True and shapes_used:
         raise ValueError(
             "preload: expected a force-only diagnosis (use_shapes=False): the shapes of a preloaded push "
@@ -166,7 +189,7 @@ def diagnose(
             ", ".join(loaded),
             "preload=False" if preload is False else "centerlines are used; diagnose with forces only to fit it",
         )
-    model = ForwardModel(data, spec.length_m, preload=use_preload)
+    model = ForwardModel(data, spec.length_m, preload=use_preload, length_bounds_m=length_bounds)
     res = diagnose_model(
         model,
         candidates=candidates,
@@ -192,6 +215,8 @@ def diagnose(
             "candidates": list(candidates),
             "preload": use_preload,
             "pushes_starting_loaded": loaded,
+            "length": "unknown" if fit_length else "known",
+            "length_bounds_m": list(length_bounds) if fit_length else None,
         },
     }
     truth = spec.extra.get("truth")

@@ -338,6 +338,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="fit each push's preload (forces only; auto: when a push starts loaded)",
     )
     dg.add_argument(
+        "--length",
+        default="auto",
+        choices=["auto", "known", "unknown"],
+        help="stem length: fit it in every model within [L/1.5, 1.5 L] (unknown), hold it (known), or fit it "
+        "when specimen.json marks it length_m_approximate (auto, default); forces only",
+    )
+    dg.add_argument(
         "--workers", type=int, default=2, help="processes for the candidate fits and held-out refits (default 2)"
     )
     dg.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
@@ -1064,6 +1071,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         heldout_alpha=args.heldout_alpha,
         force_noise=args.force_noise,
         preload={"auto": "auto", "yes": True, "no": False}[args.preload],
+        length=args.length,
         n_workers=args.workers,
     )
     res.save(out, overwrite=args.force)
@@ -1075,6 +1083,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     print(f"added effects: {', '.join(doc['added_effects']) or 'none'}")
     if doc["fitted"].get("preload_m"):
         print(f"  preload per push [mm]: {', '.join(f'{1000 * v:.3g}' for v in doc['fitted']['preload_m'])}")
+    if doc["settings"]["length"] == "unknown":
+        lo, hi = doc["settings"]["length_bounds_m"]
+        print(f"  stem length fitted: {doc['fitted']['length_m']:.3g} m (within [{lo:.3g}, {hi:.3g}] m)")
     for k in ("force_rmse_N", "shape_rmse_mm", "heldout_force_rmse_N"):
         if b[k] is not None:
             print(f"  {k:>22}: {b[k]:.4g} -> {a[k]:.4g}")

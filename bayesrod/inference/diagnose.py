@@ -176,12 +176,19 @@ class ForwardModel:
         began, added to its displacements (a nuisance, in [0, PRELOAD_MAX_L L] as in the fit's prior).
         Parameter vectors are then (log EI0, p, preload of each push with forces, effect coordinates);
         forces only.
+    length_bounds_m : (float, float) or None
+        Fit the stem length as a nuisance within these bounds [m] (the fit's length prior's support,
+        :func:`~bayesrod.inference.likelihood.default_length_prior`) instead of holding it at
+        ``length_m``; forces only. The length follows the preloads in a parameter vector:
+        (log EI0, p, preloads, L, effect coordinates). Every model of a diagnosis fits it, so a
+        likelihood ratio compares like with like.
     """
 
     data: list[PushData]
     length_m: float
     n_nodes: int = MAX_NODES
     preload: bool = False
+    length_bounds_m: tuple[float, float] | None = None
     n_force: int = field(init=False)
     n_points: int = field(init=False)
 
@@ -213,11 +220,44 @@ class ForwardModel:
                 "preload: expected a force-only diagnosis (centerlines not used): the shapes of a preloaded "
                 "push are not modelled yet"
             )
+        if self.length_bounds_m is not None:
+            if self.n_points:
+                raise ValueError(
+                    "length: expected a force-only diagnosis (centerlines not used) to fit the stem length, "
+                    "got centerlines"
+                )
+            lo, hi = (float(v) for v in self.length_bounds_m)
+            h_max = max(d.height_m for d in self.data)
+            if not (np.isfinite(hi) and h_max < lo < hi):
+                raise ValueError(
+                    f"length_bounds_m: expected bounds above the highest contact ({h_max:g} m), got [{lo:g}, {hi:g}] m"
+                )
+            self.length_bounds_m = (lo, hi)
+
+    @property
+    def n_preloads(self) -> int:
+        """Preload coordinates of a parameter vector (one per push with forces, or none)."""
+        return len(self.force_pushes) if self.preload else 0
+
+    @property
+    def length_index(self) -> int | None:
+        """Index of the fitted stem length [m] in a parameter vector (None: the length is held)."""
+        return 2 + self.n_preloads if self.length_bounds_m is not None else None
 
     @property
     def n_base(self) -> int:
-        """Parameters before the effect coordinates: log EI0, p and the preloads (if any)."""
-        return 2 + (len(self.force_pushes) if self.preload else 0)
+        """Parameters before the effect coordinates: log EI0, p, the preloads and the length (if fitted)."""
+        return 2 + self.n_preloads + (self.length_bounds_m is not None)
+
+    def lengths(self, X: NDArray) -> NDArray:
+        """Stem length [m] of each parameter set of ``X`` (K, n_par): fitted, or ``length_m``."""
+        X = np.atleast_2d(np.asarray(X, float))
+        i = self.length_index
+        return X[:, i].copy() if i is not None else np.full(X.shape[0], float(self.length_m))
+
+    def _like(self, data: list[PushData]) -> ForwardModel:
+        """A model of other data with this one's settings (length, nodes, preload, length bounds)."""
+        return ForwardModel(data, self.length_m, self.n_nodes, self.preload, self.length_bounds_m)
 
     def heldout_splits(self) -> list[tuple[str, ForwardModel, ForwardModel]]:
         """(name, training model, held-out model) of every held-out unit.
@@ -226,13 +266,13 @@ class ForwardModel:
         One push: its last third of force samples (by time: extrapolation to larger displacements),
         with the frames taken after the last training sample.
         """
-        L, fp = self.length_m, self.force_pushes
+        fp = self.force_pushes
         if len(fp) >= 2:
             return [
                 (
                     self.data[k].id,
-                    ForwardModel([d for j, d in enumerate(self.data) if j != k], L, self.n_nodes, self.preload),
-                    ForwardModel([self.data[k]], L, self.n_nodes, self.preload),
+                    self._like([d for j, d in enumerate(self.data) if j != k]),
+                    self._like([self.data[k]]),
                 )
                 for k in fp
             ]
@@ -246,8 +286,8 @@ class ForwardModel:
         return [
             (
                 f"{d.id} (last third)",
-                ForwardModel(train, L, self.n_nodes, self.preload),
-                ForwardModel([held], L, self.n_nodes, self.preload),
+                self._like(train),
+                self._like([held]),
             )
         ]
 
@@ -275,20 +315,24 @@ class ForwardModel:
     def forces(self, X: NDArray, effects: tuple[str, ...]) -> NDArray:
         """Sensor forces (K, n_force) for K parameter sets ``X`` (K, 2 + n_effects): one batched solve."""
         X = np.atleast_2d(np.asarray(X, float))
-        K, L = X.shape[0], self.length_m
+        K = X.shape[0]
         out = np.zeros((K, self.n_force))
         if not self.n_force:
             return out
         EI0 = np.exp(np.clip(X[:, 0], -60.0, 60.0))  # a wild trial step must not overflow
+        Ls = self.lengths(X)  # (K,): the nondimensional groups of each set use its own length
         nb = self.n_base
-        effs = [effects_from_coords(dict(zip(effects, X[k, nb:], strict=True)), EI0[k], L) for k in range(K)]
-        nds = [e.nondim(L, EI0[k]) for k, e in enumerate(effs)]
+        effs = [effects_from_coords(dict(zip(effects, X[k, nb:], strict=True)), EI0[k], Ls[k]) for k in range(K)]
+        nds = [e.nondim(Ls[k], EI0[k]) for k, e in enumerate(effs)]
         eff = {key: np.array([float(n[key]) for n in nds])[:, None, None] for key in nds[0]}
-        eta = np.array([self.data[k].height_m / L for k in self.force_pushes])[None, :, None]
+        heights = np.array([self.data[k].height_m for k in self.force_pushes])
+        eta = heights[None, :, None] / Ls[:, None, None]
         # each push's preload shifts its nodes and samples alike: the spline weights do not change
-        shift = X[:, 2:nb] if self.preload else np.zeros((K, len(self.force_pushes)))
-        r = force_from_displacement_nd((self._nodes[None] + shift[:, :, None]) / L, eta, X[:, 1][:, None, None], eff)
-        scale = EI0 / L**2
+        shift = X[:, 2 : 2 + self.n_preloads] if self.preload else np.zeros((K, len(self.force_pushes)))
+        r = force_from_displacement_nd(
+            (self._nodes[None] + shift[:, :, None]) / Ls[:, None, None], eta, X[:, 1][:, None, None], eff
+        )
+        scale = EI0 / Ls**2
         for j, k in enumerate(self.force_pushes):
             d, sl, S = self.data[k], self._slices[j], self._spline[j]
             exact = S.shape[0] <= S.shape[1]  # the nodes are the samples
@@ -300,11 +344,15 @@ class ForwardModel:
                 elif np.all(np.isfinite(f)) and (y.all() or not y.any()):
                     out[kk, sl] = S @ f
                 elif np.all(np.isfinite(f)):  # the yield onset (a kink) between nodes
-                    out[kk, sl] = self._yield_branches(j, d, f, y, EI0[kk], X[kk, 1], effs[kk], shift[kk, j])
+                    out[kk, sl] = self._yield_branches(
+                        j, d, f, y, EI0[kk], X[kk, 1], effs[kk], shift[kk, j], float(Ls[kk])
+                    )
                 elif not (y.any() and not y[np.isfinite(f)].all()):  # slips (no yield onset): hold
                     out[kk, sl] = self._slipped(j, d, f)
                 else:  # slips and yields: solve at every sample, hold past the slip
-                    sol = force_from_displacement(d.D_m + shift[kk, j], d.height_m, EI0[kk], X[kk, 1], L, effs[kk])
+                    sol = force_from_displacement(
+                        d.D_m + shift[kk, j], d.height_m, EI0[kk], X[kk, 1], float(Ls[kk]), effs[kk]
+                    )
                     out[kk, sl] = _hold(sol.force_N)
         return out
 
@@ -326,7 +374,16 @@ class ForwardModel:
         return out
 
     def _yield_branches(
-        self, j: int, d: PushData, f: NDArray, yielded: NDArray, EI0: float, p: float, eff, shift: float = 0.0
+        self,
+        j: int,
+        d: PushData,
+        f: NDArray,
+        yielded: NDArray,
+        EI0: float,
+        p: float,
+        eff,
+        shift: float = 0.0,
+        length_m: float | None = None,
     ) -> NDArray:
         """Forces of a push whose prediction yields between nodes: a spline per branch (elastic, plastic),
         direct solves for the samples between the last elastic and the first plastic node."""
@@ -339,7 +396,8 @@ class ForwardModel:
                 out[sel] = _through(nodes[keep], f[keep], D[sel])
         gap = (D > last_e) & (D < first_p)
         if gap.any():
-            out[gap] = force_from_displacement(D[gap] + shift, d.height_m, EI0, p, self.length_m, eff).force_N
+            L = self.length_m if length_m is None else length_m
+            out[gap] = force_from_displacement(D[gap] + shift, d.height_m, EI0, p, L, eff).force_N
         return out
 
     def predict(
@@ -408,6 +466,7 @@ class MapFit:
     loglik: float
     rho_force: float = 0.0
     jac_pred: NDArray | None = None  # (n_obs, n_par): d prediction / dx, raw units
+    length_fitted: bool = False  # x holds the stem length [m] just before the effect coordinates
 
     @property
     def coords(self) -> dict[str, float]:
@@ -416,18 +475,27 @@ class MapFit:
     @property
     def preloads_m(self) -> NDArray:
         """The preload of each push with forces [m] (empty without the preload nuisance)."""
-        return np.asarray(self.x[2 : self.x.size - len(self.effects)], float)
+        return np.asarray(self.x[2 : self.x.size - len(self.effects) - self.length_fitted], float)
+
+    @property
+    def length_m(self) -> float | None:
+        """The fitted stem length [m] (None: the length was held at the model's)."""
+        return float(self.x[self.x.size - len(self.effects) - 1]) if self.length_fitted else None
 
     @property
     def marginal_sigma_force(self) -> float:
         return float(self.sigma_force / np.sqrt(1.0 - self.rho_force**2))
 
     def natural(self, L: float) -> dict:
+        """EI0, p, the effects in SI units, the preloads and the fitted length; ``L``: the model's length
+        (the effects' nondimensional coordinates are converted with the fitted length when there is one)."""
         EI0 = float(np.exp(self.x[0]))
         out = {"EI0": EI0, "p": float(self.x[1])}
-        out.update(effects_from_coords(self.coords, EI0, L).to_mapping())
+        out.update(effects_from_coords(self.coords, EI0, self.length_m or L).to_mapping())
         if self.preloads_m.size:
             out["preload_m"] = [float(v) for v in self.preloads_m]
+        if self.length_fitted:
+            out["length_m"] = self.length_m
         return out
 
 
@@ -662,10 +730,11 @@ class Diagnoser:
         samples, and each Jacobian is one batched solve.
         """
         effects = tuple(effects)
-        n_pre = self.m.n_base - 2
-        lo = np.array([-np.inf, 0.0] + [0.0] * n_pre + [self._bound(e, 2) for e in effects])
+        n_pre = self.m.n_preloads
+        lb = list(self.m.length_bounds_m or ())
+        lo = np.array([-np.inf, 0.0] + [0.0] * n_pre + lb[:1] + [self._bound(e, 2) for e in effects])
         hi = np.array(
-            [np.inf, P_MAX] + [PRELOAD_MAX_L * self.m.length_m] * n_pre + [self._bound(e, 3) for e in effects]
+            [np.inf, P_MAX] + [PRELOAD_MAX_L * self.m.length_m] * n_pre + lb[1:] + [self._bound(e, 3) for e in effects]
         )
         x = np.clip(np.array(x0, float), lo + 1e-9 * np.isfinite(lo), hi - 1e-9 * np.isfinite(hi))
         rf, rs = self.raw_residuals(x, effects)
@@ -694,7 +763,8 @@ class Diagnoser:
         nf = self.m.n_force
         jw = self.weighted(J[:nf], J[nf:], noise)
         sf, rho, ss = noise
-        return MapFit(effects, x, sf, ss, rf, rs, jw, self.loglik(rf, rs, noise), rho, J)
+        ll = self.loglik(rf, rs, noise)
+        return MapFit(effects, x, sf, ss, rf, rs, jw, ll, rho, J, length_fitted=self.m.length_bounds_m is not None)
 
     def _bound(self, effect: str, k: int) -> float:
         if effect == "rest_curvature":  # the unloaded stem must still rise: |kappa0 L| <= 1.2 rad
@@ -702,8 +772,8 @@ class Diagnoser:
         return _COORD[effect][k]
 
     def start(self, p_grid: NDArray | None = None) -> NDArray:
-        """(log EI0, p[, preloads]) of the plain model: the force tables of the likelihood over a p grid,
-        closed-form EI0.
+        """(log EI0, p[, preloads][, L]) of the plain model: the force tables of the likelihood over a p grid,
+        closed-form EI0 (a fitted length starts at the given one).
 
         Forces are linear in EI0, so each p of the grid has a least-squares EI0; the best pair starts
         the direct fit. With preloads, each push's preload starts where that pair's force reaches the
@@ -721,7 +791,8 @@ class Diagnoser:
                 raise ValueError("diagnose: expected forces that rise with displacement, got none the model can fit")
             if self.m.preload:
                 shift = self._preload_start(float(a[k]), p_grid, k)
-        return np.concatenate([[np.log(a[k]), float(p_grid[k])], shift if self.m.preload else []])
+        length = [float(np.clip(self.m.length_m, *self.m.length_bounds_m))] if self.m.length_bounds_m else []
+        return np.concatenate([[np.log(a[k]), float(p_grid[k])], shift if self.m.preload else [], length])
 
     def _preload_start(self, EI0: float, p_grid: NDArray, k: int) -> NDArray:
         """Per push: the displacement [m] at which the plain model (EI0, p_grid[k]) reaches the push's
@@ -737,13 +808,16 @@ class Diagnoser:
             out.append(float(np.interp(max(float(d.F_N[0]), 0.0), np.maximum.accumulate(f), grid)) * L)
         return np.array(out)
 
-    def _unit_forces(self, p_grid: NDArray | None, shift: NDArray | None = None) -> tuple[NDArray, NDArray]:
+    def _unit_forces(
+        self, p_grid: NDArray | None, shift: NDArray | None = None, length_m: float | None = None
+    ) -> tuple[NDArray, NDArray]:
         """Plain-model forces per unit EI0 (P, n_force) over a p grid, from the likelihood's force tables;
-        ``shift``: each force push's displacements moved by this much [m] (its preload)."""
+        ``shift``: each force push's displacements moved by this much [m] (its preload); ``length_m``: the
+        stem length (default: the model's)."""
         from .likelihood import ForceCurves
 
         p_grid = np.linspace(0.0, P_MAX, 61) if p_grid is None else np.asarray(p_grid, float)
-        L = self.m.length_m
+        L = self.m.length_m if length_m is None else float(length_m)
         shift = np.zeros(len(self.m.force_pushes)) if shift is None else np.asarray(shift, float)
         g = (
             np.concatenate(
@@ -758,17 +832,22 @@ class Diagnoser:
         return g, p_grid
 
     def yield_start(self, plain: MapFit | None = None) -> NDArray:
-        """(log EI0, p[, preloads], log M_y) for the yield candidate of the plain model: a grid over p and M_y.
+        """(log EI0, p[, preloads][, L], log M_y) for the yield candidate of the plain model: a grid over p and M_y.
 
         The plain model's optimum can sit far from the yielding stem's (an extreme taper mimics the
         softening), out of reach of a local fit; this start caps the table forces at M_y / h and takes
         EI0 in closed form on the samples below the cap, for every p of the grid and 40 moments.
-        With preloads, those of ``plain`` (the plain fit) are kept.
+        With preloads or a fitted length, those of ``plain`` (the plain fit) are kept.
         """
-        pre = np.zeros(0)  # the preloads, kept at the plain fit's
+        pre = np.zeros(0)  # the preloads and the length, kept at the plain fit's
         if self.m.preload:
             pre = plain.preloads_m if plain is not None else np.zeros(len(self.m.force_pushes))
-        g, p_grid = self._unit_forces(np.linspace(0.0, P_MAX, 31), pre if pre.size else None)
+        length = plain.length_m if plain is not None and plain.length_fitted else None
+        if length is None and self.m.length_bounds_m is not None:
+            length = float(np.clip(self.m.length_m, *self.m.length_bounds_m))
+        g, p_grid = self._unit_forces(np.linspace(0.0, P_MAX, 31), pre if pre.size else None, length)
+        if length is not None and self.m.length_bounds_m is not None:
+            pre = np.concatenate([pre, [length]])
         F = self.m.F_obs
         h = np.array([self.m.data[k].height_m for k in self.m.force_push])
         m_max = float(np.max(F * h))
@@ -973,16 +1052,17 @@ def _held_preload(held: ForwardModel, refit: MapFit, effects: tuple[str, ...]) -
     Least squares on the AR(1)-whitened residuals (the refit's correlation), every other parameter held.
     """
     L = held.length_m
-    nb = held.n_base
+    n = held.n_preloads
     base, coords = refit.x[:2], refit.x[refit.x.size - len(effects) :]
+    length = [refit.length_m] if refit.length_fitted else []  # the stem's length: the refit's
 
     def fun(v):
-        x = np.concatenate([base, v, coords])
+        x = np.concatenate([base, v, length, coords])
         return _whiten_rows(held.F_obs - held.forces(x[None], effects)[0], held.first_sample, refit.rho_force)
 
     v0 = np.clip([float(np.median(refit.preloads_m)) if refit.preloads_m.size else 0.0], 0.0, PRELOAD_MAX_L * L)
-    res = least_squares(fun, v0, bounds=([0.0] * (nb - 2), [PRELOAD_MAX_L * L] * (nb - 2)), max_nfev=20)
-    return np.concatenate([base, res.x, coords])
+    res = least_squares(fun, v0, bounds=([0.0] * n, [PRELOAD_MAX_L * L] * n), max_nfev=20)
+    return np.concatenate([base, res.x, length, coords])
 
 
 def _refit(model: ForwardModel, force_noise: str, effects: tuple[str, ...], x0: NDArray, max_nfev: int) -> MapFit:

@@ -1,0 +1,81 @@
+"""An unknown stem length in the diagnosis (issue 19): every model fits it as a nuisance, the held-out
+push is predicted with its refit's length, and the API fits it when the dataset marks it approximate.
+
+Data are made from the physics (``force_from_displacement``) at the true length 0.8 m while the
+diagnosis is told 1.0 m, so the truth is set independently of the diagnosis' spline.
+"""
+
+import numpy as np
+import pytest
+
+import bayesrod
+from bayesrod.inference.diagnose import Diagnoser, ForwardModel
+from bayesrod.inference.likelihood import prepare_data
+from bayesrod.physics import Effects, force_from_displacement
+
+EI0, P, L_TRUE, L_GUESS = 2.63, 0.43, 0.80, 1.00
+BOUNDS = (L_GUESS / 1.5, L_GUESS * 1.5)
+HEIGHTS = (0.40, 0.50, 0.60)
+DELTAS = (0.010, 0.0, 0.020)  # preloads [m]
+
+
+def _pushes(sigma=0.004, seed=0, n=30, deltas=(0.0, 0.0, 0.0)):
+    rng = np.random.default_rng(seed)
+    D, F = [], []
+    for h, delta in zip(HEIGHTS, deltas, strict=True):
+        d = np.linspace(0.0, 0.15 * h / 0.4, n)
+        F.append(force_from_displacement(d + delta, h, EI0, P, L_TRUE).force_N + rng.normal(0, sigma, n))
+        D.append(d)
+    return bayesrod.Dataset.from_arrays(length_m=L_GUESS, height_m=list(HEIGHTS), displacement_m=D, force_N=F)
+
+
+def test_each_parameter_set_is_solved_at_its_own_length():
+    """Batched rows with different lengths, preloads before the length, an effect after it: each row's
+    forces are the physics at that row's length (the effect's coordinate c = EI0 / (k_b L) converted with it)."""
+    m = ForwardModel(prepare_data(_pushes(sigma=0.0), use_shapes=False), L_GUESS, preload=True, length_bounds_m=BOUNDS)
+    assert m.n_base == 2 + 3 + 1 and m.length_index == 5
+    c = 0.05
+    X = np.array([[np.log(EI0), P, *DELTAS, L, c] for L in (0.8, 1.1)])
+    F = m.forces(X, ("base_compliance",))
+    np.testing.assert_array_equal(m.lengths(X), [0.8, 1.1])
+    for row, L in enumerate((0.8, 1.1)):
+        eff = Effects(base_compliance=EI0 / (c * L))
+        for k, d in enumerate(m.data):
+            ref = force_from_displacement(d.D_m + DELTAS[k], d.height_m, EI0, P, L, eff).force_N
+            np.testing.assert_allclose(F[row, m.force_push == k], ref, rtol=0, atol=1e-5 * ref.max())
+
+
+def test_length_bounds_are_checked():
+    data = prepare_data(_pushes(sigma=0.0), use_shapes=False)
+    with pytest.raises(ValueError, match="length_bounds_m: expected bounds above the highest contact"):
+        ForwardModel(data, L_GUESS, length_bounds_m=(0.5, 1.5))  # 0.5 m is below the 0.6 m contact
+    with pytest.raises(ValueError, match="length_bounds_m"):
+        ForwardModel(data, L_GUESS, length_bounds_m=(1.2, 0.9))
+
+
+def test_length_is_recovered_and_the_held_out_push_uses_the_refits_length():
+    ds = _pushes(deltas=DELTAS)
+    m = ForwardModel(prepare_data(ds, use_shapes=False), L_GUESS, preload=True, length_bounds_m=BOUNDS)
+    dg = Diagnoser(m, force_noise="iid")
+    fit = dg.fit((), dg.start())
+    assert fit.length_m == pytest.approx(L_TRUE, rel=0.02)
+    assert np.exp(fit.x[0]) == pytest.approx(EI0, rel=0.05)
+    np.testing.assert_allclose(fit.preloads_m, DELTAS, atol=1.5e-3)  # the length is not read as a preload
+    nat = fit.natural(L_GUESS)
+    assert nat["length_m"] == fit.length_m and len(nat["preload_m"]) == 3
+    out, _ = dg.heldout(fit)
+    mid = {u["push"]: u for u in out["per_push"]}["h500"]
+    # the middle height held out: the two outer ones find the length, and the held-out push is predicted
+    # with it at the noise level (with the given 1.0 m it is off by far more). An outer height held out
+    # is an extrapolation along the (p, L) ridge of the other two (measured: L 0.90 and 0.67 m, errors
+    # 4-10 noise sd): an unknown length makes leave-one-height-out pessimistic, for every model alike.
+    assert mid["refit"]["length_m"] == pytest.approx(L_TRUE, rel=0.02)
+    assert mid["force_rmse_N"] < 3 * 0.004
+
+
+def test_the_api_checks_the_length_option():
+    ds = bayesrod.simulate("twig", seed=1, config_overrides={"n_frames_engaged": 2})
+    with pytest.raises(ValueError, match="length: expected 'auto', 'known' or 'unknown', got 'fit'"):
+        bayesrod.diagnose(ds, length="fit")
+    with pytest.raises(ValueError, match="length: expected a force-only diagnosis"):
+        bayesrod.diagnose(ds, length="unknown")
