@@ -40,7 +40,7 @@ from scipy.special import logsumexp
 
 from ..physics import Effects
 from ..physics.lumped import ktheta_nd
-from .likelihood import TABLE_EFFECTS, ForceCurves, _lagrange4
+from .likelihood import TABLE_EFFECTS, EffectAxis, ForceCurves, _lagrange4
 from .summary import credible_interval
 
 TARGETS = ("params", "ei", "k_theta")
@@ -106,9 +106,23 @@ class HeightPredictor:
         Fixed effects (e.g. a fitted tabled effect at its posterior median) of the forward model.
     EI0_ref : float
         EI0 at which the nondimensional effect groups are taken (the posterior median).
+    effect_axis : EffectAxis, optional
+        A tabled effect that varies from draw to draw (the one a fit sampled, e.g. a base compliance):
+        the curves are built at every node of its uniform coordinate grid and interpolated in it (4-point
+        Lagrange, as in p), and :meth:`forces` takes each draw's coordinate ``u``. ``effects`` must then
+        hold no tabled effect.
     """
 
-    def __init__(self, height_m: float, length_m: float, D_m, p_span, effects: Effects | None = None, EI0_ref=1.0):
+    def __init__(
+        self,
+        height_m: float,
+        length_m: float,
+        D_m,
+        p_span,
+        effects: Effects | None = None,
+        EI0_ref=1.0,
+        effect_axis: EffectAxis | None = None,
+    ):
         self.h, self.L = float(height_m), float(length_m)
         self.D = np.asarray(D_m, float)
         lo, hi = float(p_span[0]), float(p_span[1])
@@ -118,17 +132,48 @@ class HeightPredictor:
         self.p_grid = np.linspace(lo, hi, n)
         eff = effects or Effects()
         tabled = {k: v for k, v in eff.to_mapping().items() if k in TABLE_EFFECTS}
-        eff_nd = Effects.from_mapping(tabled).nondim(self.L, EI0_ref) if tabled else None
-        self.curves = ForceCurves(self.h / self.L, self.p_grid, effects_nd=eff_nd)
-        self.f_table = self.curves.force(self.D / self.L)  # (P, n)
+        self.effect_axis = effect_axis
+        if effect_axis is not None:
+            if tabled:
+                raise ValueError(
+                    f"effects: expected no fixed tabled effect beside the varying {effect_axis.name}, "
+                    f"got {', '.join(tabled)}"
+                )
+            eta = np.full(effect_axis.grid.size, self.h / self.L)
+            rows = ForceCurves.batch(eta, self.p_grid, effects_nd=effect_axis.nondim(effect_axis.grid))
+            self.f_table = np.stack([c.force(self.D / self.L) for c in rows])  # (E, P, n)
+            self.d_end = np.stack([c.d_end for c in rows])  # (E, P)
+        else:
+            eff_nd = Effects.from_mapping(tabled).nondim(self.L, EI0_ref) if tabled else None
+            curves = ForceCurves(self.h / self.L, self.p_grid, effects_nd=eff_nd)
+            self.f_table = curves.force(self.D / self.L)  # (P, n)
+            self.d_end = curves.d_end  # (P,)
         self.offset = eff.force_offset
         self.yield_moment = eff.yield_moment
 
-    def forces(self, log_EI0: NDArray, p: NDArray, offset=None, yield_moment=None) -> NDArray:
-        """Noise-free sensor force (K, n) [N] for draws (K,), held at the slip value past the slip."""
+    def _weights(self, p: NDArray, u: NDArray | None):
+        """Table indices and weights of draws (K,): p only, or (u, p) with an effect axis."""
         p = np.atleast_1d(np.asarray(p, float))
         idx, w = _lagrange4(self.p_grid, np.clip(p, self.p_grid[0], self.p_grid[-1]))
-        f = np.einsum("ka,kan->kn", w, self.f_table[idx])
+        if self.effect_axis is None:
+            return idx, w, None, None
+        if u is None:
+            raise ValueError(f"u: expected each draw's {self.effect_axis.name} coordinate, got none")
+        g = self.effect_axis.grid
+        iu, wu = _lagrange4(g, np.clip(np.atleast_1d(np.asarray(u, float)), g[0], g[-1]))
+        return idx, w, iu, wu
+
+    def _interp(self, table: NDArray, p: NDArray, u: NDArray | None) -> NDArray:
+        """``table`` ((P, ...) or (E, P, ...)) at each draw: (K, ...)."""
+        idx, w, iu, wu = self._weights(p, u)
+        if iu is None:
+            return np.einsum("ka,ka...->k...", w, table[idx])
+        return np.einsum("ka,kb,kba...->k...", w, wu, table[iu[:, :, None], idx[:, None, :]])
+
+    def forces(self, log_EI0: NDArray, p: NDArray, offset=None, yield_moment=None, u=None) -> NDArray:
+        """Noise-free sensor force (K, n) [N] for draws (K,), held at the slip value past the slip;
+        ``u`` (K,): each draw's effect coordinate (with an effect axis)."""
+        f = self._interp(self.f_table, p, u)
         F = np.exp(np.atleast_1d(log_EI0))[:, None] / self.L**2 * f
         my = self.yield_moment if yield_moment is None else np.atleast_1d(yield_moment)[:, None]
         if np.any(np.isfinite(my)):
@@ -136,22 +181,33 @@ class HeightPredictor:
         off = self.offset if offset is None else np.atleast_1d(offset)[:, None]
         return F + off
 
-    def slip_m(self, p: NDArray) -> NDArray:
+    def slip_m(self, p: NDArray, u: NDArray | None = None) -> NDArray:
         """Contact displacement at which each draw slips (K,) [m] (inf: beyond the table)."""
-        return np.interp(np.atleast_1d(p), self.p_grid, self.curves.d_end) * self.L
+        if self.effect_axis is None:
+            return np.interp(np.atleast_1d(p), self.p_grid, self.d_end) * self.L
+        return self._interp(self.d_end, p, u) * self.L
 
-    def observed(self, p: NDArray) -> NDArray:
+    def observed(self, p: NDArray, u: NDArray | None = None) -> NDArray:
         """(K, n) True where the planned sample is taken before the draw's slip."""
-        return self.D[None, :] <= self.slip_m(p)[:, None]
+        return self.D[None, :] <= self.slip_m(p, u)[:, None]
 
-    def jacobian(self, log_EI0: NDArray, p: NDArray, **kw) -> NDArray:
-        """d force / d (log EI0, p) at each draw: (K, n, 2), central differences."""
+    def jacobian(self, log_EI0: NDArray, p: NDArray, u: NDArray | None = None, **kw) -> NDArray:
+        """d force / d (log EI0, p[, u]) at each draw: (K, n, 2), or (K, n, 3) with an effect axis;
+        central differences."""
         d = 1e-4
         cols = []
         for a, b in ((d, 0.0), (0.0, d)):
-            up = self.forces(log_EI0 + a, p + b, **kw)
-            dn = self.forces(log_EI0 - a, p - b, **kw)
+            up = self.forces(log_EI0 + a, p + b, u=u, **kw)
+            dn = self.forces(log_EI0 - a, p - b, u=u, **kw)
             cols.append((up - dn) / (2 * d))
+        if self.effect_axis is not None:
+            # one-sided at the grid's ends (a rigid clamp sits at u = 0): divide by the step taken
+            g = self.effect_axis.grid
+            u = np.atleast_1d(np.asarray(u, float))
+            hi, lo = np.minimum(u + d, g[-1]), np.maximum(u - d, g[0])
+            up = self.forces(log_EI0, p, u=hi, **kw)
+            dn = self.forces(log_EI0, p, u=lo, **kw)
+            cols.append((up - dn) / np.maximum(hi - lo, 1e-12)[:, None])
         return np.stack(cols, axis=-1)
 
 
@@ -192,9 +248,9 @@ def eig_gaussian(
 
     Parameters
     ----------
-    theta : (K, 2) array
-        Posterior draws of (log EI0, p).
-    J : (K, n, 2) array
+    theta : (K, D) array
+        Posterior draws of (log EI0, p), and of a sampled effect's coordinate when D = 3.
+    J : (K, n, D) array
         Force sensitivities d F / d theta of the planned samples at each draw [N].
     mask : (K, n) bool array
         Samples recorded at each draw (before its slip).
@@ -211,13 +267,15 @@ def eig_gaussian(
         of 0.5 log(g^T Sigma g / g^T (Sigma^-1 + A_k)^-1 g) for a derived quantity with gradient g.
     """
     theta = np.asarray(theta, float)
-    Sigma = np.cov(theta, rowvar=False) + 1e-12 * np.eye(2)
+    D = theta.shape[1]
+    Sigma = np.atleast_2d(np.cov(theta, rowvar=False)) + 1e-12 * np.eye(D)
     Jm = np.where(np.asarray(mask)[..., None], J, 0.0)
     A = np.einsum("kni,knj->kij", Jm, Jm) / np.asarray(sigma, float)[:, None, None] ** 2
     if target == "params":
-        M = np.eye(2)[None] + Sigma[None] @ A
+        M = np.eye(D)[None] + Sigma[None] @ A
         return float(np.mean(0.5 * np.linalg.slogdet(M)[1]))
-    G = _functional_gradients(target, theta, length_m, target_height_m)  # (K, G, 2)
+    G = _functional_gradients(target, theta, length_m, target_height_m)  # (K, G, 2): stem quantities
+    G = np.concatenate([G, np.zeros(G.shape[:2] + (D - 2,))], axis=-1)  # an effect coordinate does not enter
     post = np.linalg.inv(np.linalg.inv(Sigma)[None] + A)  # (K, 2, 2)
     v_pre = np.einsum("kgi,ij,kgj->kg", G, Sigma, G)
     v_post = np.einsum("kgi,kij,kgj->kg", G, post, G)
@@ -319,6 +377,26 @@ def feasibility(F: NDArray, mask: NDArray, slip_m: NDArray, sigma: NDArray, plan
     return out
 
 
+#: table-coordinate nodes of a sampled effect in a design (over the draws' range: the posterior is narrow)
+DESIGN_EFFECT_NODES = 9
+
+
+def _effect_axis(samples: dict, length_m: float) -> EffectAxis | None:
+    """The table axis of the tabled effect the posterior sampled (its draws vary), over the draws' range
+    of its coordinate, or None. A fit samples at most one (the likelihood's one extra table axis)."""
+    varying = [k for k in TABLE_EFFECTS if k in samples and np.ptp(np.asarray(samples[k], float)) > 0]
+    if not varying:
+        return None
+    if len(varying) > 1:
+        raise ValueError(f"samples: expected at most one sampled tabled effect, got {', '.join(varying)}")
+    name = varying[0]
+    u = EffectAxis(name, np.zeros(1)).coordinate(np.asarray(samples[name], float), np.asarray(samples["EI0"]), length_m)
+    lo, hi = float(np.min(u)), float(np.max(u))
+    pad = 0.05 * (hi - lo)
+    lo = max(lo - pad, 0.0) if name == "base_compliance" else lo - pad  # u >= 0: the clamp is the end
+    return EffectAxis(name, np.linspace(lo, hi + pad, DESIGN_EFFECT_NODES))
+
+
 def design_heights(
     samples: dict,
     length_m: float,
@@ -340,6 +418,10 @@ def design_heights(
     samples : dict of (S,) arrays
         Posterior draws in natural units: ``EI0``, ``p``, ``sigma_force_N`` (else ``sigma_force_N``
         must be given in ``plan``-free form via ``samples["sigma_force_N"]``), and any fitted effects.
+        A sampled tabled effect (e.g. ``base_compliance``) varies with the draws: its table coordinate is
+        a third parameter of the information gain (the stem and its anchorage together: with one height
+        they are confounded, and the gain is largest where a push separates them); other tabled effects
+        are held at their medians.
     length_m : float
     candidates_m : (C,) heights [m]
     plan : PushPlan
@@ -377,8 +459,13 @@ def design_heights(
     if method == "nmc" and inner.size < 100:
         inner = rng.choice(S, size=n_inner)  # too few left over: resample (adds a little dependence)
 
+    axis = _effect_axis(samples, L)
+
     def draws(ix):
-        th = np.column_stack([np.log(samples["EI0"][ix]), samples["p"][ix]])
+        cols = [np.log(samples["EI0"][ix]), samples["p"][ix]]
+        if axis is not None:  # the sampled effect's table coordinate (u = c/(1+c) for a base compliance)
+            cols.append(axis.coordinate(np.asarray(samples[axis.name])[ix], np.asarray(samples["EI0"])[ix], L))
+        th = np.column_stack(cols)
         kw = {}
         if "force_offset" in samples:
             kw["offset"] = np.asarray(samples["force_offset"])[ix]
@@ -387,7 +474,9 @@ def design_heights(
         return th, np.asarray(samples["sigma_force_N"])[ix], kw
 
     th_o, sig_o, kw_o = draws(outer)
-    fixed = {k: float(np.median(samples[k])) for k in TABLE_EFFECTS if k in samples}
+    u_o = th_o[:, 2] if axis is not None else None
+    varying = axis.name if axis is not None else None
+    fixed = {k: float(np.median(samples[k])) for k in TABLE_EFFECTS if k in samples and k != varying}
     effects = Effects.from_mapping(fixed)
     p_all = np.asarray(samples["p"])
     p_span = (float(np.min(p_all)), float(np.max(p_all)))
@@ -405,17 +494,17 @@ def design_heights(
             )
             rows.append(row)
             continue
-        pred = HeightPredictor(h, L, plan.D_m, p_span, effects, EI0_ref)
-        F = pred.forces(th_o[:, 0], th_o[:, 1], **kw_o)
-        mask = pred.observed(th_o[:, 1])
-        feas = feasibility(F, mask, pred.slip_m(th_o[:, 1]), sig_o, plan)
+        pred = HeightPredictor(h, L, plan.D_m, p_span, effects, EI0_ref, effect_axis=axis)
+        F = pred.forces(th_o[:, 0], th_o[:, 1], u=u_o, **kw_o)
+        mask = pred.observed(th_o[:, 1], u_o)
+        feas = feasibility(F, mask, pred.slip_m(th_o[:, 1], u_o), sig_o, plan)
         if method == "gaussian":
-            J = pred.jacobian(th_o[:, 0], th_o[:, 1], **kw_o)
+            J = pred.jacobian(th_o[:, 0], th_o[:, 1], u=u_o, **kw_o)
             eig = eig_gaussian(th_o, J, mask, sig_o, target=target, length_m=L, target_height_m=target_height_m)
             se = None
         else:
             th_i, sig_i, kw_i = draws(inner)
-            F_i = pred.forces(th_i[:, 0], th_i[:, 1], **kw_i)
+            F_i = pred.forces(th_i[:, 0], th_i[:, 1], u=th_i[:, 2] if axis is not None else None, **kw_i)
             eig, se = eig_nested_mc(F, mask, sig_o, F_i, sig_i, rng)
         row.update(
             expected_information_gain_nats=float(eig),
@@ -445,5 +534,6 @@ def design_heights(
             "min_fraction": plan.min_fraction,
         },
         "fixed_effects": fixed,
+        "parameters": ["log_EI0", "p"] + ([f"{varying}_coordinate"] if varying else []),
         "n_draws": int(outer.size),
     }

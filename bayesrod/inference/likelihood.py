@@ -188,8 +188,9 @@ class ForceCurves:
         etas = np.asarray(etas, float)
         Q = etas.size
         eff = effects_nd or {}
+        # plain floats: the cache keys must hash (a 0-d array from Effects.nondim does not)
         rows = [
-            {k: float(np.asarray(v, float).reshape(-1)[q]) if np.ndim(v) else v for k, v in eff.items()}
+            {k: float(np.asarray(v, float).reshape(-1)[q]) if np.ndim(v) else float(v) for k, v in eff.items()}
             for q in range(Q)
         ]
         tag = (np.asarray(p_grid, float).tobytes(), int(n_f))
