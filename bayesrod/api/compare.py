@@ -8,6 +8,7 @@ between-specimen spread, warnings, convergence) and ``figures/forest.png``.
 from __future__ import annotations
 
 import copy
+import itertools
 import logging
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -17,6 +18,7 @@ from types import MappingProxyType
 import numpy as np
 
 from ..inference.hierarchical import (
+    PRIOR_COMPLIANCE,
     PRIOR_LOG_E,
     SpecimenPosterior,
     check_reduction,
@@ -34,20 +36,58 @@ def _is_run(path: Path) -> bool:
     return (path / "summary.json").is_file() and (path / "samples.npz").is_file()
 
 
+def _is_group_run(path: Path) -> bool:
+    """A fit-group stem directory (its summary names the conditions)."""
+    if not _is_run(path):
+        return False
+    import json
+
+    try:
+        return "conditions_order" in json.loads((path / "summary.json").read_text())
+    except (OSError, ValueError):
+        return False
+
+
 def expand_inputs(inputs) -> list[Path]:
-    """Paths as given, a ``fit-many`` output standing for all its finished runs."""
+    """Paths as given, a ``fit-many`` output standing for all its finished runs and a ``fit-group``
+    output (``groups.json``) for all its stems."""
+    import json
+
     expanded = []
     for raw in inputs:
         path = Path(raw)
         if (path / "survey.csv").is_file() and (path / "runs").is_dir():
             expanded += [d.with_suffix("") for d in sorted((path / "runs").glob("*.done"))]
+        elif (path / "groups.json").is_file():
+            stems = json.loads((path / "groups.json").read_text()).get("stems", {})
+            expanded += [path / d for d in stems.values()]
         else:
             expanded.append(path)
     return expanded
 
 
 def _specimen_posterior(post, species: str | None = None) -> SpecimenPosterior:
-    """(log EI0, p) draws of one fit (its thinned draws: those ``samples.npz`` holds), specimen and species."""
+    """(log EI0, p) draws of one fit (its thinned draws: those ``samples.npz`` holds), specimen and species;
+    of a stem under several conditions (a :class:`GroupFit`), its shared EI0 and p."""
+    from .group import GroupFit
+
+    if isinstance(post, GroupFit):
+        species = species or post.species
+        missing = [n for n in ("EI0", "p") if n not in post.doc.get("shared", {})]
+        if missing:
+            raise ValueError(
+                f"stem {post.stem_id}: field shared: expected EI0 and p shared by its conditions (the stem's "
+                f"own parameters to compare), got {', '.join(missing)} fitted per condition"
+            )
+        if not species:
+            raise ValueError(
+                f"stem {post.stem_id}: field species: expected the stem's species or genotype (set it in its "
+                "datasets' specimen.json), got none"
+            )
+        d = post.samples
+        return SpecimenPosterior(
+            post.stem_id, str(species), float(post.length_m or np.nan), np.column_stack([np.log(d["EI0"]), d["p"]])
+        )
     species = species or post.doc.get("species")
     if not species:
         where = post.config.get("run") or post.specimen
@@ -69,6 +109,10 @@ def _modulus_posterior(post, species: str | None = None) -> SpecimenPosterior | 
 
 def _moduli(fits) -> tuple[list[SpecimenPosterior] | None, list[str]]:
     """log E posteriors of every fit when all have measured diameters (else None), and the warnings."""
+    from .group import GroupFit
+
+    if any(isinstance(post, GroupFit) for post, _ in fits):
+        return None, []  # stems under several conditions carry no diameters
     moduli = [_modulus_posterior(post, sp) for post, sp in fits]
     if all(m is None for m in moduli):
         return None, []
@@ -85,12 +129,69 @@ def _moduli(fits) -> tuple[list[SpecimenPosterior] | None, list[str]]:
 
 def _as_posterior(x):
     from .fitting import Posterior
+    from .group import GroupFit
 
-    if isinstance(x, Posterior):
+    if isinstance(x, (Posterior, GroupFit)):
         return x
+    if isinstance(x, (str, Path)) and _is_group_run(Path(x)):
+        return GroupFit.load(x)
     if isinstance(x, (str, Path)) and _is_run(Path(x)):
         return Posterior.load(x)
-    raise ValueError(f"{x}: expected a bayesrod.Posterior or a fit run directory (summary.json + samples.npz)")
+    raise ValueError(
+        f"{x}: expected a bayesrod.Posterior, a GroupFit, a fit run directory or a fit-group stem directory "
+        "(summary.json + samples.npz)"
+    )
+
+
+def _anchorage(fits, seed: int) -> tuple[dict, list[str]]:
+    """Species contrasts of the base compliance per condition, over the stems fitted under several conditions.
+
+    For every condition all those stems share, a one-dimensional normal-normal model (the species model
+    of :mod:`~bayesrod.inference.hierarchical`) of each stem's base compliance [rad/(N m)] with
+    :data:`PRIOR_COMPLIANCE`. Returns ``{condition: {species, between_stem_sd, contrasts}}`` and warnings.
+    """
+    from .group import GroupFit
+
+    stems = [(post, sp or post.species) for post, sp in fits if isinstance(post, GroupFit)]
+    if not stems:
+        return {}, []
+    common = [c for c in stems[0][0].conditions if all(c in post.conditions for post, _ in stems)]
+    out, warnings = {}, []
+    if not common:
+        warnings.append("anchorage not compared: the stems share no condition name")
+    for k, cond in enumerate(common):
+        per = [
+            SpecimenPosterior(
+                post.stem_id,
+                str(sp),
+                float(post.length_m or np.nan),
+                np.asarray(post.samples[f"base_compliance_rad_per_Nm__{cond}"], float)[:, None],
+            )
+            for post, sp in stems
+        ]
+        if len({s.species for s in per}) < 2:
+            warnings.append(f"anchorage not compared: the stems of condition {cond} are of one species")
+            break
+        # one dimension per species: 600 steps give a bulk ESS of several thousand
+        fit = sample_species(per, seed=seed + 2 + k, prior=PRIOR_COMPLIANCE, n_steps=600)
+        sp, mu = fit["species"], fit["mu"][:, :, 0]
+        out[cond] = {
+            "species": {s: {"base_compliance_rad_per_Nm": credible_interval(mu[:, g])} for g, s in enumerate(sp)},
+            "between_stem_sd_rad_per_Nm": credible_interval(fit["tau"][:, 0]),
+            "contrasts": [
+                {
+                    "a": sp[a],
+                    "b": sp[b],
+                    "parameter": "base_compliance_rad_per_Nm",
+                    "condition": cond,
+                    **{f"difference_{q}": v for q, v in credible_interval(mu[:, a] - mu[:, b]).items()},
+                    "prob_a_greater": float(np.mean(mu[:, a] > mu[:, b])),
+                }
+                for a, b in itertools.combinations(range(len(sp)), 2)
+            ],
+            "convergence": {"rhat_max": fit["rhat_max"], "ess_bulk_min": fit["ess_bulk_min"]},
+        }
+    return out, warnings
 
 
 @dataclass(frozen=True, eq=False)
@@ -164,6 +265,8 @@ def compare(posteriors, *, height_m: float | None = None, seed: int = 0) -> Comp
             )
     with_E, w_E = _moduli(fits)
     warnings += w_E
+    anchorage, w_A = _anchorage(fits, seed)
+    warnings += w_A
     for w in warnings:
         log.warning("warning: %s", w)
     fit = sample_species(specimens, seed=seed)
@@ -198,5 +301,7 @@ def compare(posteriors, *, height_m: float | None = None, seed: int = 0) -> Comp
             "rhat_max": max(fit["rhat_max"], fit_E["rhat_max"]),
             "ess_bulk_min": min(fit["ess_bulk_min"], fit_E["ess_bulk_min"]),
         }
+    if anchorage:
+        result["anchorage"] = anchorage
     result = plain_json(result)
     return Comparison(MappingProxyType(result), MappingProxyType(fit), tuple(specimens))

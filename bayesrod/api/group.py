@@ -60,6 +60,32 @@ class GroupFit:
     samples: Mapping[str, NDArray] = field(repr=False)
     doc: Mapping = field(repr=False)
 
+    @property
+    def species(self) -> str | None:
+        """The stem's species (or genotype) from its datasets' specimen.json, or None."""
+        return self.doc.get("species")
+
+    @property
+    def length_m(self) -> float | None:
+        """The stem length the fit used [m] (None in runs written before it was recorded)."""
+        return self.doc.get("length_m")
+
+    @classmethod
+    def load(cls, path) -> GroupFit:
+        """A saved stem (``RUN/<stem_id>/``: summary.json and samples.npz, as :meth:`save` writes them)."""
+        import json
+
+        path = Path(path)
+        for name in ("summary.json", "samples.npz"):
+            if not (path / name).is_file():
+                raise ValueError(f"{path}: expected a fit-group stem directory with {name}, got none")
+        doc = json.loads((path / "summary.json").read_text())
+        if "conditions_order" not in doc or "stem_id" not in doc:
+            raise ValueError(f"{path / 'summary.json'}: expected a fit-group summary (stem_id, conditions_order)")
+        with np.load(path / "samples.npz") as z:
+            samples = {k: readonly(np.array(z[k])) for k in z.files}
+        return cls(doc["stem_id"], tuple(doc["conditions_order"]), MappingProxyType(samples), MappingProxyType(doc))
+
     def to_dict(self) -> dict:
         """summary.json, a fresh copy."""
         return copy.deepcopy(dict(self.doc))
@@ -220,6 +246,12 @@ def fit_group(
     if not (isinstance(max_steps, (int, np.integer)) and max_steps >= 100):
         raise ValueError(f"max_steps: expected an integer >= 100, got {max_steps!r}")
     sid = stem_id or next(iter(specs.values())).extra.get("stem_id") or next(iter(specs.values())).specimen
+    species = {c: ds.species for c, ds in specs.items()}
+    if len(set(species.values())) > 1:
+        raise ValueError(
+            f"species: expected one species for the conditions of stem {sid}, got "
+            + ", ".join(f"{c}: {v!r}" for c, v in species.items())
+        )
     pr = load_prior(prior)
     lik = GroupLikelihood(specs, pr, shared=tuple(shared), force_noise=force_noise, force_offsets=force_offsets)
     post = GroupPosterior(lik)
@@ -236,6 +268,8 @@ def fit_group(
         samples[f"base_compliance_rad_per_Nm__{c}"] = base_compliance(u, per[c]["EI0"], lik.liks[c].L)
     check = sharing_check(lik, theta0) if sharing else None
     doc = _summary(sid, lik, nat, per, samples, res, pr, check, time.perf_counter() - t0)
+    doc["species"] = next(iter(species.values()))
+    doc["length_m"] = float(lik.liks[lik.conditions[0]].L)
     ro = {k: readonly(v) for k, v in samples.items()}
     return GroupFit(sid, tuple(lik.conditions), MappingProxyType(ro), MappingProxyType(plain_json(doc)))
 

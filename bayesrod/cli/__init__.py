@@ -939,14 +939,14 @@ def cmd_demo(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- #
 @_command("compare")
 def cmd_compare(args: argparse.Namespace) -> int:
-    from ..api import Posterior, compare
-    from ..api.compare import _is_run, expand_inputs
+    from ..api import compare
+    from ..api.compare import _as_posterior, _is_run, expand_inputs
 
     out = _prepare_out(args)
     posts, fitted = [], []
     for path in expand_inputs(args.inputs):
         if _is_run(path):
-            posts.append(Posterior.load(path))
+            posts.append(_as_posterior(path))  # a fit, or a stem of fit-group
         elif (path / "specimen.json").is_file():
             logging.getLogger("bayesrod").info("%s: a dataset; fitting it first", path)
             from ..api import fit
@@ -955,7 +955,10 @@ def cmd_compare(args: argparse.Namespace) -> int:
             posts.append(post)
             fitted.append(post)
         else:
-            raise ValueError(f"{path}: expected a fit run (summary.json + samples.npz) or a dataset (specimen.json)")
+            raise ValueError(
+                f"{path}: expected a fit run or a fit-group stem (summary.json + samples.npz) or a dataset "
+                "(specimen.json)"
+            )
     res = compare(posts, height_m=args.height, seed=args.seed)
     res.save(out, overwrite=args.force)
     for post in fitted:
@@ -968,6 +971,13 @@ def cmd_compare(args: argparse.Namespace) -> int:
             print(
                 f"EI0 {c['a']} / {c['b']}: {c['ratio_median']:.3g} [{c['ratio_q05']:.3g}, {c['ratio_q95']:.3g}] "
                 f"(90%), P({c['a']} stiffer) = {c['prob_a_greater']:.3f}"
+            )
+    for cond, block in res.to_dict().get("anchorage", {}).items():
+        for c in block["contrasts"]:
+            print(
+                f"base compliance, {cond}: {c['a']} - {c['b']} = {c['difference_median']:.3g} "
+                f"[{c['difference_q05']:.3g}, {c['difference_q95']:.3g}] rad/(N m) (90%), "
+                f"P({c['a']} softer base) = {c['prob_a_greater']:.3f}"
             )
     print(f"wrote {args.out}/compare.json and figures/forest.png")
     return 0
