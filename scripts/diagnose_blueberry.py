@@ -1,11 +1,11 @@
 """`bayesrod diagnose` on every imported blueberry cane: the before/after table of docs/validation.md.
 
     bayesrod import blueberry ../shared/data/blueberry-canes --out blueberry --length-m 1.6
-    python scripts/diagnose_blueberry.py blueberry --out blueberry-diagnose [--workers 2] [--length known]
+    python scripts/diagnose_blueberry.py blueberry --out blueberry-diagnose [--workers 2] [--length unknown]
 
 Runs the whole loop (every catalog effect; forces only: the canes have no
-centerlines) on each cane, with the cane length fitted in every model (the importer marks the
-assumed length approximate; ``--length known`` holds it), writing ``OUT/<cane>/`` (diagnose.json, figures,
+centerlines) on each cane, the assumed cane length held (``--length unknown`` fits it in every
+model; the importer marks it approximate), writing ``OUT/<cane>/`` (diagnose.json, figures,
 report.html), blueberry_diagnose.csv (resumable) and blueberry_diagnose.md.
 """
 
@@ -99,7 +99,7 @@ def main() -> None:
     ap.add_argument("root", help="folder of imported cane datasets")
     ap.add_argument("--out", default="blueberry-diagnose")
     ap.add_argument("--workers", type=int, default=1)
-    ap.add_argument("--length", default="auto", choices=["auto", "known", "unknown"], help="as bayesrod diagnose")
+    ap.add_argument("--length", default="known", choices=["known", "unknown", "auto"], help="as bayesrod diagnose")
     ap.add_argument("--shard", default="0/1", help="I/N: every N-th cane from the I-th (parallel runs, a CSV each)")
     args = ap.parse_args()
     out = Path(args.out)

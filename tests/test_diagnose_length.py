@@ -79,3 +79,34 @@ def test_the_api_checks_the_length_option():
         bayesrod.diagnose(ds, length="fit")
     with pytest.raises(ValueError, match="length: expected a force-only diagnosis"):
         bayesrod.diagnose(ds, length="unknown")
+
+
+class _Captured(Exception):
+    pass
+
+
+def test_the_api_resolves_the_length_option(monkeypatch, caplog):
+    """What each option hands the loop (the loop itself is not run): known holds an approximate length and
+    says so, auto and unknown fit it within the fit's default prior's support."""
+    import dataclasses
+    import sys
+
+    api = sys.modules["bayesrod.api.diagnose"]  # the module (the package exports the function by its name)
+
+    def capture(model, **kw):
+        raise _Captured(model)
+
+    monkeypatch.setattr(api, "diagnose_model", capture)
+    ds = dataclasses.replace(_pushes(sigma=0.0), extra={"length_m_approximate": True})
+    bounds = {}
+    for option in ("known", "auto", "unknown"):
+        with pytest.raises(_Captured) as got:
+            bayesrod.diagnose(ds, length=option, use_shapes=False)
+        bounds[option] = got.value.args[0].length_bounds_m
+    assert bounds["known"] is None
+    assert bounds["auto"] == bounds["unknown"] == pytest.approx((L_GUESS / 1.5, 1.5 * L_GUESS))
+    assert "marked approximate but stays fixed" in caplog.text
+    exact = _pushes(sigma=0.0)  # a length not marked approximate: auto holds it
+    with pytest.raises(_Captured) as got:
+        bayesrod.diagnose(exact, length="auto", use_shapes=False)
+    assert got.value.args[0].length_bounds_m is None

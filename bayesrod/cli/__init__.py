@@ -339,10 +339,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     dg.add_argument(
         "--length",
-        default="auto",
-        choices=["auto", "known", "unknown"],
-        help="stem length: fit it in every model within [L/1.5, 1.5 L] (unknown), hold it (known), or fit it "
-        "when specimen.json marks it length_m_approximate (auto, default); forces only",
+        default="known",
+        choices=["known", "unknown", "auto"],
+        help="stem length: hold it (known, default), fit it in every model within [L/1.5, 1.5 L] (unknown), or "
+        "fit it when specimen.json marks it length_m_approximate (auto); fitting needs forces only",
     )
     dg.add_argument(
         "--workers", type=int, default=2, help="processes for the candidate fits and held-out refits (default 2)"
