@@ -110,3 +110,19 @@ def test_the_api_resolves_the_length_option(monkeypatch, caplog):
     with pytest.raises(_Captured) as got:
         bayesrod.diagnose(exact, length="auto", use_shapes=False)
     assert got.value.args[0].length_bounds_m is None
+
+
+def test_a_held_out_push_the_refit_cannot_reach_is_predicted_as_no_contact():
+    """A refit whose rest shape never reaches the held-out height (strong rest curvature, short stem): the
+    held-out push is predicted at zero force instead of stopping the diagnosis (it once killed a cane's)."""
+    from bayesrod.inference.diagnose import _held_forces
+
+    held = ForwardModel(prepare_data(_pushes(sigma=0.0), use_shapes=False), L_GUESS)
+    x = np.array([np.log(EI0), P, 1.2 / 0.62])  # kappa0 L = 1.2 rad over a 0.62 m stem: curls below 0.6 m
+    with pytest.raises(ValueError, match="height_m"):
+        held.forces(x[None], ("rest_curvature",))
+    np.testing.assert_array_equal(_held_forces(held, x, ("rest_curvature",)), np.zeros(held.n_force))
+    ok = np.array([np.log(EI0), P, 0.0])
+    np.testing.assert_allclose(
+        _held_forces(held, ok, ("rest_curvature",)), held.forces(ok[None], ("rest_curvature",))[0]
+    )

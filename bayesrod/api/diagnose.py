@@ -178,7 +178,7 @@ def diagnose(
             spec.length_m,
             "centerlines are used; diagnose with forces only to fit it"
             if shapes_used and length != "known"
-            else "length 'unknown' (--length unknown) fits it in every model",
+            else "diagnose with length 'unknown' to fit it in every model",
         )
     length_bounds = default_length_prior(spec).bounds() if fit_length else None
     if preload is True and shapes_used:

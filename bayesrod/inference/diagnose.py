@@ -965,7 +965,7 @@ class Diagnoser:
             x_held = refit.x
             if loho and self.m.preload:  # the held-out push's own preload: fitted to it, all else held
                 x_held = _held_preload(held, refit, fit.effects)
-            e = held.F_obs - held.forces(x_held[None], fit.effects)[0]
+            e = held.F_obs - _held_forces(held, x_held, fit.effects)
             errs.append(HeldoutErrors(e, refit.sigma_force, refit.rho_force))
             per.append(
                 {
@@ -1058,11 +1058,21 @@ def _held_preload(held: ForwardModel, refit: MapFit, effects: tuple[str, ...]) -
 
     def fun(v):
         x = np.concatenate([base, v, length, coords])
-        return _whiten_rows(held.F_obs - held.forces(x[None], effects)[0], held.first_sample, refit.rho_force)
+        return _whiten_rows(held.F_obs - _held_forces(held, x, effects), held.first_sample, refit.rho_force)
 
     v0 = np.clip([float(np.median(refit.preloads_m)) if refit.preloads_m.size else 0.0], 0.0, PRELOAD_MAX_L * L)
     res = least_squares(fun, v0, bounds=([0.0] * n, [PRELOAD_MAX_L * L] * n), max_nfev=20)
     return np.concatenate([base, res.x, length, coords])
+
+
+def _held_forces(held: ForwardModel, x: NDArray, effects: tuple[str, ...]) -> NDArray:
+    """Forces of a held-out push at a refit's parameters ``x``; zero where the refit's stem cannot be solved
+    there (e.g. its rest shape never reaches the held-out height): it predicts no contact, as the force
+    tables do, and the held-out error counts the push's whole force."""
+    try:
+        return held.forces(np.asarray(x, float)[None], effects)[0]
+    except ValueError:
+        return np.zeros(held.n_force)
 
 
 def _refit(model: ForwardModel, force_noise: str, effects: tuple[str, ...], x0: NDArray, max_nfev: int) -> MapFit:
