@@ -45,8 +45,29 @@ def stems():
     return [_stem(f"{g}{k}", g, rng) for g in "AB" for k in range(3)]
 
 
-def test_genotypes_differ_at_the_cut_base_not_in_the_stem(stems):
-    res = bayesrod.compare(stems, seed=1).to_dict()
+def test_a_stem_without_shared_parameters_or_species_is_refused(stems):
+    rng = np.random.default_rng(0)
+    own_p = _stem("C0", "A", rng, shared=("EI0",))
+    with pytest.raises(ValueError, match="stem C0: field shared: expected EI0 and p shared .* got p fitted"):
+        bayesrod.compare([*stems, own_p])
+    no_species = _stem("C1", "A", rng)
+    doc = dict(no_species.doc, species=None)
+    bare = GroupFit("C1", no_species.conditions, no_species.samples, MappingProxyType(doc))
+    with pytest.raises(ValueError, match="stem C1: field species"):
+        bayesrod.compare([*stems, bare])
+
+
+def test_genotypes_differ_at_the_cut_base_not_in_the_stem(stems, tmp_path, capsys):
+    """Through the CLI on a saved fit-group study (groups.json and one folder per stem standing for all its
+    stems; one compare run serves every check, it samples three hierarchical models)."""
+    GroupStudy(MappingProxyType({s.stem_id: s for s in stems}), ()).save(tmp_path / "groups")
+    loaded = GroupFit.load(tmp_path / "groups" / "B1")
+    assert loaded.species == "B" and loaded.conditions == ("intact", "cut")
+    np.testing.assert_array_equal(loaded.samples["p"], stems[4].samples["p"])
+    assert main(["compare", str(tmp_path / "groups"), "--out", str(tmp_path / "cmp"), "--seed", "1"]) == 0
+    assert "base compliance, cut: A - B = " in capsys.readouterr().out
+    res = json.loads((tmp_path / "cmp" / "compare.json").read_text())
+    assert set(res["anchorage"]) == {"intact", "cut"}
     assert res["groups"] == {"A": ["A0", "A1", "A2"], "B": ["B0", "B1", "B2"]}
     ei0 = next(c for c in res["contrasts"] if c["parameter"] == "EI0")
     assert ei0["ratio_q05"] < 1 < ei0["ratio_q95"]  # the same stem
@@ -61,31 +82,6 @@ def test_genotypes_differ_at_the_cut_base_not_in_the_stem(stems):
         band = res["anchorage"]["cut"]["species"][g]["base_compliance_rad_per_Nm"]
         assert band["q05"] < truth < band["q95"]
         assert band["q95"] - band["q05"] < 0.03  # three stems of spread 0.005 pin the mean, not the prior
-
-
-def test_a_stem_without_shared_parameters_or_species_is_refused(stems):
-    rng = np.random.default_rng(0)
-    own_p = _stem("C0", "A", rng, shared=("EI0",))
-    with pytest.raises(ValueError, match="stem C0: field shared: expected EI0 and p shared .* got p fitted"):
-        bayesrod.compare([*stems, own_p])
-    no_species = _stem("C1", "A", rng)
-    doc = dict(no_species.doc, species=None)
-    bare = GroupFit("C1", no_species.conditions, no_species.samples, MappingProxyType(doc))
-    with pytest.raises(ValueError, match="stem C1: field species"):
-        bayesrod.compare([*stems, bare])
-
-
-def test_compare_cli_reads_a_fit_group_output(stems, tmp_path, capsys):
-    """A saved fit-group study (groups.json and one folder per stem) stands for all its stems."""
-    GroupStudy(MappingProxyType({s.stem_id: s for s in stems}), ()).save(tmp_path / "groups")
-    loaded = GroupFit.load(tmp_path / "groups" / "B1")
-    assert loaded.species == "B" and loaded.conditions == ("intact", "cut")
-    np.testing.assert_array_equal(loaded.samples["p"], stems[4].samples["p"])
-    assert main(["compare", str(tmp_path / "groups"), "--out", str(tmp_path / "cmp"), "--seed", "1"]) == 0
-    out = capsys.readouterr().out
-    assert "base compliance, cut: A - B = " in out
-    doc = json.loads((tmp_path / "cmp" / "compare.json").read_text())
-    assert set(doc["anchorage"]) == {"intact", "cut"}
 
 
 def test_fit_group_refuses_conditions_of_different_species():
