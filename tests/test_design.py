@@ -274,10 +274,11 @@ def test_predictor_with_a_sampled_base_compliance_matches_direct_forward_solves(
     L, h, D = 0.8, 0.5, np.linspace(0.0, 0.06, 25)
     EI0, p, kb = _sampled_compliance()
     kb[-1] = np.inf  # a rigid clamp: u = 0, the grid's end
-    axis = _effect_axis({"EI0": EI0, "p": p, "base_compliance": kb}, L)
+    axis, u_all = _effect_axis({"EI0": EI0, "p": p, "base_compliance": kb}, L)
     assert axis.name == "base_compliance" and axis.grid[0] == 0.0 and axis.grid[-1] < 0.5  # spans the draws
     pred = HeightPredictor(h, L, D, (p.min(), p.max()), effect_axis=axis)
     u = axis.coordinate(kb, EI0, L)
+    np.testing.assert_array_equal(u_all, u)
     F = pred.forces(np.log(EI0), p, u=u)
     for k in range(EI0.size):
         ref = force_from_displacement(D, h, EI0[k], p[k], L, Effects(base_compliance=kb[k])).force_N

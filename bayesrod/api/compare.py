@@ -36,18 +36,6 @@ def _is_run(path: Path) -> bool:
     return (path / "summary.json").is_file() and (path / "samples.npz").is_file()
 
 
-def _is_group_run(path: Path) -> bool:
-    """A fit-group stem directory (its summary names the conditions)."""
-    if not _is_run(path):
-        return False
-    import json
-
-    try:
-        return "conditions_order" in json.loads((path / "summary.json").read_text())
-    except (OSError, ValueError):
-        return False
-
-
 def expand_inputs(inputs) -> list[Path]:
     """Paths as given, a ``fit-many`` output standing for all its finished runs and a ``fit-group``
     output (``groups.json``) for all its stems."""
@@ -133,10 +121,11 @@ def _as_posterior(x):
 
     if isinstance(x, (Posterior, GroupFit)):
         return x
-    if isinstance(x, (str, Path)) and _is_group_run(Path(x)):
-        return GroupFit.load(x)
     if isinstance(x, (str, Path)) and _is_run(Path(x)):
-        return Posterior.load(x)
+        try:  # a fit-group stem (its summary names the conditions), else a fit
+            return GroupFit.load(x)
+        except ValueError:
+            return Posterior.load(x)
     raise ValueError(
         f"{x}: expected a bayesrod.Posterior, a GroupFit, a fit run directory or a fit-group stem directory "
         "(summary.json + samples.npz)"
@@ -156,9 +145,11 @@ def _anchorage(fits, seed: int) -> tuple[dict, list[str]]:
     if not stems:
         return {}, []
     common = [c for c in stems[0][0].conditions if all(c in post.conditions for post, _ in stems)]
-    out, warnings = {}, []
     if not common:
-        warnings.append("anchorage not compared: the stems share no condition name")
+        return {}, ["anchorage not compared: the stems share no condition name"]
+    if len({str(sp) for _, sp in stems}) < 2:
+        return {}, ["anchorage not compared: the stems fitted under several conditions are of one species"]
+    out = {}
     for k, cond in enumerate(common):
         per = [
             SpecimenPosterior(
@@ -169,9 +160,6 @@ def _anchorage(fits, seed: int) -> tuple[dict, list[str]]:
             )
             for post, sp in stems
         ]
-        if len({s.species for s in per}) < 2:
-            warnings.append(f"anchorage not compared: the stems of condition {cond} are of one species")
-            break
         # one dimension per species: 600 steps give a bulk ESS of several thousand
         fit = sample_species(per, seed=seed + 2 + k, prior=PRIOR_COMPLIANCE, n_steps=600)
         sp, mu = fit["species"], fit["mu"][:, :, 0]
@@ -191,7 +179,7 @@ def _anchorage(fits, seed: int) -> tuple[dict, list[str]]:
             ],
             "convergence": {"rhat_max": fit["rhat_max"], "ess_bulk_min": fit["ess_bulk_min"]},
         }
-    return out, warnings
+    return out, []
 
 
 @dataclass(frozen=True, eq=False)

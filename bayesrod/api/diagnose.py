@@ -136,8 +136,8 @@ def diagnose(
         length, above the highest contact; forces only); ``"auto"``: unknown when specimen.json marks
         the length approximate (``length_m_approximate``, as the blueberry importer does) and the
         diagnosis uses forces only. Why the default holds it (docs/diagnose.md): on the 18 blueberry
-        canes fitting it changed no verdict, moved held-out errors by a few percent and made each
-        diagnosis 3-10 times slower (two heights leave L and p on a nearly flat ridge).
+        canes fitting it changed no verdict and moved held-out errors by a few percent, and each fit
+        is slower (a plain fit 4x: two heights leave L and p on a nearly flat ridge).
     n_workers : int
         Processes the candidate fits and the held-out refits are spread over (default 1: none
         started; the result does not depend on it). A 3-height twig with a missing base spring

@@ -381,12 +381,13 @@ def feasibility(F: NDArray, mask: NDArray, slip_m: NDArray, sigma: NDArray, plan
 DESIGN_EFFECT_NODES = 9
 
 
-def _effect_axis(samples: dict, length_m: float) -> EffectAxis | None:
+def _effect_axis(samples: dict, length_m: float) -> tuple[EffectAxis | None, NDArray | None]:
     """The table axis of the tabled effect the posterior sampled (its draws vary), over the draws' range
-    of its coordinate, or None. A fit samples at most one (the likelihood's one extra table axis)."""
+    of its coordinate, and that coordinate of every draw (S,); (None, None) without one. A fit samples
+    at most one (the likelihood's one extra table axis)."""
     varying = [k for k in TABLE_EFFECTS if k in samples and np.ptp(np.asarray(samples[k], float)) > 0]
     if not varying:
-        return None
+        return None, None
     if len(varying) > 1:
         raise ValueError(f"samples: expected at most one sampled tabled effect, got {', '.join(varying)}")
     name = varying[0]
@@ -394,7 +395,7 @@ def _effect_axis(samples: dict, length_m: float) -> EffectAxis | None:
     lo, hi = float(np.min(u)), float(np.max(u))
     pad = 0.05 * (hi - lo)
     lo = max(lo - pad, 0.0) if name == "base_compliance" else lo - pad  # u >= 0: the clamp is the end
-    return EffectAxis(name, np.linspace(lo, hi + pad, DESIGN_EFFECT_NODES))
+    return EffectAxis(name, np.linspace(lo, hi + pad, DESIGN_EFFECT_NODES)), u
 
 
 def design_heights(
@@ -459,12 +460,12 @@ def design_heights(
     if method == "nmc" and inner.size < 100:
         inner = rng.choice(S, size=n_inner)  # too few left over: resample (adds a little dependence)
 
-    axis = _effect_axis(samples, L)
+    axis, u_all = _effect_axis(samples, L)
 
     def draws(ix):
         cols = [np.log(samples["EI0"][ix]), samples["p"][ix]]
         if axis is not None:  # the sampled effect's table coordinate (u = c/(1+c) for a base compliance)
-            cols.append(axis.coordinate(np.asarray(samples[axis.name])[ix], np.asarray(samples["EI0"])[ix], L))
+            cols.append(u_all[ix])
         th = np.column_stack(cols)
         kw = {}
         if "force_offset" in samples:

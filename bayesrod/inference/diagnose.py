@@ -249,6 +249,11 @@ class ForwardModel:
         """Parameters before the effect coordinates: log EI0, p, the preloads and the length (if fitted)."""
         return 2 + self.n_preloads + (self.length_bounds_m is not None)
 
+    @property
+    def start_length(self) -> float | None:
+        """Where a fitted length starts [m]: the given one, inside its bounds (None: the length is held)."""
+        return float(np.clip(self.length_m, *self.length_bounds_m)) if self.length_bounds_m is not None else None
+
     def lengths(self, X: NDArray) -> NDArray:
         """Stem length [m] of each parameter set of ``X`` (K, n_par): fitted, or ``length_m``."""
         X = np.atleast_2d(np.asarray(X, float))
@@ -382,8 +387,8 @@ class ForwardModel:
         EI0: float,
         p: float,
         eff,
-        shift: float = 0.0,
-        length_m: float | None = None,
+        shift: float,
+        length_m: float,
     ) -> NDArray:
         """Forces of a push whose prediction yields between nodes: a spline per branch (elastic, plastic),
         direct solves for the samples between the last elastic and the first plastic node."""
@@ -396,8 +401,7 @@ class ForwardModel:
                 out[sel] = _through(nodes[keep], f[keep], D[sel])
         gap = (D > last_e) & (D < first_p)
         if gap.any():
-            L = self.length_m if length_m is None else length_m
-            out[gap] = force_from_displacement(D[gap] + shift, d.height_m, EI0, p, L, eff).force_N
+            out[gap] = force_from_displacement(D[gap] + shift, d.height_m, EI0, p, length_m, eff).force_N
         return out
 
     def predict(
@@ -791,7 +795,7 @@ class Diagnoser:
                 raise ValueError("diagnose: expected forces that rise with displacement, got none the model can fit")
             if self.m.preload:
                 shift = self._preload_start(float(a[k]), p_grid, k)
-        length = [float(np.clip(self.m.length_m, *self.m.length_bounds_m))] if self.m.length_bounds_m else []
+        length = [self.m.start_length] if self.m.length_bounds_m is not None else []
         return np.concatenate([[np.log(a[k]), float(p_grid[k])], shift if self.m.preload else [], length])
 
     def _preload_start(self, EI0: float, p_grid: NDArray, k: int) -> NDArray:
@@ -839,15 +843,14 @@ class Diagnoser:
         EI0 in closed form on the samples below the cap, for every p of the grid and 40 moments.
         With preloads or a fitted length, those of ``plain`` (the plain fit) are kept.
         """
-        pre = np.zeros(0)  # the preloads and the length, kept at the plain fit's
+        pre = np.zeros(0)  # the preloads, kept at the plain fit's
         if self.m.preload:
             pre = plain.preloads_m if plain is not None else np.zeros(len(self.m.force_pushes))
-        length = plain.length_m if plain is not None and plain.length_fitted else None
-        if length is None and self.m.length_bounds_m is not None:
-            length = float(np.clip(self.m.length_m, *self.m.length_bounds_m))
+        length = None  # the length, kept at the plain fit's (or where a fit starts it)
+        if self.m.length_bounds_m is not None:
+            length = plain.length_m if plain is not None else self.m.start_length
         g, p_grid = self._unit_forces(np.linspace(0.0, P_MAX, 31), pre if pre.size else None, length)
-        if length is not None and self.m.length_bounds_m is not None:
-            pre = np.concatenate([pre, [length]])
+        held = np.concatenate([pre, [length] if length is not None else []])  # between p and log M_y
         F = self.m.F_obs
         h = np.array([self.m.data[k].height_m for k in self.m.force_push])
         m_max = float(np.max(F * h))
@@ -863,7 +866,7 @@ class Diagnoser:
             rss = np.where(a > 0, rss, np.inf)
             k = int(np.argmin(rss))
             if rss[k] < best:
-                best, out = rss[k], np.concatenate([[np.log(a[k]), p_grid[k]], pre, [np.log(frac * m_max)]])
+                best, out = rss[k], np.concatenate([[np.log(a[k]), p_grid[k]], held, [np.log(frac * m_max)]])
         return out
 
     # -------------------------------------------------------------- statistics

@@ -41,8 +41,8 @@ PRIOR_TAU_SCALE = np.array([0.5, 0.3])
 #: mu ~ N(log 3 GPa, 3^2) (0.15-60 GPa within 1 sd), tau ~ half-normal(0.5)
 PRIOR_LOG_E = {"mean": np.array([np.log(3e9)]), "sd": np.array([3.0]), "tau_scale": np.array([0.5])}
 #: the species model of a base compliance [rad/(N m)] per condition (``compare`` over stems fitted under
-#: several conditions): mu ~ N(0, 1^2) (base springs from 1 N m/rad to rigid within 1 sd), tau ~
-#: half-normal(0.1) (between-stem spreads up to a base spring of ~5 N m/rad apart)
+#: several conditions): mu ~ N(0, 1^2) (compliances up to 1 rad/(N m), a base spring of 1 N m/rad, within
+#: 1 sd), tau ~ half-normal(0.1 rad/(N m))
 PRIOR_COMPLIANCE = {"mean": np.array([0.0]), "sd": np.array([1.0]), "tau_scale": np.array([0.1])}
 
 
