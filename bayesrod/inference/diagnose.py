@@ -42,7 +42,7 @@ from scipy import stats
 from scipy.interpolate import CubicSpline, PchipInterpolator
 from scipy.optimize import least_squares
 
-from ..physics import Effects, force_from_displacement
+from ..physics import Effects
 from ..physics.effects import EFFECT_NAMES
 from ..physics.elastica import centerline_at, force_from_displacement_nd
 from .likelihood import PRELOAD_MAX_L, PushData, ar1_innovations
@@ -338,6 +338,10 @@ class ForwardModel:
             (self._nodes[None] + shift[:, :, None]) / Ls[:, None, None], eta, X[:, 1][:, None, None], eff
         )
         scale = EI0 / Ls**2
+        # Samples that need their own solve (a yield onset between nodes) are gathered over every
+        # parameter set and push and solved in one batch: one march costs about the same for 1 or 100
+        # problems, and a Jacobian asks for one set per coordinate.
+        direct: list[tuple[int, int, slice, NDArray, NDArray, bool]] = []  # (set, push, slice, where, D, hold)
         for j, k in enumerate(self.force_pushes):
             d, sl, S = self.data[k], self._slices[j], self._spline[j]
             exact = S.shape[0] <= S.shape[1]  # the nodes are the samples
@@ -349,16 +353,29 @@ class ForwardModel:
                 elif np.all(np.isfinite(f)) and (y.all() or not y.any()):
                     out[kk, sl] = S @ f
                 elif np.all(np.isfinite(f)):  # the yield onset (a kink) between nodes
-                    out[kk, sl] = self._yield_branches(
-                        j, d, f, y, EI0[kk], X[kk, 1], effs[kk], shift[kk, j], float(Ls[kk])
-                    )
+                    out[kk, sl], gap, D = self._yield_branches(j, d, f, y)
+                    if gap.any():
+                        direct.append((kk, j, sl, gap, D[gap] + shift[kk, j], False))
                 elif not (y.any() and not y[np.isfinite(f)].all()):  # slips (no yield onset): hold
                     out[kk, sl] = self._slipped(j, d, f)
                 else:  # slips and yields: solve at every sample, hold past the slip
-                    sol = force_from_displacement(
-                        d.D_m + shift[kk, j], d.height_m, EI0[kk], X[kk, 1], float(Ls[kk]), effs[kk]
-                    )
-                    out[kk, sl] = _hold(sol.force_N)
+                    direct.append((kk, j, sl, np.ones(d.D_m.size, bool), d.D_m + shift[kk, j], True))
+        if direct:
+            kks = np.concatenate([np.full(job[4].size, job[0]) for job in direct])
+            D = np.concatenate([job[4] for job in direct])
+            h = np.concatenate([np.full(job[4].size, self.data[self.force_pushes[job[1]]].height_m) for job in direct])
+            sol = force_from_displacement_nd(
+                D / Ls[kks], h / Ls[kks], X[kks, 1], {key: v[kks, 0, 0] for key, v in eff.items()}
+            )
+            F = sol["f_measured"] * scale[kks]
+            start = 0
+            for kk, _, sl, where, Dj, hold in direct:
+                f = F[start : start + Dj.size]
+                start += Dj.size
+                if hold:
+                    out[kk, sl] = _hold(f)
+                else:
+                    out[kk, sl][where] = f
         return out
 
     def _slipped(self, j: int, d: PushData, f: NDArray) -> NDArray:
@@ -378,31 +395,21 @@ class ForwardModel:
             out[sel] = _through(nodes[:n_ok], f[:n_ok], D[sel])
         return out
 
-    def _yield_branches(
-        self,
-        j: int,
-        d: PushData,
-        f: NDArray,
-        yielded: NDArray,
-        EI0: float,
-        p: float,
-        eff,
-        shift: float,
-        length_m: float,
-    ) -> NDArray:
-        """Forces of a push whose prediction yields between nodes: a spline per branch (elastic, plastic),
-        direct solves for the samples between the last elastic and the first plastic node."""
+    def _yield_branches(self, j: int, d: PushData, f: NDArray, yielded: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+        """Forces of a push whose prediction yields between nodes: a spline per branch (elastic, plastic).
+
+        Returns the forces (n,), the samples between the last elastic and the first plastic node (n,)
+        bool, whose forces the caller solves directly (they are left unset here), and the samples'
+        displacements clipped to the first node (n,) [m].
+        """
         nodes = self._nodes[j]
         D = np.maximum(d.D_m, nodes[0])
-        out = np.empty(D.size)
+        out = np.zeros(D.size)
         last_e, first_p = nodes[~yielded].max(), nodes[yielded].min()
         for sel, keep in ((D <= last_e, ~yielded), (D >= first_p, yielded)):
             if sel.any():
                 out[sel] = _through(nodes[keep], f[keep], D[sel])
-        gap = (D > last_e) & (D < first_p)
-        if gap.any():
-            out[gap] = force_from_displacement(D[gap] + shift, d.height_m, EI0, p, length_m, eff).force_N
-        return out
+        return out, (D > last_e) & (D < first_p), D
 
     def predict(
         self, log_EI0: float, p: float, coords: dict[str, float], shapes: bool = True
