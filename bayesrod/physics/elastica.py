@@ -221,8 +221,9 @@ def _rhs(sig, Y, af, P, out=None):
     """
     if out is None:
         out = np.empty_like(Y)
-    if P["_p4_scalar"] is not None and np.ndim(sig) == 0:
-        e = max((1.0 - sig) ** P["_p4_scalar"] if sig < 1.0 else 0.0, _TINY) if P["_p4_scalar"] else 1.0
+    p4 = P["_p4_scalar"]
+    if p4 is not None and isinstance(sig, float):  # one taper exponent, one sigma (numpy floats are floats)
+        e = max((1.0 - sig) ** p4 if sig < 1.0 else 0.0, _TINY) if p4 else 1.0
         log1m = None
     else:
         log1m = np.log(np.maximum(1.0 - sig, _TINY))
@@ -236,12 +237,17 @@ def _rhs(sig, Y, af, P, out=None):
         np.multiply(out[1] - P["mu"] * out[0], af, out=out[3])
         np.negative(out[3], out=out[3])
     else:
-        np.multiply(out[1], -af, out=out[3])
+        np.multiply(out[1], af, out=out[3])
+        np.negative(out[3], out=out[3])
     if P["_weighted"]:
         if log1m is None:
             log1m = np.log(max(1.0 - sig, _TINY))
         out[3] -= P["w0"] * np.exp(P["_q"] * log1m) / P["_q"] * out[0]
     return out
+
+
+# Rows of the tableau without their zero tail: stage i combines the first i slopes.
+_A_ROWS = [np.ascontiguousarray(_A[i, :i]) for i in range(12)]
 
 
 def _step(Y, sig, h, f, P, active):
@@ -251,8 +257,19 @@ def _step(Y, sig, h, f, P, active):
     K = np.empty((12, 4, B))
     K2 = K.reshape(12, 4 * B)
     _rhs(sig, Y, af, P, K[0])
+    if isinstance(h, float):  # one step size: the stages are dot products into one buffer
+        Yf = np.ascontiguousarray(Y).reshape(4 * B)
+        Yi = np.empty(4 * B)
+        Y2 = Yi.reshape(4, B)
+        for i in range(1, 12):
+            np.dot(h * _A_ROWS[i], K2[:i], out=Yi)
+            Yi += Yf
+            _rhs(sig + _C[i] * h, Y2, af, P, K[i])
+        out = np.dot(h * _B, K2)
+        out += Yf
+        return out.reshape(4, B)
     for i in range(1, 12):
-        Yi = Y + h * (_A[i, :i] @ K2[:i]).reshape(4, B)
+        Yi = Y + h * (_A_ROWS[i] @ K2[:i]).reshape(4, B)
         _rhs(sig + _C[i] * h, Yi, af, P, K[i])
     return Y + h * (_B @ K2).reshape(4, B)
 
@@ -375,8 +392,11 @@ def _locate(Y, sig, h, f, P, comp, target, dmax, iters=8):
     d = np.clip(dmax * (target - y0) / np.where(y1 > y0, y1 - y0, 1.0), 0.0, dmax)
     for _ in range(iters):
         yd = _step(Y, sig, d, f, P, 1.0)
+        miss = yd[comp] - target
+        if np.all(np.abs(miss) <= 1e-15 * np.maximum(np.abs(target), 1.0)):  # converged: yd is the answer
+            return yd, d
         slope = _rhs(sig + d, yd, f, P)[comp]
-        d = np.clip(d - (yd[comp] - target) / np.maximum(slope, 1e-6), 0.0, dmax)
+        d = np.clip(d - miss / np.maximum(slope, 1e-6), 0.0, dmax)
     return _step(Y, sig, d, f, P, 1.0), d
 
 
@@ -607,15 +627,19 @@ def force_from_displacement_nd(
         )
     target = ref["xi_c"] + d_
 
-    def g_elastic(f, i):
-        s = _equilibrium(f, zeros[i], _subset(P, i), n_steps)
-        return np.where(s["found"], s["xi_c"] - target[i], np.nan)
+    # Only displacements past first contact are solved: at d <= 0 the force is zero, and a root at the
+    # bracket's end (g(0) = 0) would cost the root finder many rounds for nothing.
+    moved = np.flatnonzero(d_ > 0)
 
-    k_guess = _linear_kx_nd(P)
-    f_guess = np.maximum(d_, 1e-9) * k_guess
-    f_sol, ok = _bracket_and_solve(g_elastic, f_guess)
-    f_sol = np.where(d_ <= 0, 0.0, f_sol)
-    ok = ok | (d_ <= 0)
+    def g_elastic(f, i):
+        j = moved[i]
+        s = _equilibrium(f, zeros[j], _subset(P, j), n_steps)
+        return np.where(s["found"], s["xi_c"] - target[j], np.nan)
+
+    f_sol, ok = np.zeros(B), np.ones(B, bool)
+    if moved.size:
+        f_guess = d_[moved] * _linear_kx_nd(_subset(P, moved))
+        f_sol[moved], ok[moved] = _bracket_and_solve(g_elastic, f_guess)
     phi_p = np.zeros(B)
     sol = _equilibrium(np.nan_to_num(f_sol), phi_p, P, n_steps, keep_shape)
     yielded = ok & (sol["m0"] > P["m_yield"])
