@@ -1,6 +1,7 @@
 """Diagnosis (issue 9): undeclared effects are found, clean data are left alone, structure is flagged."""
 
 import json
+from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pytest
@@ -150,12 +151,18 @@ def test_candidate_start_is_pulled_back_until_it_fits_no_worse(datasets):
     assert abs(x0[-1]) < abs(far[0])
 
 
-def test_diagnosis_does_not_depend_on_the_number_of_workers(datasets):
+def test_offset_is_attributed_and_the_refits_do_not_depend_on_the_worker_processes(datasets):
+    """The default suite's end-to-end attribution (the others are slow): the undeclared offset is added
+    and the held-out error drops; the held-out refits mapped over worker processes give what they give
+    in turn (one diagnosis, not two: the pool runs the same jobs the loop maps)."""
     m = _model(datasets["offset"])
-    one = diagnose(m, candidates=("force_offset",))
-    two = diagnose(m, candidates=("force_offset",), workers=2)
-    assert one["added_effects"] == two["added_effects"] == ["force_offset"]
-    for key in ("before", "after", "candidates", "fitted", "noise"):
-        assert json.dumps(one[key], sort_keys=True, default=str) == json.dumps(two[key], sort_keys=True, default=str)
+    r = diagnose(m, candidates=("force_offset",))
+    assert r["added_effects"] == ["force_offset"]
+    assert r["fitted"]["force_offset"] == pytest.approx(0.1, rel=0.15)
+    assert r["after"]["heldout_force_rmse_N"] < 0.7 * r["before"]["heldout_force_rmse_N"]
+    dg = Diagnoser(m)
+    with ProcessPoolExecutor(2) as pool:
+        pooled, _ = dg.errors(r["_fit"], pool=pool)
+    assert json.dumps(pooled, sort_keys=True) == json.dumps(r["after"], sort_keys=True)
     with pytest.raises(ValueError, match="workers"):
         diagnose(m, candidates=("force_offset",), workers=0)

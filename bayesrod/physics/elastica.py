@@ -404,11 +404,19 @@ def _locate(Y, sig, h, f, P, comp, target, dmax, iters=8):
 # Vectorised scalar root finding (Illinois regula falsi) and bracketing
 # --------------------------------------------------------------------------- #
 def _illinois(fun, lo, hi, glo, ghi, xtol=1e-13, maxiter=80):
-    """Roots of increasing ``fun`` on brackets with glo < 0 <= ghi (elementwise)."""
+    """Roots of increasing ``fun`` on brackets with glo < 0 <= ghi (elementwise).
+
+    Each round evaluates two points per element in one call: the candidate and a point 1e-7 (relative)
+    beyond it. Both narrow the bracket; their difference quotient gives a Newton step, the next
+    candidate when it falls inside the bracket (otherwise the Illinois regula falsi point of the
+    bracket). Newton converges in about half the rounds of regula falsi, and a round costs about the
+    same for twice the problems.
+    """
     lo, hi, glo, ghi = (np.array(a, float) for a in (lo, hi, glo, ghi))
     x = hi.copy()
     todo = np.ones(lo.shape, bool)
     side = np.zeros(lo.shape, int)
+    newton = np.full(lo.shape, np.nan)  # the Newton candidate of the last round (NaN: none)
     for _ in range(maxiter):
         if not todo.any():
             break
@@ -417,20 +425,35 @@ def _illinois(fun, lo, hi, glo, ghi, xtol=1e-13, maxiter=80):
         xs = np.where(
             denom > 0, hi[i] - ghi[i] * (hi[i] - lo[i]) / np.where(denom > 0, denom, 1), 0.5 * (lo[i] + hi[i])
         )
+        xn = newton[i]
+        use_n = (xn > lo[i]) & (xn < hi[i])
+        xs = np.where(use_n, xn, xs)
         bad = ~((xs > lo[i]) & (xs < hi[i]))
         xs[bad] = 0.5 * (lo[i] + hi[i])[bad]
-        g = fun(xs, i)
-        g = np.where(np.isnan(g), np.inf, g)  # beyond the branch counts as "too far"
+        dx = 1e-7 * np.maximum(np.abs(xs), 1e-300)
+        x2 = np.minimum(xs + dx, hi[i])
+        both = fun(np.concatenate([xs, x2]), np.concatenate([i, i]))
+        both = np.where(np.isnan(both), np.inf, both)  # beyond the branch counts as "too far"
+        g, g2 = both[: i.size], both[i.size :]
         x[i] = xs
-        up = g >= 0
-        # Illinois: halve the retained end's value when the same side repeats.
-        ju, jd = i[up], i[~up]
-        glo[ju] = np.where(side[ju] == 1, 0.5 * glo[ju], glo[ju])
-        hi[ju], ghi[ju] = xs[up], np.minimum(g[up], 1e300)
-        side[ju] = 1
-        ghi[jd] = np.where(side[jd] == -1, 0.5 * ghi[jd], ghi[jd])
-        lo[jd], glo[jd] = xs[~up], g[~up]
-        side[jd] = -1
+        with np.errstate(invalid="ignore"):  # inf - inf past a branch end: no Newton step there
+            slope = (g2 - g) / np.where(x2 > xs, x2 - xs, 1.0)
+        ok = np.isfinite(g2) & np.isfinite(g) & (slope > 0) & (x2 > xs)
+        newton[i] = np.where(ok, xs - g / np.where(ok, slope, 1.0), np.nan)
+        for xv, gv in ((xs, g), (x2, g2)):
+            up = gv >= 0
+            # Illinois: halve the retained end's value when the same side repeats.
+            ju, jd = i[up], i[~up]
+            keep_u = xv[up] < hi[ju]
+            ju, xu, gu = ju[keep_u], xv[up][keep_u], gv[up][keep_u]
+            glo[ju] = np.where(side[ju] == 1, 0.5 * glo[ju], glo[ju])
+            hi[ju], ghi[ju] = xu, np.minimum(gu, 1e300)
+            side[ju] = 1
+            keep_d = xv[~up] > lo[jd]
+            jd, xd, gd = jd[keep_d], xv[~up][keep_d], gv[~up][keep_d]
+            ghi[jd] = np.where(side[jd] == -1, 0.5 * ghi[jd], ghi[jd])
+            lo[jd], glo[jd] = xd, gd
+            side[jd] = -1
         done = (np.abs(g) <= 1e-14) | (hi[i] - lo[i] <= xtol * np.maximum(1.0, np.abs(hi[i])))
         todo[i[done]] = False
     return x
