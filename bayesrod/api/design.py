@@ -1,7 +1,9 @@
 """``bayesrod.design``: where should the next push go? Returns a :class:`Design`.
 
 The computation is :mod:`bayesrod.inference.design`; the input is a
-:class:`~bayesrod.Posterior` (or a saved run). The planned push defaults
+:class:`~bayesrod.Posterior` (or a saved run), or one condition of a
+:class:`~bayesrod.GroupFit` (a stem under several anchorage conditions: the stem's
+draws with that condition's base compliance and noise). The planned push defaults
 to what the dataset's pushes did: the largest engaged contact displacement and
 the median number of engaged force samples per push; the sensor range is
 ``sensor.force_range_N``.
@@ -94,6 +96,7 @@ def design(
     target: str = "params",
     target_height_m: float | None = None,
     method: str | None = None,
+    condition: str | None = None,
     seed: int = 0,
     progress: bool = True,
 ) -> Design:
@@ -101,8 +104,9 @@ def design(
 
     Parameters
     ----------
-    posterior : Posterior or path
-        A fit (:func:`bayesrod.fit`) or a saved run directory.
+    posterior : Posterior, GroupFit or path
+        A fit (:func:`bayesrod.fit`), a stem's joint fit (:func:`bayesrod.fit_group`), or a saved
+        run or fit-group stem directory.
     heights : array_like or None
         Candidate heights [m]; default 19 heights from 0.05 L to 0.95 L.
     sensor : (low, high) or None
@@ -114,24 +118,39 @@ def design(
         Information about (log EI0, p), the EI(s) band, or k_theta at ``target_height_m``.
     method : {"nmc", "gaussian"} or None
         Nested Monte Carlo (default for params) or linearised (the only choice for ei, k_theta).
+    condition : str or None
+        With a GroupFit, the condition whose next push is planned (required there; unused otherwise).
+        Its base compliance varies with the draws, so the gain counts what a push teaches about the
+        stem and its anchorage together (with one height they are confounded).
     """
-    from ._common import progress_enabled
     from .fitting import Posterior
+    from .group import GroupFit
 
+    if isinstance(posterior, (str, Path)):
+        posterior = GroupFit.load(posterior) if _is_group_stem(Path(posterior)) else Posterior.load(posterior)
+    if isinstance(posterior, GroupFit):
+        return _design_group(
+            posterior,
+            condition,
+            heights,
+            sensor=sensor,
+            displacement_m=displacement_m,
+            n_samples=n_samples,
+            confidence=confidence,
+            target=target,
+            target_height_m=target_height_m,
+            method=method,
+            seed=seed,
+            progress=progress,
+        )
     if not isinstance(posterior, Posterior):
-        if isinstance(posterior, (str, Path)):
-            posterior = Posterior.load(posterior)
-        else:
-            raise TypeError(
-                f"posterior: expected a bayesrod.Posterior or a run directory, got {type(posterior).__name__}"
-            )
-    if target not in ("params", "ei", "k_theta"):
-        raise ValueError(f"target: expected params, ei or k_theta, got {target!r}")
-    method = method or ("nmc" if target == "params" else "gaussian")
-    if method not in ("nmc", "gaussian"):
-        raise ValueError(f"method: expected nmc or gaussian, got {method!r}")
+        raise TypeError(
+            "posterior: expected a bayesrod.Posterior, a bayesrod.GroupFit or a run directory, got "
+            f"{type(posterior).__name__}"
+        )
+    if condition is not None:
+        raise ValueError(f"condition: expected None for a single-condition fit, got {condition!r}")
     samples = posterior.thinned()
-    L = posterior.length_m
     spec = posterior.dataset
     pushed = (
         [float(h) for h in spec.heights_m]
@@ -139,6 +158,91 @@ def design(
         else list(posterior.doc.get("data", {}).get("heights_m", []))
     )
     plan_kw: dict = default_plan(spec) if spec is not None else {}
+    source = posterior.config.get("run") or posterior.config.get("dataset")
+    return _design(
+        samples,
+        posterior.length_m,
+        pushed,
+        plan_kw,
+        source,
+        heights,
+        sensor=sensor,
+        displacement_m=displacement_m,
+        n_samples=n_samples,
+        confidence=confidence,
+        target=target,
+        target_height_m=target_height_m,
+        method=method,
+        seed=seed,
+        progress=progress,
+    )
+
+
+def _is_group_stem(path: Path) -> bool:
+    """A fit-group stem directory (its summary.json lists the conditions)."""
+    import json
+
+    f = path / "summary.json"
+    try:
+        return f.is_file() and "conditions_order" in json.loads(f.read_text())
+    except (OSError, ValueError):
+        return False
+
+
+def _design_group(group, condition, heights, **kw) -> Design:
+    """Design the next push of one condition of a stem's joint fit."""
+    from ..inference.group import condition_name
+
+    if condition is None:
+        raise ValueError(
+            f"condition: expected one of {', '.join(group.conditions)} (a fit-group stem: whose next push?), got none"
+        )
+    if condition not in group.conditions:
+        raise ValueError(f"condition: expected one of {', '.join(group.conditions)}, got {condition!r}")
+    S = group.samples
+
+    def draws(name):
+        for key in (condition_name(name, condition), name):
+            if key in S:
+                return np.asarray(S[key], float)
+        raise ValueError(f"{group.stem_id}: expected draws of {name} in the fit-group samples, got none")
+
+    C = np.asarray(S[f"base_compliance_rad_per_Nm__{condition}"], float)
+    with np.errstate(divide="ignore"):
+        k_b = np.where(C > 0, 1.0 / np.where(C > 0, C, 1.0), np.inf)  # the effect holds k_b; a clamp is inf
+    samples = {"EI0": draws("EI0"), "p": draws("p"), "sigma_force_N": draws("sigma_force_N"), "base_compliance": k_b}
+    pushed = [float(r["height_m"]) for r in group.doc["conditions"][condition]["k_theta"]]
+    return _design(samples, group.length_m, pushed, {}, f"{group.stem_id}/{condition}", heights, **kw)
+
+
+def _design(
+    samples,
+    L,
+    pushed,
+    plan_kw,
+    source,
+    heights,
+    *,
+    sensor,
+    displacement_m,
+    n_samples,
+    confidence,
+    target,
+    target_height_m,
+    method,
+    seed,
+    progress,
+) -> Design:
+    from ._common import progress_enabled
+
+    if target not in ("params", "ei", "k_theta"):
+        raise ValueError(f"target: expected params, ei or k_theta, got {target!r}")
+    method = method or ("nmc" if target == "params" else "gaussian")
+    if method not in ("nmc", "gaussian"):
+        raise ValueError(f"method: expected nmc or gaussian, got {method!r}")
+    if L is None:
+        raise ValueError("length_m: expected the stem length the fit used, got none (a run written before it was kept)")
+    plan_kw = dict(plan_kw)
     if displacement_m is not None:
         plan_kw["displacement_m"] = displacement_m
     if n_samples is not None:
@@ -174,7 +278,7 @@ def design(
         seed=seed,
         progress=progress_enabled(progress),
     )
-    res["source"] = posterior.config.get("run") or posterior.config.get("dataset")
+    res["source"] = source
     res["length_m"] = L
     res["pushed_heights_m"] = pushed
     res = plain_json(res)

@@ -282,7 +282,12 @@ def build_parser() -> argparse.ArgumentParser:
     ft.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
 
     de = sub.add_parser("design", help="rank contact heights for the next push by expected information gain")
-    de.add_argument("source", metavar="DATASET_OR_RUN", help="fit run directory, or a dataset (fitted first)")
+    de.add_argument(
+        "source",
+        metavar="DATASET_OR_RUN",
+        help="fit run directory, a fit-group stem directory (RUN/<stem_id>, with --condition), or a dataset "
+        "(fitted first)",
+    )
     de.add_argument("--out", required=True, help="output directory (design.json, figures/design.png)")
     de.add_argument("--candidates", metavar="START:STOP:NUM", help="heights to rank [m] (default 0.05L:0.95L:19)")
     de.add_argument("--displacement", type=float, help="planned contact displacement [m] (default: the data's)")
@@ -303,6 +308,7 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["nmc", "gaussian"],
         help="nested Monte Carlo (default for params) or linearised (default and only choice for ei, k_theta)",
     )
+    de.add_argument("--condition", help="with a fit-group stem: the condition whose next push is planned (e.g. intact)")
     de.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     de.add_argument("--forces-only", action="store_true", help="when fitting a dataset first: ignore centerlines")
     de.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
@@ -984,12 +990,10 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
 
 def _design_source(args, out: Path):
-    """The posterior to design from: a run as it is, or a dataset fitted first into OUT/fit."""
-    from ..api import Posterior
-
+    """The posterior to design from: a run (or fit-group stem) as it is, or a dataset fitted first into OUT/fit."""
     src = Path(args.source)
     if (src / "samples.npz").is_file():
-        return Posterior.load(src), None
+        return src, None  # the API loads a run or a fit-group stem
     if (src / "specimen.json").is_file():
         logging.getLogger("bayesrod").info("%s: a dataset; fitting it into %s first", src, out / "fit")
         from ..api import fit
@@ -1024,6 +1028,7 @@ def cmd_design(args: argparse.Namespace) -> int:
         target=args.target,
         target_height_m=args.target_height,
         method=args.method,
+        condition=args.condition,
         seed=args.seed,
         progress=_progress(args),
     )
