@@ -145,7 +145,7 @@ def test_computing_writes_nothing(twig_noisy, tmp_path):
     """fit, bands, design and predict run in an empty working directory and leave it empty."""
     code = (
         "import bayesrod, numpy as np\n"
-        f"post = bayesrod.fit({str(twig_noisy)!r}, use_shapes=False, progress=True, target_ess=150, max_steps=1500)\n"
+        f"post = bayesrod.fit({str(twig_noisy)!r}, use_shapes=False, progress=True, target_ess=50, max_steps=300)\n"
         "post.ei_band(np.linspace(0, 0.7, 5)); post.k_theta_band([0.5]); post.predict_force(0.6, [0.02])\n"
         "post.report_html()\n"
         "bayesrod.predict(0.6, [0.02], posterior=post)\n"

@@ -406,11 +406,12 @@ def _locate(Y, sig, h, f, P, comp, target, dmax, iters=8):
 def _illinois(fun, lo, hi, glo, ghi, xtol=1e-13, maxiter=80):
     """Roots of increasing ``fun`` on brackets with glo < 0 <= ghi (elementwise).
 
-    Each round evaluates two points per element in one call: the candidate and a point 1e-7 (relative)
-    beyond it. Both narrow the bracket; their difference quotient gives a Newton step, the next
-    candidate when it falls inside the bracket (otherwise the Illinois regula falsi point of the
-    bracket). Newton converges in about half the rounds of regula falsi, and a round costs about the
-    same for twice the problems.
+    While at most ``NEWTON_BATCH`` elements remain, each round evaluates two points per element in one
+    call: the candidate and a point 1e-7 (relative) beyond it. Both narrow the bracket; their
+    difference quotient gives a Newton step, the next candidate when it falls inside the bracket
+    (otherwise the Illinois regula falsi point of the bracket). Newton needs fewer rounds than regula
+    falsi, and for small batches a round costs about the same for twice the problems; large batches
+    (where the march's cost grows with the batch) take the plain Illinois rounds.
     """
     lo, hi, glo, ghi = (np.array(a, float) for a in (lo, hi, glo, ghi))
     x = hi.copy()
@@ -430,9 +431,10 @@ def _illinois(fun, lo, hi, glo, ghi, xtol=1e-13, maxiter=80):
         xs = np.where(use_n, xn, xs)
         bad = ~((xs > lo[i]) & (xs < hi[i]))
         xs[bad] = 0.5 * (lo[i] + hi[i])[bad]
+        probe = i.size <= NEWTON_BATCH
         dx = 1e-7 * np.maximum(np.abs(xs), 1e-300)
-        x2 = np.minimum(xs + dx, hi[i])
-        both = fun(np.concatenate([xs, x2]), np.concatenate([i, i]))
+        x2 = np.minimum(xs + dx, hi[i]) if probe else xs
+        both = fun(np.concatenate([xs, x2]), np.concatenate([i, i])) if probe else np.tile(fun(xs, i), 2)
         both = np.where(np.isnan(both), np.inf, both)  # beyond the branch counts as "too far"
         g, g2 = both[: i.size], both[i.size :]
         x[i] = xs
@@ -463,6 +465,8 @@ def _illinois(fun, lo, hi, glo, ghi, xtol=1e-13, maxiter=80):
 # interior points of the boundary search (1 and 1: the plain expansion and bisection).
 EXPAND_POINTS = 4
 BOUNDARY_SECTIONS = 7
+# Root-search rounds take a Newton probe while at most this many problems remain (see _illinois).
+NEWTON_BATCH = 512
 
 
 def _bracket_and_solve(fun, x_guess, x_max=np.inf, grow=1.6, max_expand=80, boundary_rtol=4e-16):
