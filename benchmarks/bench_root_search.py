@@ -35,7 +35,7 @@ def _cases():
 
 
 def _time(args, repeat, newton_batch):
-    saved = elastica.NEWTON_BATCH
+    saved = getattr(elastica, "NEWTON_BATCH", None)  # None: a commit before the probe (docs' before row)
     elastica.NEWTON_BATCH = newton_batch
     calls = [0]
     march = elastica._march
@@ -54,7 +54,10 @@ def _time(args, repeat, newton_batch):
             times.append(time.perf_counter() - t)
     finally:
         elastica._march = march
-        elastica.NEWTON_BATCH = saved
+        if saved is None:
+            del elastica.NEWTON_BATCH
+        else:
+            elastica.NEWTON_BATCH = saved
     return statistics.median(times), calls[0], f
 
 
@@ -66,7 +69,7 @@ def main() -> None:
     print(head + " max rel diff |")
     print("|---|---|---|---|---|---|")
     for name, args in _cases():
-        t1, n1, f1 = _time(args, a.repeat, elastica.NEWTON_BATCH)
+        t1, n1, f1 = _time(args, a.repeat, getattr(elastica, "NEWTON_BATCH", 0))
         t0, n0, f0 = _time(args, a.repeat, 0)
         ok = np.isfinite(f1) & np.isfinite(f0) & (f0 != 0)
         diff = float(np.max(np.abs(f1[ok] / f0[ok] - 1))) if ok.any() else float("nan")
