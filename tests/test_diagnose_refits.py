@@ -120,6 +120,24 @@ def test_spline_forces_match_the_direct_solve_on_long_pushes(coords):
     assert np.max(np.abs(F - ref)) < tol * np.max(np.abs(ref))
 
 
+def test_batched_parameter_sets_with_a_yield_onset_match_one_set_at_a_time():
+    """The samples a yield onset puts between nodes are solved in one batch over every parameter set
+    (a Jacobian's rows): each row must get its own EI0, p, yield moment and height, as when solved alone."""
+    from bayesrod.inference.likelihood import PushData
+
+    D = np.linspace(0.0, 0.25, 150)
+    empty = np.zeros(0)
+    pushes = [
+        PushData(f"h{h}", h, D, np.zeros(D.size), empty, empty.astype(int), empty, empty, None) for h in (0.45, 0.6)
+    ]
+    m = ForwardModel(pushes, 0.8)
+    X = np.array([[np.log(2.63), 0.43, np.log(2.0)], [np.log(3.5), 0.3, np.log(1.5)], [np.log(2.0), 0.6, np.log(1.2)]])
+    batched = m.forces(X, ("yield",))
+    for k in range(X.shape[0]):
+        np.testing.assert_allclose(batched[k], m.forces(X[k : k + 1], ("yield",))[0], rtol=1e-10, atol=1e-12)
+    assert np.ptp(batched[:, -1]) > 0.1 * np.max(batched[:, -1])  # the rows differ: a mixed-up row would show
+
+
 def test_structure_test_holds_its_level_under_ar1_noise_and_fails_without_the_correction():
     """Pure AR(1) residuals (rho 0.95): the whitened F test flags no block in 95%+ of pushes; without the
     whitening (the correlated-noise correction dropped) nearly every push is flagged."""

@@ -117,15 +117,12 @@ def _moduli(fits) -> tuple[list[SpecimenPosterior] | None, list[str]]:
 
 def _as_posterior(x):
     from .fitting import Posterior
-    from .group import GroupFit
+    from .group import GroupFit, load_run
 
     if isinstance(x, (Posterior, GroupFit)):
         return x
     if isinstance(x, (str, Path)) and _is_run(Path(x)):
-        try:  # a fit-group stem (its summary names the conditions), else a fit
-            return GroupFit.load(x)
-        except ValueError:
-            return Posterior.load(x)
+        return load_run(x)
     raise ValueError(
         f"{x}: expected a bayesrod.Posterior, a GroupFit, a fit run directory or a fit-group stem directory "
         "(summary.json + samples.npz)"

@@ -123,126 +123,35 @@ def design(
         Its base compliance varies with the draws, so the gain counts what a push teaches about the
         stem and its anchorage together (with one height they are confounded).
     """
+    from ._common import progress_enabled
     from .fitting import Posterior
-    from .group import GroupFit
+    from .group import GroupFit, load_run
 
     if isinstance(posterior, (str, Path)):
-        posterior = GroupFit.load(posterior) if _is_group_stem(Path(posterior)) else Posterior.load(posterior)
+        posterior = load_run(posterior)
     if isinstance(posterior, GroupFit):
-        return _design_group(
-            posterior,
-            condition,
-            heights,
-            sensor=sensor,
-            displacement_m=displacement_m,
-            n_samples=n_samples,
-            confidence=confidence,
-            target=target,
-            target_height_m=target_height_m,
-            method=method,
-            seed=seed,
-            progress=progress,
+        samples, L, pushed, plan_kw, source = _group_draws(posterior, condition)
+    elif isinstance(posterior, Posterior):
+        if condition is not None:
+            raise ValueError(f"condition: expected None for a single-condition fit, got {condition!r}")
+        samples, L, spec = posterior.thinned(), posterior.length_m, posterior.dataset
+        pushed = (
+            [float(h) for h in spec.heights_m]
+            if spec is not None
+            else list(posterior.doc.get("data", {}).get("heights_m", []))
         )
-    if not isinstance(posterior, Posterior):
+        plan_kw = default_plan(spec) if spec is not None else {}
+        source = posterior.config.get("run") or posterior.config.get("dataset")
+    else:
         raise TypeError(
             "posterior: expected a bayesrod.Posterior, a bayesrod.GroupFit or a run directory, got "
             f"{type(posterior).__name__}"
         )
-    if condition is not None:
-        raise ValueError(f"condition: expected None for a single-condition fit, got {condition!r}")
-    samples = posterior.thinned()
-    spec = posterior.dataset
-    pushed = (
-        [float(h) for h in spec.heights_m]
-        if spec is not None
-        else list(posterior.doc.get("data", {}).get("heights_m", []))
-    )
-    plan_kw: dict = default_plan(spec) if spec is not None else {}
-    source = posterior.config.get("run") or posterior.config.get("dataset")
-    return _design(
-        samples,
-        posterior.length_m,
-        pushed,
-        plan_kw,
-        source,
-        heights,
-        sensor=sensor,
-        displacement_m=displacement_m,
-        n_samples=n_samples,
-        confidence=confidence,
-        target=target,
-        target_height_m=target_height_m,
-        method=method,
-        seed=seed,
-        progress=progress,
-    )
-
-
-def _is_group_stem(path: Path) -> bool:
-    """A fit-group stem directory (its summary.json lists the conditions)."""
-    import json
-
-    f = path / "summary.json"
-    try:
-        return f.is_file() and "conditions_order" in json.loads(f.read_text())
-    except (OSError, ValueError):
-        return False
-
-
-def _design_group(group, condition, heights, **kw) -> Design:
-    """Design the next push of one condition of a stem's joint fit."""
-    from ..inference.group import condition_name
-
-    if condition is None:
-        raise ValueError(
-            f"condition: expected one of {', '.join(group.conditions)} (a fit-group stem: whose next push?), got none"
-        )
-    if condition not in group.conditions:
-        raise ValueError(f"condition: expected one of {', '.join(group.conditions)}, got {condition!r}")
-    S = group.samples
-
-    def draws(name):
-        for key in (condition_name(name, condition), name):
-            if key in S:
-                return np.asarray(S[key], float)
-        raise ValueError(f"{group.stem_id}: expected draws of {name} in the fit-group samples, got none")
-
-    C = np.asarray(S[f"base_compliance_rad_per_Nm__{condition}"], float)
-    with np.errstate(divide="ignore"):
-        k_b = np.where(C > 0, 1.0 / np.where(C > 0, C, 1.0), np.inf)  # the effect holds k_b; a clamp is inf
-    samples = {"EI0": draws("EI0"), "p": draws("p"), "sigma_force_N": draws("sigma_force_N"), "base_compliance": k_b}
-    pushed = [float(r["height_m"]) for r in group.doc["conditions"][condition]["k_theta"]]
-    return _design(samples, group.length_m, pushed, {}, f"{group.stem_id}/{condition}", heights, **kw)
-
-
-def _design(
-    samples,
-    L,
-    pushed,
-    plan_kw,
-    source,
-    heights,
-    *,
-    sensor,
-    displacement_m,
-    n_samples,
-    confidence,
-    target,
-    target_height_m,
-    method,
-    seed,
-    progress,
-) -> Design:
-    from ._common import progress_enabled
-
     if target not in ("params", "ei", "k_theta"):
         raise ValueError(f"target: expected params, ei or k_theta, got {target!r}")
     method = method or ("nmc" if target == "params" else "gaussian")
     if method not in ("nmc", "gaussian"):
         raise ValueError(f"method: expected nmc or gaussian, got {method!r}")
-    if L is None:
-        raise ValueError("length_m: expected the stem length the fit used, got none (a run written before it was kept)")
-    plan_kw = dict(plan_kw)
     if displacement_m is not None:
         plan_kw["displacement_m"] = displacement_m
     if n_samples is not None:
@@ -283,3 +192,31 @@ def _design(
     res["pushed_heights_m"] = pushed
     res = plain_json(res)
     return Design(doc=MappingProxyType(res), recommended_height_m=res["recommended_height_m"])
+
+
+def _group_draws(group, condition: str | None) -> tuple[dict, float | None, list[float], dict, str]:
+    """Draws, length, pushed heights, planned-push defaults (none: a fit-group run keeps no dataset) and
+    source of one condition of a stem's joint fit: the stem's EI0 and p with that condition's base
+    compliance (as the base-spring effect, k_b = 1/compliance, inf at the clamp) and force noise."""
+    from ..inference.group import condition_name
+
+    if condition not in group.conditions:
+        whose = " (a fit-group stem: whose next push?)" if condition is None else ""
+        got = "none" if condition is None else repr(condition)
+        raise ValueError(f"condition: expected one of {', '.join(group.conditions)}{whose}, got {got}")
+    if group.length_m is None:
+        raise ValueError(f"{group.stem_id}: expected the stem length in summary.json (length_m), got none")
+    S = group.samples
+
+    def draws(name):
+        for key in (condition_name(name, condition), name):
+            if key in S:
+                return np.asarray(S[key], float)
+        raise ValueError(f"{group.stem_id}: expected draws of {name} in the fit-group samples, got none")
+
+    C = np.asarray(S[f"base_compliance_rad_per_Nm__{condition}"], float)
+    with np.errstate(divide="ignore"):
+        k_b = np.where(C > 0, 1.0 / np.where(C > 0, C, 1.0), np.inf)
+    samples = {"EI0": draws("EI0"), "p": draws("p"), "sigma_force_N": draws("sigma_force_N"), "base_compliance": k_b}
+    pushed = [float(r["height_m"]) for r in group.doc["conditions"][condition]["k_theta"]]
+    return samples, group.length_m, pushed, {}, f"{group.stem_id}/{condition}"

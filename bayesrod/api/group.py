@@ -122,6 +122,17 @@ class GroupFit:
         return bars
 
 
+def load_run(path):
+    """A saved run: a fit-group stem (its summary names the conditions) as a :class:`GroupFit`, else a fit
+    as a :class:`~bayesrod.Posterior` (whose loader reports what is missing)."""
+    from .fitting import Posterior
+
+    try:
+        return GroupFit.load(path)
+    except ValueError:
+        return Posterior.load(path)
+
+
 @dataclass(frozen=True)
 class GroupStudy:
     """Every stem found in a folder, fitted: ``fits`` by stem id, ``problems`` (one line each) for the rest."""

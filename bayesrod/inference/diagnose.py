@@ -341,7 +341,7 @@ class ForwardModel:
         # Samples that need their own solve (a yield onset between nodes) are gathered over every
         # parameter set and push and solved in one batch: one march costs about the same for 1 or 100
         # problems, and a Jacobian asks for one set per coordinate.
-        direct: list[tuple[int, int, slice, NDArray, NDArray, bool]] = []  # (set, push, slice, where, D, hold)
+        direct: list[tuple[int, float, slice, NDArray, NDArray, bool]] = []  # (set, height, slice, where, D, hold)
         for j, k in enumerate(self.force_pushes):
             d, sl, S = self.data[k], self._slices[j], self._spline[j]
             exact = S.shape[0] <= S.shape[1]  # the nodes are the samples
@@ -355,15 +355,15 @@ class ForwardModel:
                 elif np.all(np.isfinite(f)):  # the yield onset (a kink) between nodes
                     out[kk, sl], gap, D = self._yield_branches(j, d, f, y)
                     if gap.any():
-                        direct.append((kk, j, sl, gap, D[gap] + shift[kk, j], False))
+                        direct.append((kk, d.height_m, sl, gap, D[gap] + shift[kk, j], False))
                 elif not (y.any() and not y[np.isfinite(f)].all()):  # slips (no yield onset): hold
                     out[kk, sl] = self._slipped(j, d, f)
                 else:  # slips and yields: solve at every sample, hold past the slip
-                    direct.append((kk, j, sl, np.ones(d.D_m.size, bool), d.D_m + shift[kk, j], True))
+                    direct.append((kk, d.height_m, sl, np.ones(d.D_m.size, bool), d.D_m + shift[kk, j], True))
         if direct:
             kks = np.concatenate([np.full(job[4].size, job[0]) for job in direct])
             D = np.concatenate([job[4] for job in direct])
-            h = np.concatenate([np.full(job[4].size, self.data[self.force_pushes[job[1]]].height_m) for job in direct])
+            h = np.concatenate([np.full(job[4].size, job[1]) for job in direct])
             sol = force_from_displacement_nd(
                 D / Ls[kks], h / Ls[kks], X[kks, 1], {key: v[kks, 0, 0] for key, v in eff.items()}
             )

@@ -237,8 +237,7 @@ def _rhs(sig, Y, af, P, out=None):
         np.multiply(out[1] - P["mu"] * out[0], af, out=out[3])
         np.negative(out[3], out=out[3])
     else:
-        np.multiply(out[1], af, out=out[3])
-        np.negative(out[3], out=out[3])
+        np.multiply(out[1], -af, out=out[3])
     if P["_weighted"]:
         if log1m is None:
             log1m = np.log(max(1.0 - sig, _TINY))
@@ -403,6 +402,11 @@ def _locate(Y, sig, h, f, P, comp, target, dmax, iters=8):
 # --------------------------------------------------------------------------- #
 # Vectorised scalar root finding (Illinois regula falsi) and bracketing
 # --------------------------------------------------------------------------- #
+def _too_far(g: NDArray) -> NDArray:
+    """Residuals with NaN (beyond the branch's end) counted as "too far" (+inf)."""
+    return np.where(np.isnan(g), np.inf, g)
+
+
 def _illinois(fun, lo, hi, glo, ghi, xtol=1e-13, maxiter=80):
     """Roots of increasing ``fun`` on brackets with glo < 0 <= ghi (elementwise).
 
@@ -431,23 +435,25 @@ def _illinois(fun, lo, hi, glo, ghi, xtol=1e-13, maxiter=80):
         xs = np.where(use_n, xn, xs)
         bad = ~((xs > lo[i]) & (xs < hi[i]))
         xs[bad] = 0.5 * (lo[i] + hi[i])[bad]
-        probe = i.size <= NEWTON_BATCH
-        dx = 1e-7 * np.maximum(np.abs(xs), 1e-300)
-        x2 = np.minimum(xs + dx, hi[i]) if probe else xs
-        both = fun(np.concatenate([xs, x2]), np.concatenate([i, i])) if probe else np.tile(fun(xs, i), 2)
-        both = np.where(np.isnan(both), np.inf, both)  # beyond the branch counts as "too far"
-        g, g2 = both[: i.size], both[i.size :]
+        if i.size <= NEWTON_BATCH:  # probe 1e-7 beyond the candidate: a Newton step for the next round
+            x2 = np.minimum(xs + 1e-7 * np.maximum(np.abs(xs), 1e-300), hi[i])
+            both = _too_far(fun(np.concatenate([xs, x2]), np.concatenate([i, i])))
+            g, g2 = both[: i.size], both[i.size :]
+            with np.errstate(invalid="ignore"):  # inf - inf past a branch end: no Newton step there
+                slope = (g2 - g) / np.where(x2 > xs, x2 - xs, 1.0)
+            ok = np.isfinite(g2) & np.isfinite(g) & (slope > 0) & (x2 > xs)
+            newton[i] = np.where(ok, xs - g / np.where(ok, slope, 1.0), np.nan)
+            points = ((xs, g), (x2, g2))
+        else:
+            g = _too_far(fun(xs, i))
+            points = ((xs, g),)
         x[i] = xs
-        with np.errstate(invalid="ignore"):  # inf - inf past a branch end: no Newton step there
-            slope = (g2 - g) / np.where(x2 > xs, x2 - xs, 1.0)
-        ok = np.isfinite(g2) & np.isfinite(g) & (slope > 0) & (x2 > xs)
-        newton[i] = np.where(ok, xs - g / np.where(ok, slope, 1.0), np.nan)
-        for xv, gv in ((xs, g), (x2, g2)):
+        for xv, gv in points:  # each point inside the bracket narrows it
             up = gv >= 0
-            # Illinois: halve the retained end's value when the same side repeats.
             ju, jd = i[up], i[~up]
             keep_u = xv[up] < hi[ju]
             ju, xu, gu = ju[keep_u], xv[up][keep_u], gv[up][keep_u]
+            # Illinois: halve the retained end's value when the same side repeats.
             glo[ju] = np.where(side[ju] == 1, 0.5 * glo[ju], glo[ju])
             hi[ju], ghi[ju] = xu, np.minimum(gu, 1e300)
             side[ju] = 1
