@@ -186,3 +186,23 @@ def test_root_search_finds_roots_next_to_the_branch_end(points, monkeypatch):
     np.testing.assert_allclose(x[ok], exact, rtol=1e-12, atol=0)
     if points != (1, 1):  # each round does the work of several: fewer rounds than bisection's ~60
         assert len(rounds) < 35
+
+
+@pytest.mark.parametrize("p", [0.0, 0.43, [0.2, 1.0, 3.0, 4.0]])
+@pytest.mark.parametrize("sig", [0.0, 0.5, 0.99, 1.0])
+def test_plain_fast_step_matches_the_general_step(p, sig):
+    """The one-step-size path (stage dot products, taper at all stages at once) against the general path."""
+    from bayesrod.physics import elastica as E
+
+    rng = np.random.default_rng(3)
+    B = 4
+    P = E._prepare(E._problem(np.full(B, 0.6), np.broadcast_to(np.asarray(p, float), B), None)[0])
+    Y = np.vstack([rng.uniform(0, 0.3, (2, B)), rng.uniform(-0.5, 1.2, (1, B)), rng.uniform(-1, 1, (1, B))])
+    f, active = rng.uniform(0.1, 3.0, B), np.array([1.0, 0.0, 1.0, 1.0])
+    h = 1.0 / 48 if sig < 1.0 else 1e-4
+    if sig > 0.9:
+        Y[3], active = 0.0, np.zeros(B)  # above the contact (near a tapered tip): no load, no moment
+    assert P["_plain"]
+    fast = E._step_plain(Y, sig, h, f, P, active)
+    np.testing.assert_allclose(fast, E._step_general(Y, sig, h, f, P, active), rtol=1e-11, atol=1e-14)
+    assert E._step(Y, sig, h, f, P, active) is not None and np.array_equal(E._step(Y, sig, h, f, P, active), fast)

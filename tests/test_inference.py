@@ -70,6 +70,21 @@ def test_force_table_matches_direct_solves(twig_lik):
         off += n
 
 
+def test_table_interpolation_weights_are_the_lagrange_cardinals():
+    """The closed-form weights of the p tables equal the textbook product formula, at the grid's ends too."""
+    from bayesrod.inference.likelihood import _lagrange4
+
+    grid = np.linspace(0.0, 3.0, 61)
+    p = np.concatenate([grid[[0, 1, 30, -2, -1]], np.random.default_rng(0).uniform(0.0, 3.0, 200)])
+    idx, w = _lagrange4(grid, p)
+    for i in range(p.size):
+        nodes = grid[idx[i]]
+        ref = [np.prod([(p[i] - nodes[b]) / (nodes[a] - nodes[b]) for b in range(4) if b != a]) for a in range(4)]
+        np.testing.assert_allclose(w[i], ref, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(w @ np.ones(4), 1.0, atol=1e-12)  # a cubic through the nodes reproduces p^3 exactly
+    np.testing.assert_allclose(np.sum(w * grid[idx] ** 3, axis=1), p**3, rtol=1e-12)
+
+
 def test_likelihood_peaks_near_truth(twig_lik):
     post = LogPosterior(twig_lik, load_prior("default"))
     base = {"EI0": 2.63, "p": 0.43, "sigma_force_N": 0.03, "shape_sd_scale": 1.0}
