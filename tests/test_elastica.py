@@ -70,7 +70,8 @@ def test_forces_agree_with_reference_up_to_slip(preset):
         d = d_end * np.array([0.002, 0.05, 0.2, 0.4, 0.6, 0.8, 0.9, 0.95, 0.97])
         fast = force_from_displacement(d * L, h, EI0, p, L)
         assert not fast.slipped.any()
-        ref = np.array([R.solve_displacement(x, eta, p)["f"] for x in d]) * EI0 / L**2
+        # the reference at rtol 1e-10: four orders tighter than the check, at a third of the 1e-12 default's cost
+        ref = np.array([R.solve_displacement(x, eta, p, rtol=1e-10)["f"] for x in d]) * EI0 / L**2
         np.testing.assert_allclose(fast.force_N, ref, rtol=1e-6)
 
 
@@ -96,8 +97,10 @@ def test_slip_reported_not_invented():
     sol = force_from_displacement([0.5 * d_end, 1.05 * d_end, 3.0], h, EI0, p, L)
     assert list(sol.slipped) == [False, True, True]
     assert np.isnan(sol.force_N[1:]).all() and np.isfinite(sol.force_N[0])
-    # the reference agrees that 5% past the branch end there is no contact
-    assert R.solve_displacement(1.05 * d_end / L, h / L, p)["slipped"]
+    # the reference agrees that 5% past the branch end there is no contact, and 5% before it there is
+    # (rtol 1e-9 is ample for a yes/no; at the default 1e-12 the bisection to the branch end took 25 s)
+    assert R.solve_displacement(1.05 * d_end / L, h / L, p, rtol=1e-9)["slipped"]
+    assert not R.solve_displacement(0.95 * d_end / L, h / L, p, rtol=1e-9)["slipped"]
 
 
 def test_force_increases_monotonically_along_branch():
@@ -206,3 +209,20 @@ def test_plain_fast_step_matches_the_general_step(p, sig):
     fast = E._step_plain(Y, sig, h, f, P, active)
     np.testing.assert_allclose(fast, E._step_general(Y, sig, h, f, P, active), rtol=1e-11, atol=1e-14)
     assert E._step(Y, sig, h, f, P, active) is not None and np.array_equal(E._step(Y, sig, h, f, P, active), fast)
+
+
+@pytest.mark.parametrize("p", [0.43, [0.2, 1.0, 2.0, 0.0]])
+def test_plain_step_per_element_matches_the_general_step(p):
+    """Per-element step sizes and positions (the partial steps that locate a contact), plain rod."""
+    from bayesrod.physics import elastica as E
+
+    rng = np.random.default_rng(4)
+    B = 4
+    P = E._prepare(E._problem(np.full(B, 0.6), np.broadcast_to(np.asarray(p, float), B), None)[0])
+    Y = np.vstack([rng.uniform(0, 0.3, (2, B)), rng.uniform(-0.5, 1.2, (1, B)), rng.uniform(-1, 1, (1, B))])
+    f, active = rng.uniform(0.1, 3.0, B), np.array([1.0, 0.0, 1.0, 1.0])
+    sig, h = np.array([0.0, 0.3, 0.55, 0.7]), np.array([0.02, 0.0, 0.005, 0.013])
+    for s, a in [(sig, active), (0.4, 1.0)]:
+        fast = E._step_plain_each(Y, s, h, f, P, a)
+        np.testing.assert_allclose(fast, E._step_general(Y, s, h, f, P, a), rtol=1e-11, atol=1e-14)
+        np.testing.assert_array_equal(E._step(Y, s, h, f, P, a), fast)

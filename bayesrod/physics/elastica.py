@@ -301,10 +301,36 @@ def _step_plain(Y, sig, h, f, P, active):
     return np.dot(coef[12], K2).reshape(4, B)
 
 
+def _step_plain_each(Y, sig, h, f, P, active):
+    """:func:`_step` without weight, friction or rest curvature, with a step size and sigma per element
+    (the partial steps that locate a contact): the taper at every stage and element in one evaluation,
+    four array calls per stage for the slopes."""
+    B = Y.shape[1]
+    neg_af = np.negative(active * f) * np.ones(B)
+    h = np.asarray(h, float)
+    s = np.asarray(sig, float) + _C[:, None] * h  # (12, B) or (12, 1)
+    log1m = np.log(np.maximum(1.0 - s, _TINY))
+    inv_e = 1.0 / np.maximum(np.exp(P["_p4"] * log1m), _TINY)  # (12, B)
+    K = np.empty((12, 4, B))
+    K2 = K.reshape(12, 4 * B)
+    Yi = Y
+    for i in range(12):
+        if i:
+            Yi = Y + h * (_A_ROWS[i] @ K2[:i]).reshape(4, B)
+        k = K[i]
+        np.sin(Yi[2], out=k[0])
+        np.cos(Yi[2], out=k[1])
+        np.multiply(Yi[3], inv_e[i], out=k[2])
+        np.multiply(k[1], neg_af, out=k[3])
+    return Y + h * (_B @ K2).reshape(4, B)
+
+
 def _step(Y, sig, h, f, P, active):
     """One explicit RK step (DOP853 tableau, 8th order) of size h (scalar or (B,))."""
-    if P.get("_plain") and isinstance(h, float) and isinstance(sig, float):
-        return _step_plain(Y, sig, h, f, P, active)
+    if P.get("_plain"):
+        if isinstance(h, float) and isinstance(sig, float):
+            return _step_plain(Y, sig, h, f, P, active)
+        return _step_plain_each(Y, sig, h, f, P, active)
     return _step_general(Y, sig, h, f, P, active)
 
 
