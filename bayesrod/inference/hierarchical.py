@@ -27,6 +27,7 @@ ratios up to ~3x), tau(p) ~ half-normal(0.3).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from itertools import combinations
 
@@ -128,12 +129,19 @@ def sample_species(
     *,
     seed: int = 0,
     n_steps: int = 3000,
+    min_steps: int = 1000,
+    chunk: int = 500,
+    target_ess: float = 1000.0,
+    target_rhat: float = 1.01,
     progress=False,
     prior: dict | None = None,
 ):
     """emcee draws of the species model: dict with ``mu`` (n, G, D), ``tau`` (n, D), ``species``, diagnostics.
 
-    ``prior``: see :class:`HierarchicalPosterior` (default: the (log EI0, p) model).
+    Four independent ensembles run ``min_steps`` steps, then ``chunk`` more at a time until the second
+    halves (the draws kept) agree (R-hat <= ``target_rhat``), hold ``target_ess`` effective draws of every
+    parameter and span 50 autocorrelation times, or ``n_steps`` is reached (with ``n_steps <= min_steps``:
+    exactly ``n_steps``). ``prior``: see :class:`HierarchicalPosterior` (default: the (log EI0, p) model).
     """
     import emcee
 
@@ -145,9 +153,9 @@ def sample_species(
         [np.concatenate([post.m[post.group == g].mean(axis=0) for g in range(post.G)]), np.log(post.tau_scale / 2)]
     )
     n_walkers = max(32, 4 * post.ndim)
-    chains = []
+    samplers, states = [], []
     for _ in range(4):  # independent ensembles for R-hat
-        p0 = start + 1e-3 * rng.standard_normal((n_walkers, post.ndim))
+        states.append(start + 1e-3 * rng.standard_normal((n_walkers, post.ndim)))
         s = emcee.EnsembleSampler(
             n_walkers,
             post.ndim,
@@ -156,16 +164,34 @@ def sample_species(
             moves=[(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)],
         )
         s.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()
-        s.run_mcmc(p0, n_steps, progress=progress)
-        chains.append(s.get_chain(discard=n_steps // 2, thin=5))  # (n, W, ndim)
-    chain = np.concatenate([c.reshape(-1, post.ndim) for c in chains])
+        samplers.append(s)
     az = import_arviz()
-    per_ens = np.stack([c.reshape(-1, post.ndim) for c in chains])  # (4, n, ndim)
-    idata = az.from_dict(posterior={"theta": per_ens})
-    rhat = float(np.max(az.rhat(idata)["theta"].values))
-    ess = float(np.min(az.ess(idata, method="bulk")["theta"].values))
+    done = 0
+    while True:
+        todo = min(max(min_steps - done, chunk), n_steps - done)
+        for k, s in enumerate(samplers):
+            states[k] = s.run_mcmc(states[k], todo, progress=progress)
+        done += todo
+        chains = [s.get_chain(discard=done // 2, thin=5) for s in samplers]  # (n, W, ndim)
+        per_ens = np.stack([c.reshape(-1, post.ndim) for c in chains])  # (4, n, ndim)
+        idata = az.from_dict(posterior={"theta": per_ens})
+        rhat = float(np.max(az.rhat(idata)["theta"].values))
+        ess = float(np.min(az.ess(idata, method="bulk")["theta"].values))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            tau = max(float(np.nanmax(s.get_autocorr_time(discard=done // 2, tol=0))) for s in samplers)
+        if done >= n_steps or (rhat <= target_rhat and ess >= target_ess and done >= 50 * tau):
+            break
+    chain = np.concatenate([c.reshape(-1, post.ndim) for c in chains])
     mu, log_tau = post.split(chain)
-    return {"mu": mu, "tau": np.exp(log_tau), "species": post.species, "rhat_max": rhat, "ess_bulk_min": ess}
+    return {
+        "mu": mu,
+        "tau": np.exp(log_tau),
+        "species": post.species,
+        "rhat_max": rhat,
+        "ess_bulk_min": ess,
+        "n_steps": done,
+    }
 
 
 def modulus_contrasts(fit: dict) -> list[dict]:
