@@ -313,3 +313,18 @@ def test_diameter_model_errors_name_the_field():
 
     with pytest.raises(ValueError, match="youngs_modulus: expected a fit with measured diameters"):
         youngs_modulus({"EI0": np.ones(3), "p": np.ones(3)})
+
+
+def test_contrast_scale_recovers_the_contrast_of_blurred_profiles():
+    """Coverage profiles of boxes 1.5-5 px wide, blurred (sd 1.1 px), at 0.8 of the assumed contrast."""
+    from bayesrod.vision.width import _blurred_box, contrast_scale
+
+    rng = np.random.default_rng(0)
+    t = np.arange(-6, 6, 0.25)
+    w = rng.uniform(1.5, 5.0, 30)
+    c = rng.uniform(-0.5, 0.5, 30)
+    profiles = [
+        (t, 0.8 * _blurred_box(t - ci, wi, 1.1) + rng.normal(0, 0.02, t.size)) for wi, ci in zip(w, c, strict=True)
+    ]
+    assert contrast_scale(profiles, w / 2) == pytest.approx(0.8, abs=0.01)
+    assert contrast_scale(profiles[:4], w[:4] / 2) == 1.0  # too few profiles to read a shape from
