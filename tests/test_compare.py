@@ -30,6 +30,9 @@ def test_twofold_difference_is_found():
     assert c["EI0"]["prob_a_greater"] < 0.05
     assert c["p"]["difference_q05"] <= 0 <= c["p"]["difference_q95"]
     assert "k_theta" in c and fit["rhat_max"] < 1.02
+    # the sampler stops when converged, not before and not at its cap
+    assert fit["rhat_max"] <= 1.01 and fit["ess_bulk_min"] >= 1000 and 1000 <= fit["n_steps"] < 3000
+    assert fit["n_steps"] >= 50 * fit["autocorr_time_max"]
 
 
 def _null_hits(n_rep):

@@ -115,13 +115,17 @@ def test_validate_names_each_problem(twig_copy, name, breaker, needle, expected,
     assert any(needle in p and expected in p for p in problems), problems
     with pytest.raises(DatasetError):
         read_dataset(twig_copy)
-    if name == CASES[0][0]:  # one case in a real process: exit code and no traceback as a shell sees them
-        res = _cli_validate(twig_copy)
-        assert res.returncode != 0 and "Traceback" not in res.stderr
-        assert needle in res.stderr
-    else:  # the others in-process (an uncaught exception fails the test)
-        assert main(["validate", str(twig_copy)]) != 0
-        assert needle in capsys.readouterr().err
+    assert main(["validate", str(twig_copy)]) != 0  # in-process: an uncaught exception fails the test
+    assert needle in capsys.readouterr().err
+
+
+def test_validate_in_a_real_process_prints_no_traceback(twig_copy):
+    """One bad dataset as a shell sees it: exit code and message, no traceback."""
+    _, breaker, needle, _ = CASES[0]
+    breaker(twig_copy)
+    res = _cli_validate(twig_copy)
+    assert res.returncode != 0 and "Traceback" not in res.stderr
+    assert needle in res.stderr
 
 
 def test_unreadable_png_and_missing_frame(twig_copy):

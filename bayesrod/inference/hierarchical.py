@@ -190,6 +190,7 @@ def sample_species(
         "species": post.species,
         "rhat_max": rhat,
         "ess_bulk_min": ess,
+        "autocorr_time_max": tau,
         "n_steps": done,
     }
 

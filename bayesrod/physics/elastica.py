@@ -260,16 +260,23 @@ def _stage_coefficients(h: float) -> tuple:
 
 
 def _inverse_taper(sig: NDArray, P: dict) -> NDArray:
-    """1 / e(sigma) at the stage positions ``sig`` (12,): (12,) with one taper exponent, else (12, B).
-
-    The same values as :func:`_rhs` divides by (e floored at ``_TINY``, e = 1 when p = 0)."""
+    """1 / e(sigma) at the stage positions ``sig``, (12,) or (12, B): the values :func:`_rhs` divides by
+    (e floored at ``_TINY``, e = 1 when p = 0). (12,) with one taper exponent and one sigma, else (12, B)."""
     p4 = P["_p4_scalar"]
     if p4 is not None:
         if not p4:
-            return np.ones(sig.size)
+            return np.ones(np.shape(sig))
         return 1.0 / np.maximum(np.maximum(1.0 - sig, 0.0) ** p4, _TINY)
-    log1m = np.log(np.maximum(1.0 - sig, _TINY))
-    return 1.0 / np.maximum(np.exp(P["_p4"][None, :] * log1m[:, None]), _TINY)
+    log1m = np.log(np.maximum(1.0 - sig, _TINY)).reshape(len(sig), -1)  # (12, 1) or (12, B)
+    return 1.0 / np.maximum(np.exp(P["_p4"] * log1m), _TINY)
+
+
+def _plain_slopes(Yi: NDArray, inv_e: NDArray | float, neg_af: NDArray, k: NDArray) -> None:
+    """Slopes of a plain rod (no weight, friction or rest curvature) into ``k`` (4, B): four array calls."""
+    np.sin(Yi[2], out=k[0])
+    np.cos(Yi[2], out=k[1])
+    np.multiply(Yi[3], inv_e, out=k[2])
+    np.multiply(k[1], neg_af, out=k[3])
 
 
 def _step_plain(Y, sig, h, f, P, active):
@@ -280,8 +287,7 @@ def _step_plain(Y, sig, h, f, P, active):
     (a diagnosis, a force curve) spends its time on. Tests check the two agree.
     """
     B = Y.shape[1]
-    neg_af = active * f
-    np.negative(neg_af, out=neg_af)
+    neg_af = -(active * f)
     coef = _stage_coefficients(h)
     inv_e = _inverse_taper(sig + _C * h, P)
     K = np.empty((13, 4, B))
@@ -293,35 +299,24 @@ def _step_plain(Y, sig, h, f, P, active):
         if i:
             np.dot(coef[i], K2[: i + 1], out=buf)
             Yi = buf.reshape(4, B)
-        k = K[i + 1]
-        np.sin(Yi[2], out=k[0])
-        np.cos(Yi[2], out=k[1])
-        np.multiply(Yi[3], inv_e[i], out=k[2])
-        np.multiply(k[1], neg_af, out=k[3])
+        _plain_slopes(Yi, inv_e[i], neg_af, K[i + 1])
     return np.dot(coef[12], K2).reshape(4, B)
 
 
 def _step_plain_each(Y, sig, h, f, P, active):
     """:func:`_step` without weight, friction or rest curvature, with a step size and sigma per element
-    (the partial steps that locate a contact): the taper at every stage and element in one evaluation,
-    four array calls per stage for the slopes."""
+    (the partial steps that locate a contact): the taper at every stage and element in one evaluation."""
     B = Y.shape[1]
-    neg_af = np.negative(active * f) * np.ones(B)
+    neg_af = -(active * f)
     h = np.asarray(h, float)
-    s = np.asarray(sig, float) + _C[:, None] * h  # (12, B) or (12, 1)
-    log1m = np.log(np.maximum(1.0 - s, _TINY))
-    inv_e = 1.0 / np.maximum(np.exp(P["_p4"] * log1m), _TINY)  # (12, B)
+    inv_e = _inverse_taper(np.asarray(sig, float) + _C[:, None] * h, P)  # (12, B) or (12, 1)
     K = np.empty((12, 4, B))
     K2 = K.reshape(12, 4 * B)
     Yi = Y
     for i in range(12):
         if i:
             Yi = Y + h * (_A_ROWS[i] @ K2[:i]).reshape(4, B)
-        k = K[i]
-        np.sin(Yi[2], out=k[0])
-        np.cos(Yi[2], out=k[1])
-        np.multiply(Yi[3], inv_e[i], out=k[2])
-        np.multiply(k[1], neg_af, out=k[3])
+        _plain_slopes(Yi, inv_e[i], neg_af, K[i])
     return Y + h * (_B @ K2).reshape(4, B)
 
 
