@@ -62,11 +62,11 @@ def test_forward_model_matches_the_physics_and_holds_past_the_slip(datasets):
 @pytest.mark.slow
 def test_score_statistic_is_chi2_sized_on_clean_data_and_large_for_the_missing_effect(datasets):
     dg = Diagnoser(_model(datasets["clean"]))
-    fit = dg.fit((), dg.start())
+    fit = dg.fit_plain()
     clean = dg.score(fit, "force_offset")["statistic"]
     assert clean < 10.8  # chi^2_1 at p = 0.001
     dg2 = Diagnoser(_model(datasets["offset"]))
-    fit2 = dg2.fit((), dg2.start())
+    fit2 = dg2.fit_plain()
     assert dg2.score(fit2, "force_offset")["statistic"] > 3 * 10.8  # far beyond the 0.001 quantile
 
 
@@ -142,7 +142,7 @@ def test_candidate_start_is_pulled_back_until_it_fits_no_worse(datasets):
     from bayesrod.inference.diagnose import _no_worse_start
 
     dg = Diagnoser(_model(datasets["clean"]))
-    cur = dg.fit((), dg.start())
+    cur = dg.fit_plain()
     noise = (cur.sigma_force, cur.rho_force, cur.shape_scale)
     far = np.array([20 * cur.sigma_force])  # a force offset 20 noise sd off
     assert dg.loglik(*dg.raw_residuals(np.concatenate([cur.x, far]), ("force_offset",)), noise) < cur.loglik

@@ -59,7 +59,7 @@ def test_length_is_recovered_and_the_held_out_push_uses_the_refits_length():
     ds = _pushes(deltas=DELTAS)
     m = ForwardModel(prepare_data(ds, use_shapes=False), L_GUESS, preload=True, length_bounds_m=BOUNDS)
     dg = Diagnoser(m, force_noise="iid")
-    fit = dg.fit((), dg.start())
+    fit = dg.fit_plain()
     assert fit.length_m == pytest.approx(L_TRUE, rel=0.02)
     assert np.exp(fit.x[0]) == pytest.approx(EI0, rel=0.05)
     np.testing.assert_allclose(fit.preloads_m, DELTAS, atol=1.5e-3)  # the length is not read as a preload

@@ -44,7 +44,7 @@ def test_preloaded_forces_are_the_physics_at_the_shifted_displacement():
 def test_preloads_are_recovered_and_the_held_out_push_fits_its_own():
     ds = _preloaded()
     dg = Diagnoser(_model(ds), force_noise="iid")
-    fit = dg.fit((), dg.start())
+    fit = dg.fit_plain()
     np.testing.assert_allclose(fit.preloads_m, DELTAS, atol=1.5e-3)
     assert np.exp(fit.x[0]) == pytest.approx(EI0, rel=0.05)
     assert fit.natural(L)["preload_m"] == pytest.approx(list(fit.preloads_m))
@@ -53,7 +53,7 @@ def test_preloads_are_recovered_and_the_held_out_push_fits_its_own():
     assert out["heldout_force_rmse_N"] < 3 * 0.004
     # ... which a model without preloads cannot do (the pushes start at different forces)
     dg0 = Diagnoser(_model(ds, preload=False), force_noise="iid")
-    out0, _ = dg0.heldout(dg0.fit((), dg0.start()))
+    out0, _ = dg0.heldout(dg0.fit_plain())
     assert out0["heldout_force_rmse_N"] > 5 * out["heldout_force_rmse_N"]
 
 

@@ -22,7 +22,7 @@ def test_heldout_error_is_a_true_refit_without_the_push(datasets):
     """Each held-out push is predicted by a full fit to the other pushes: no steps from the full fit."""
     m = _model(datasets["clean"])
     dg = Diagnoser(m)
-    fit = dg.fit((), dg.start())
+    fit = dg.fit_plain()
     summary, errs = dg.heldout(fit)
     assert summary["heldout"] == "leave-one-height-out"
     for k, (row, e) in list(enumerate(zip(summary["per_push"], errs, strict=True)))[:1]:
@@ -40,7 +40,7 @@ def test_one_push_holds_out_the_last_third(datasets):
     m = _model(datasets["clean"])
     one = ForwardModel([m.data[0]], m.length_m)
     dg = Diagnoser(one)
-    fit = dg.fit((), dg.start())
+    fit = dg.fit_plain()
     summary, errs = dg.heldout(fit)
     assert summary["heldout"] == "last third of the push"
     n = m.data[0].D_m.size
