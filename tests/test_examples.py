@@ -13,6 +13,7 @@ SLOW_EXAMPLES = {
     "choose_next_height.py",
     "compare_species.py",
     "diagnose_misfit.py",
+    "fit_from_arrays.py",
     "predict_new_height.py",
     "quickstart.py",
     "stem_conditions.py",
