@@ -84,3 +84,51 @@ def test_a_grid_started_candidate_is_fitted_from_its_grid_too_and_the_better_fit
     calls.clear()
     row, ok = D._candidate_fit(FakeDiagnoser(), cur, ("force_offset",), [0.1], None, *gate)
     assert calls == [(("force_offset",), 0.0, False)] and ok is None
+
+
+def test_round_one_refits_a_grid_started_effect_the_screen_passed_over(monkeypatch):
+    # plumbing of the loop: while the model is plain, an effect with a grid start is refitted from that
+    # start alone even when its screen does not pass; one without a grid start is not refitted
+    jobs = []
+
+    def candidate_fit(dg, cur, effects, starts, grid, *rest):
+        jobs.append((effects, starts, None if grid is None else grid.tolist()))
+        return {"lr_statistic": 0.0, "rejected_because": "likelihood ratio below the threshold"}, None
+
+    plain = SimpleNamespace(
+        effects=(), loglik=0.0, sigma_force=0.1, marginal_sigma_force=0.2, rho_force=0.9, shape_scale=1.0
+    )
+    plain.natural = lambda L: {"EI0": 1.0, "p": 0.5}
+
+    class FakeDiagnoser:
+        def __init__(self, model, force_noise):
+            pass
+
+        def fit_plain(self):
+            return plain
+
+        def errors(self, fit, pool=None):
+            return {"heldout_force_rmse_N": 1.0}, []
+
+        def structure(self, fit, ratio):
+            return {"blocks": [], "unexplained_structure": False}
+
+        def score(self, fit, effect):
+            return {
+                "statistic": 40.0 if effect == "force_offset" else 0.0,
+                "p_value": 1e-9 if effect == "force_offset" else 1.0,
+                "direction": 1.0,
+            }
+
+        def grid_start(self, effect, fit):
+            return np.array([1.0, 2.0, 3.0]) if effect == "yield" else None
+
+    monkeypatch.setattr(D, "Diagnoser", FakeDiagnoser)
+    monkeypatch.setattr(D, "_candidate_fit", candidate_fit)
+    r = D.diagnose(SimpleNamespace(length_m=1.0), candidates=("force_offset", "yield", "base_compliance"))
+    assert sorted(jobs, key=str) == sorted(
+        [(("force_offset",), [pytest.approx(0.2)], None), (("yield",), None, [1.0, 2.0, 3.0])], key=str
+    )
+    rows = {c["effect"]: c for c in r["candidates"]}
+    assert rows["yield"].get("refitted_from_grid") and "refitted_from_grid" not in rows["base_compliance"]
+    assert r["added_effects"] == []

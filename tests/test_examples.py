@@ -8,7 +8,8 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 
-#: examples of a minute or more (several fits, or shapes): run with ``pytest -m slow``
+#: run with ``pytest -m slow``: examples of a minute or more (several fits, or shapes), and fit_from_arrays
+#: (about 30 s, which the default run's 10-minute budget could not hold on 2026-11-25)
 SLOW_EXAMPLES = {
     "choose_next_height.py",
     "compare_species.py",

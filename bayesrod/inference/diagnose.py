@@ -103,6 +103,14 @@ RHO_MAX = 0.99  # AR(1) correlation of the force noise is estimated in [-0.5, RH
 BLOCK_TRAIN = 2.0 / 3.0  # one push: the first two thirds of its samples fit, the last third is held out
 
 
+def _scale_fit(g: NDArray, F: NDArray) -> tuple[NDArray, NDArray]:
+    """Forces linear in EI0: for each row of ``g`` (P, n), forces per unit EI0, the least-squares EI0
+    (P,) fitting ``F`` (n,) and its residual sum of squares (P,), infinite where that EI0 is not positive."""
+    gg = np.einsum("pn,pn->p", g, g)
+    a = (g @ F) / np.where(gg > 0, gg, np.inf)
+    return a, np.where(a > 0, np.sum((F[None, :] - a[:, None] * g) ** 2, axis=1), np.inf)
+
+
 def _spline_matrix(D: NDArray, n_nodes: int) -> tuple[NDArray, NDArray]:
     """Solver nodes (n_nodes,) of one push and the matrix (n, n_nodes) reading its n samples off them.
 
@@ -807,10 +815,7 @@ class Diagnoser:
         shift = np.zeros(len(self.m.force_pushes))
         for _ in range(2 if self.m.preload else 1):
             g, p_grid = self._unit_forces(p_grid, shift)
-            gg = np.einsum("pn,pn->p", g, g)
-            a = (g @ self.m.F_obs) / np.where(gg > 0, gg, np.inf)
-            rss = np.sum((self.m.F_obs[None, :] - a[:, None] * g) ** 2, axis=1)
-            rss = np.where(a > 0, rss, np.inf)
+            a, rss = _scale_fit(g, self.m.F_obs)
             k = int(np.argmin(rss))
             if not np.isfinite(rss[k]):
                 raise ValueError("diagnose: expected forces that rise with displacement, got none the model can fit")
@@ -880,10 +885,7 @@ class Diagnoser:
         p_grid = np.array([0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, P_MAX])  # a start: coarse (a curve costs)
         best, out = np.inf, plain.x[: self.m.n_base]
         for c in np.concatenate([[0.0], np.geomspace(0.05, 2.5, 5)]):
-            g, _ = self._unit_forces(p_grid, pre, length, c_base=c, n_f=80)
-            gg = np.einsum("pn,pn->p", g, g)
-            a = (g @ self.m.F_obs) / np.where(gg > 0, gg, np.inf)
-            rss = np.where(a > 0, np.sum((self.m.F_obs[None, :] - a[:, None] * g) ** 2, axis=1), np.inf)
+            a, rss = _scale_fit(self._unit_forces(p_grid, pre, length, c_base=c, n_f=80)[0], self.m.F_obs)
             k = int(np.argmin(rss))
             if rss[k] < best:
                 best = rss[k]
@@ -1169,13 +1171,12 @@ def _candidate_fit(
     from a grid (:meth:`Diagnoser.grid_start`; None: none), fitted with independent weights first. The
     better of the two fits is judged.
     """
-    slow = any(e in SLOW for e in effects)
+    model, budget = cur.effects + tuple(effects), 12 if any(e in SLOW for e in effects) else 40
     fitted = []
     if starts is not None:
-        x0 = _no_worse_start(dg, cur, effects, np.asarray(starts, float))
-        fitted.append(dg.fit(cur.effects + tuple(effects), x0, max_nfev=12 if slow else 40))
+        fitted.append(dg.fit(model, _no_worse_start(dg, cur, effects, np.asarray(starts, float)), max_nfev=budget))
     if grid is not None:
-        fitted.append(dg.fit(cur.effects + tuple(effects), grid, max_nfev=12 if slow else 40, ols_first=True))
+        fitted.append(dg.fit(model, grid, max_nfev=budget, ols_first=True))
     new = max(fitted, key=lambda f: f.loglik)
     lr = 2.0 * (new.loglik - cur.loglik)
     row = {"lr_statistic": float(lr), "fitted": new.natural(L)}
@@ -1338,11 +1339,10 @@ def _loop(
         cur_rmse = history[-1]["errors"]["heldout_force_rmse_N"]
         accepted = None  # (effects, (fit, errors, error arrays, lr), row)
         state = (rnd, cur, level, cur_errs, cur_rmse)
-        # an effect with a grid start is refitted whatever its screen says while the model is plain: the
-        # screen is local, at the plain optimum, and that optimum can hide the effect behind another taper
-        # (a yielding twig: plain fit p = 2, yield screen 0.8, yield refit LR 228)
-        # (only the grid's fit: the screen says the local step shows nothing; no grid start: the grid's
-        # best point is the plain model itself)
+        # While the model is plain, an effect whose grid start fits better than the plain fit is refitted
+        # from that start whatever its screen says (and from there only: the screen says the local step
+        # shows nothing). The screen is local, at the plain optimum, and that optimum can hide the effect
+        # behind another taper (a yielding twig: plain fit p = 2, yield screen 0.8, yield refit LR 228).
         grids = {e: dg.grid_start(e, cur) for e in GRID_STARTED if e in remaining} if not cur.effects else {}
         for t in tests:
             if grids.get(t["effect"]) is not None and t["p_value"] >= level:
