@@ -330,3 +330,83 @@ def test_design_separates_the_stem_from_its_anchorage_after_one_height():
     assert r["parameters"] == ["log_EI0", "p", "base_compliance_coordinate"]
     assert eig[0.5] < 0.2 and eig[0.3] > 1.5 and eig[0.7] > 0.3
     assert r["recommended_height_m"] == 0.3
+
+
+def _pinned(n=400, **effects):
+    """A posterior pinned at EI0 2.63 N m^2, p 0.43 (relative spread 1e-4), with effects held at one value each."""
+    rng = np.random.default_rng(0)
+    s = {
+        "EI0": 2.63 * np.exp(1e-4 * rng.standard_normal(n)),
+        "p": 0.43 + 1e-4 * rng.standard_normal(n),
+        "sigma_force_N": np.full(n, 0.03),
+    }
+    s.update({k: np.full(n, v) for k, v in effects.items()})
+    return s
+
+
+@pytest.mark.parametrize("method", ["gaussian", "nmc"])
+def test_design_peak_forces_carry_the_offset_the_yield_and_a_fixed_tabled_effect(method):
+    """Peak forces of a pinned posterior are the forward solve's with every fitted effect: the offset
+    added, the base moment capped by the yield (1.867 N = 0.5 N m / 0.3 m + 0.2 N at 0.3 m, while the
+    elastic rod would reach 3.41 N), the base spring held at its value (a tabled effect that does not vary)."""
+    from bayesrod.physics import Effects, force_from_displacement
+
+    L, plan = 0.8, PushPlan(0.05, 20, None)
+    s = _pinned(force_offset=0.2, base_compliance=8.0, **{"yield": 0.5})
+    r = design_heights(s, L, [0.3, 0.5, 0.7], plan, method=method, n_draws=200, n_inner=150)
+    assert r["fixed_effects"] == {"base_compliance": 8.0} and r["parameters"] == ["log_EI0", "p"]
+    eff = Effects(base_compliance=8.0, yield_moment=0.5, force_offset=0.2)
+    for c in r["candidates"]:
+        ref = float(np.max(force_from_displacement(plan.D_m, c["height_m"], 2.63, 0.43, L, eff).force_N))
+        assert c["peak_force_N"]["median"] == pytest.approx(ref, rel=1e-4)
+        assert c["predicted_peak_force_N"] == c["peak_force_N"]["median"]
+        assert abs(c["expected_information_gain_nats"]) < 2e-3  # a pinned posterior has nothing to learn
+    assert r["candidates"][0]["peak_force_N"]["median"] == pytest.approx(0.5 / 0.3 + 0.2, rel=1e-6)
+
+
+def test_design_information_gain_sees_the_yield_cap():
+    """Past the yield the force no longer depends on EI0 or p: the linearised gain (its Jacobian through the
+    cap) drops from 2.4 to 0.12 nats at 0.3 m and matches nested Monte Carlo (measured 0.120 vs 0.119)."""
+    rng = np.random.default_rng(2)
+    n = 3000
+    s = {
+        "EI0": 2.63 * np.exp(0.08 * rng.standard_normal(n)),
+        "p": 0.43 + 0.06 * rng.standard_normal(n),
+        "sigma_force_N": np.full(n, 0.3),
+    }
+    plan = PushPlan(0.06, 20, None)
+    free = design_heights(s, 0.8, [0.3], plan, method="gaussian", n_draws=800)["candidates"][0]
+    capped = {**s, "yield": np.full(n, 0.6)}
+    g = design_heights(capped, 0.8, [0.3], plan, method="gaussian", n_draws=800)["candidates"][0]
+    m = design_heights(capped, 0.8, [0.3], plan, method="nmc", n_draws=400, n_inner=1600)["candidates"][0]
+    assert free["expected_information_gain_nats"] > 2.0 and g["expected_information_gain_nats"] < 0.3
+    se = m["eig_standard_error_nats"]
+    assert abs(g["expected_information_gain_nats"] - m["expected_information_gain_nats"]) < 4 * se + 0.02
+
+
+def test_design_resamples_the_inner_draws_of_a_small_posterior_and_rejects_heights_off_the_stem():
+    """400 draws, 350 outer: 50 left for the inner sum, too few: it resamples n_inner of them. Heights at
+    the clamp (0) and at the tip (L) are outside the stem."""
+    s = _pinned()
+    r = design_heights(s, 0.8, [0.0, 0.5, 0.8], PushPlan(0.05, 20, None), n_draws=350, n_inner=300)
+    rows = r["candidates"]
+    assert r["n_draws"] == 350 and rows[1]["feasible"]
+    assert np.isfinite(rows[1]["expected_information_gain_nats"]) and rows[1]["eig_standard_error_nats"] >= 0
+    for row in (rows[0], rows[2]):
+        assert not row["feasible"] and row["expected_information_gain_nats"] is None
+        assert row["reason"] == "outside the stem: expected 0 < h < L = 0.8 m" and row["predicted_peak_force_N"] is None
+
+
+def test_design_checks_target_method_and_noise_by_name():
+    s, plan = _pinned(n=200), PushPlan(0.05, 10, None)
+    r = design_heights(s, 0.8, [0.5], plan, method="gaussian", target="ei", n_draws=50)
+    assert r["target"] == "ei" and r["method"] == "gaussian"
+    with pytest.raises(ValueError, match=r"^target: expected one of params, ei, k_theta, got 'bogus'$"):
+        design_heights(s, 0.8, [0.5], plan, target="bogus")
+    with pytest.raises(ValueError, match=r"^method: expected gaussian or nmc, got 'mcmc'$"):
+        design_heights(s, 0.8, [0.5], plan, method="mcmc")
+    with pytest.raises(ValueError, match=r"^method: expected target params for nmc .*got 'ei'$"):
+        design_heights(s, 0.8, [0.5], plan, method="nmc", target="ei")
+    bare = {k: s[k] for k in ("EI0", "p")}
+    with pytest.raises(ValueError, match=r"^samples: expected a posterior with force noise .*got EI0, p$"):
+        design_heights(bare, 0.8, [0.5], plan)
