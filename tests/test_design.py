@@ -82,9 +82,10 @@ def test_predictor_forces_match_direct_forward_solves():
 
     D = np.linspace(0.005, 0.08, 12)
     pred = HeightPredictor(0.5, 0.8, D, (0.3, 0.6))
-    p = np.array([0.33, 0.47, 0.58])
-    F = pred.forces(np.log([2.0, 2.63, 3.1]), p)
-    for k, (e, pp) in enumerate(zip([2.0, 2.63, 3.1], p, strict=True)):
+    p = np.array([0.3, 0.33, 0.47, 0.58, 0.6])  # the span's ends too: the p grid must cover them
+    EI0 = [2.0, 2.2, 2.63, 3.1, 2.8]
+    F = pred.forces(np.log(EI0), p)
+    for k, (e, pp) in enumerate(zip(EI0, p, strict=True)):
         ref = force_from_displacement(D, 0.5, e, pp, 0.8).force_N
         np.testing.assert_allclose(F[k], ref, rtol=2e-4)
 
@@ -410,3 +411,51 @@ def test_design_checks_target_method_and_noise_by_name():
     bare = {k: s[k] for k in ("EI0", "p")}
     with pytest.raises(ValueError, match=r"^samples: expected a posterior with force noise .*got EI0, p$"):
         design_heights(bare, 0.8, [0.5], plan)
+
+
+def test_nested_mc_estimator_is_the_loop_written_from_its_definition():
+    """Uneven noise, masked samples, N not a multiple of the chunk: each outer draw's log-likelihood ratio
+    against the mean over the inner draws and itself, written as a plain loop with scipy's densities."""
+    from scipy.special import logsumexp
+    from scipy.stats import norm
+
+    rng = np.random.default_rng(8)
+    N, M, n = 150, 37, 7
+    F_o, F_i = rng.normal(2.0, 0.5, (N, n)), rng.normal(2.0, 0.5, (M, n))
+    s_o, s_i = rng.uniform(0.2, 0.6, N), rng.uniform(0.2, 0.6, M)
+    mask = rng.random((N, n)) > 0.2
+    est, se = eig_nested_mc(F_o, mask, s_o, F_i, s_i, np.random.default_rng(3))
+    y = F_o + s_o[:, None] * np.random.default_rng(3).standard_normal((N, n))
+    terms = []
+    for i in range(N):
+        m = mask[i]
+        own = norm.logpdf(y[i, m], F_o[i, m], s_o[i]).sum()
+        others = [norm.logpdf(y[i, m], F_i[j, m], s_i[j]).sum() for j in range(M)]
+        terms.append(own - (logsumexp([own, *others]) - np.log(M + 1)))
+    assert est == pytest.approx(np.mean(terms), rel=1e-10)
+    assert se == pytest.approx(np.std(terms, ddof=1) / np.sqrt(N), rel=1e-10)
+
+
+@pytest.mark.parametrize("D", [2, 3])
+def test_linearised_estimator_is_its_formula_with_masked_samples(D):
+    """0.5 log det(I + Sigma J^T J / sigma^2) averaged over draws, the masked samples left out; and for a
+    derived quantity with gradient g, 0.5 log(g^T Sigma g / g^T (Sigma^-1 + A)^-1 g) (an effect coordinate,
+    the third column, has no gradient)."""
+    from bayesrod.inference.design import _functional_gradients
+
+    rng = np.random.default_rng(9)
+    K, n = 40, 6
+    theta = rng.multivariate_normal(np.zeros(D), 0.02 * np.eye(D) + 0.01, size=K) + [np.log(2.6), 0.43, 0.1][:D]
+    J, sig = rng.normal(size=(K, n, D)), rng.uniform(0.3, 0.9, K)
+    mask = rng.random((K, n)) > 0.3
+    Sigma = np.cov(theta.T)
+    A = [J[k][mask[k]].T @ J[k][mask[k]] / sig[k] ** 2 for k in range(K)]
+    ref = np.mean([0.5 * np.linalg.slogdet(np.eye(D) + Sigma @ a)[1] for a in A])
+    assert eig_gaussian(theta, J, mask, sig) == pytest.approx(ref, rel=1e-9)
+    G = _functional_gradients("k_theta", theta, 0.8, 0.5)
+    gains = []
+    for k in range(K):
+        g = np.concatenate([G[k, 0], np.zeros(D - 2)])
+        gains.append(0.5 * np.log(g @ Sigma @ g / (g @ np.linalg.inv(np.linalg.inv(Sigma) + A[k]) @ g)))
+    got = eig_gaussian(theta, J, mask, sig, target="k_theta", length_m=0.8, target_height_m=0.5)
+    assert got == pytest.approx(np.mean(gains), rel=1e-9)

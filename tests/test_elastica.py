@@ -70,8 +70,10 @@ def test_forces_agree_with_reference_up_to_slip(preset):
         d = d_end * np.array([0.002, 0.05, 0.2, 0.4, 0.6, 0.8, 0.9, 0.95, 0.97])
         fast = force_from_displacement(d * L, h, EI0, p, L)
         assert not fast.slipped.any()
-        # the reference at rtol 1e-10: four orders tighter than the check, at a third of the 1e-12 default's cost
-        ref = np.array([R.solve_displacement(x, eta, p, rtol=1e-10)["f"] for x in d]) * EI0 / L**2
+        # the reference at its default rtol 1e-12: at 0.97 of the branch end the force is flat to 1e-7 and the
+        # push must be located to ~1e-10 in force; at rtol 1e-10 the reference lost that point on grass (NaN
+        # with scipy 1.17.1, 2026-11-25), at 1e-12 it costs 20% more
+        ref = np.array([R.solve_displacement(x, eta, p)["f"] for x in d]) * EI0 / L**2
         np.testing.assert_allclose(fast.force_N, ref, rtol=1e-6)
 
 
