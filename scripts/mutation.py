@@ -184,8 +184,13 @@ def main(argv=None) -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--reclassify", action="store_true", help="only classify the survivors in --out again")
     args = ap.parse_args(argv)
-    if subprocess.run([sys.executable, "-m", "mutmut", "--version"], capture_output=True).returncode:
-        raise SystemExit("mutmut is not installed: pip install mutmut==3.8.1")
+    # by its metadata: `python -m mutmut --version` reads a configuration and fails outside a project with one
+    try:
+        from importlib.metadata import version
+
+        version("mutmut")
+    except ImportError:
+        raise SystemExit("mutmut is not installed: pip install mutmut==3.8.1") from None
     old = json.loads(args.out.read_text()) if args.out.exists() else {}
     results = dict(old)
     for name in [] if args.reclassify else args.only or list(TARGETS):

@@ -459,3 +459,99 @@ def test_linearised_estimator_is_its_formula_with_masked_samples(D):
         gains.append(0.5 * np.log(g @ Sigma @ g / (g @ np.linalg.inv(np.linalg.inv(Sigma) + A[k]) @ g)))
     got = eig_gaussian(theta, J, mask, sig, target="k_theta", length_m=0.8, target_height_m=0.5)
     assert got == pytest.approx(np.mean(gains), rel=1e-9)
+
+
+def test_design_row_is_the_predictor_and_the_estimator_applied_to_its_draws(capsys):
+    """Every draw outer (n_draws = S: the estimator's mean and covariance ignore the order), target k_theta at
+    0.5 m: the row's gain, peak forces, P(in range), slip and recorded fraction are the predictor's, the
+    linearised estimator's and the feasibility check's on those draws; no progress is printed unless asked,
+    and a second call gives the same numbers."""
+    from bayesrod.inference.design import feasibility
+
+    S, L, h = 300, 0.8, 0.6
+    s = _posterior(np.random.default_rng(6), n=S, sigma=0.05)
+    plan = PushPlan(0.45, 25, (0.05, 6.0))  # past some draws' slip, some peaks above 6 N
+    kw = dict(target="k_theta", target_height_m=0.5, method="gaussian", n_draws=S)
+    r = design_heights(s, L, [h], plan, **kw)
+    row = r["candidates"][0]
+    assert r["target"] == "k_theta@0.5" and r["n_draws"] == S and "eig_standard_error_nats" not in row
+    pred = HeightPredictor(h, L, plan.D_m, (s["p"].min(), s["p"].max()), None, float(np.median(s["EI0"])))
+    th = np.column_stack([np.log(s["EI0"]), s["p"]])
+    F, mask = pred.forces(th[:, 0], th[:, 1]), pred.observed(th[:, 1])
+    J = pred.jacobian(th[:, 0], th[:, 1])
+    eig = eig_gaussian(th, J, mask, s["sigma_force_N"], target="k_theta", length_m=L, target_height_m=0.5)
+    feas = feasibility(F, mask, pred.slip_m(th[:, 1]), s["sigma_force_N"], plan)
+    assert row["expected_information_gain_nats"] == pytest.approx(eig, rel=1e-9)
+    assert row["expected_information_gain_nats"] != pytest.approx(eig_gaussian(th, J, mask, s["sigma_force_N"]))
+    assert row["peak_force_N"] == pytest.approx(feas["peak_force_N"], rel=1e-12)
+    assert row["prob_in_range"] == feas["prob_in_range"] and 0 < row["prob_in_range"] < 1
+    assert row["slip_displacement_m"] == pytest.approx(feas["slip_displacement_m"], rel=1e-12)
+    assert row["recorded_fraction"] == pytest.approx(mask.mean()) and 0 < row["recorded_fraction"] < 1
+    again = design_heights(s, L, [h], plan, **kw)
+    nmc = [design_heights(s, L, [h], plan, n_draws=100, n_inner=200) for _ in range(2)]
+    assert again == r and nmc[0] == nmc[1]
+    assert capsys.readouterr().err == ""
+
+
+def test_predictor_jacobian_is_the_central_difference_of_its_forces_through_the_cap_and_the_axis():
+    """All three columns (log EI0, p, the base spring's coordinate) with a yield cap and an offset passed
+    through: where the cap binds the force depends on none of them."""
+    from bayesrod.inference.design import _effect_axis
+
+    L, h, D = 0.8, 0.5, np.linspace(0.0, 0.06, 13)
+    EI0, p, kb = _sampled_compliance()
+    axis, u = _effect_axis({"EI0": EI0, "p": p, "base_compliance": kb}, L)
+    pred = HeightPredictor(h, L, D, (p.min(), p.max()), effect_axis=axis)
+    kw = {"yield_moment": np.full(EI0.size, 0.5), "offset": np.full(EI0.size, 0.1)}
+    le, d = np.log(EI0), 1e-4
+    J = pred.jacobian(le, p, u=u, **kw)
+    cols = [
+        (pred.forces(le + d, p, u=u, **kw) - pred.forces(le - d, p, u=u, **kw)) / (2 * d),
+        (pred.forces(le, p + d, u=u, **kw) - pred.forces(le, p - d, u=u, **kw)) / (2 * d),
+        (pred.forces(le, p, u=u + d, **kw) - pred.forces(le, p, u=u - d, **kw)) / (2 * d),
+    ]
+    capped = pred.forces(le, p, u=u, **kw) >= 0.5 / h + 0.1 - 1e-12
+    assert capped.any() and (~capped).any()
+    for k in range(3):
+        np.testing.assert_allclose(J[..., k], cols[k], rtol=1e-6, atol=1e-9)
+        assert np.all(J[..., k][capped] == 0.0) and np.abs(J[..., k][~capped]).max() > 0.05
+
+
+def test_predictor_slip_is_where_the_forward_solve_slips_with_a_sampled_spring():
+    from bayesrod.inference.design import _effect_axis
+    from bayesrod.physics import Effects, force_from_displacement
+
+    L, h = 0.8, 0.6
+    EI0, p, kb = _sampled_compliance(3)
+    axis, u = _effect_axis({"EI0": EI0, "p": p, "base_compliance": kb}, L)
+    pred = HeightPredictor(h, L, np.linspace(0, 0.1, 5), (p.min(), p.max()), effect_axis=axis)
+    slip = pred.slip_m(p, u)
+    D = np.linspace(0.0, 1.2 * L, 2401)
+    for k in range(3):
+        first = D[force_from_displacement(D, h, EI0[k], p[k], L, Effects(base_compliance=kb[k])).slipped][0]
+        assert slip[k] == pytest.approx(first, rel=5e-3), (k, slip[k], first)  # measured: within 0.3%
+
+
+def test_a_varying_tabled_effect_is_an_axis_however_small_its_spread_and_only_one_may_vary():
+    from bayesrod.inference.design import _effect_axis
+
+    rng = np.random.default_rng(0)
+    s = {"EI0": np.full(50, 2.6), "p": np.full(50, 0.43), "base_compliance": 8.0 + 0.3 * rng.random(50)}
+    axis, u = _effect_axis(s, 0.8)
+    assert axis is not None and axis.name == "base_compliance" and u.shape == (50,)
+    assert axis.grid[0] <= u.min() and axis.grid[-1] >= u.max()
+    with pytest.raises(
+        ValueError, match=r"^samples: expected at most one sampled tabled effect, got base_compliance, "
+    ):
+        _effect_axis({**s, "base_tilt": 0.01 * rng.random(50)}, 0.8)
+    capped = design_heights(_pinned(), 0.8, [0.0], PushPlan(0.05, 10, None), method="gaussian", n_draws=20)
+    assert capped["candidates"][0]["feasible"] is False
+    # a tilt either way: the axis spans the negative draws too (only a base spring's coordinate stops at 0)
+    tilt, _ = _effect_axis({**{k: s[k] for k in ("EI0", "p")}, "base_tilt": np.linspace(-0.03, 0.02, 50)}, 0.8)
+    assert tilt.grid[0] < -0.03 and tilt.grid[-1] > 0.02
+    # the linearised gain with the spring as a third parameter
+    lin = design_heights(
+        {**s, "sigma_force_N": np.full(50, 0.03)}, 0.8, [0.5], PushPlan(0.05, 10, None), method="gaussian"
+    )
+    assert lin["parameters"][-1] == "base_compliance_coordinate"
+    assert np.isfinite(lin["candidates"][0]["expected_information_gain_nats"])
