@@ -37,8 +37,8 @@ def _is_run(path: Path) -> bool:
 
 
 def expand_inputs(inputs) -> list[Path]:
-    """Paths as given, a ``fit-many`` output standing for all its finished runs and a ``fit-group``
-    output (``groups.json``) for all its stems."""
+    """Paths as given, a ``fit-many`` output standing for all its finished runs (and, when grouped,
+    its stems) and a ``fit-group`` output (``groups.json``) for all its stems."""
     import json
 
     expanded = []
@@ -46,6 +46,7 @@ def expand_inputs(inputs) -> list[Path]:
         path = Path(raw)
         if (path / "survey.csv").is_file() and (path / "runs").is_dir():
             expanded += [d.with_suffix("") for d in sorted((path / "runs").glob("*.done"))]
+            expanded += [d.with_suffix("") for d in sorted((path / "groups").glob("*.done"))]  # fit_many(grouped=True)
         elif (path / "groups.json").is_file():
             stems = json.loads((path / "groups.json").read_text()).get("stems", {})
             expanded += [path / d for d in stems.values()]

@@ -160,43 +160,65 @@ def _safe(s: str) -> str:
     return re.sub(r"[^0-9A-Za-z_.-]", "_", s)
 
 
+def group_paths(root) -> tuple[dict[str, dict[str, Path]], list[Path], list[tuple[Path, str]]]:
+    """Datasets under ``root`` sorted by stem: ``({stem_id: {condition: path}}, singles, problems)``.
+
+    ``singles``: datasets that are no stem's condition (no ``stem_id`` or ``condition``, or the only
+    condition of their stem); ``problems``: ``(path, one line)`` for each of those and for a second dataset
+    of one stem with the same condition (skipped).
+    """
+    from .survey import find_datasets
+
+    groups: dict[str, dict[str, Path]] = {}
+    singles: list[Path] = []
+    problems: list[tuple[Path, str]] = []
+    for path in find_datasets(root):
+        extra = as_dataset(path).extra
+        sid, cond = extra.get("stem_id"), extra.get("condition")
+        if not isinstance(sid, str) or not sid or not isinstance(cond, str) or not cond:
+            singles.append(path)
+            problems.append(
+                (
+                    path,
+                    f"{path}/specimen.json: stem_id, condition: expected two non-empty strings, got "
+                    f"{sid!r} and {cond!r}; not part of a group",
+                )
+            )
+            continue
+        conds = groups.setdefault(sid, {})
+        if cond in conds:
+            problems.append(
+                (
+                    path,
+                    f"{path}/specimen.json: condition: expected one dataset per condition of stem {sid!r}, got "
+                    f"{cond!r} again (also {conds[cond]}); this one skipped",
+                )
+            )
+            continue
+        conds[cond] = path
+    for sid in list(groups):
+        if len(groups[sid]) < 2:
+            ((cond, path),) = groups.pop(sid).items()
+            singles.append(path)
+            problems.append(
+                (
+                    path,
+                    f"stem {sid}: expected two or more conditions, got only {cond!r} ({path}); "
+                    "fit it with bayesrod fit",
+                )
+            )
+    return groups, singles, problems
+
+
 def find_groups(root) -> tuple[dict[str, dict], list[str]]:
     """Stems under ``root``: ``{stem_id: {condition: Dataset}}`` and the problems (one line each).
 
     A dataset without ``stem_id`` or ``condition``, a stem with a single condition, and two datasets of
     one stem with the same condition are reported, not fitted.
     """
-    from .survey import find_datasets
-
-    groups: dict[str, dict] = {}
-    where: dict[tuple, Path] = {}
-    problems = []
-    for path in find_datasets(root):
-        ds = as_dataset(path)
-        sid, cond = ds.extra.get("stem_id"), ds.extra.get("condition")
-        if not isinstance(sid, str) or not sid or not isinstance(cond, str) or not cond:
-            problems.append(
-                f"{path}/specimen.json: stem_id, condition: expected two non-empty strings, got "
-                f"{sid!r} and {cond!r}; not part of a group"
-            )
-            continue
-        if (sid, cond) in where:
-            problems.append(
-                f"{path}/specimen.json: condition: expected one dataset per condition of stem {sid!r}, got "
-                f"{cond!r} again (also {where[(sid, cond)]}); this one skipped"
-            )
-            continue
-        where[(sid, cond)] = path
-        groups.setdefault(sid, {})[cond] = ds
-    for sid in list(groups):
-        if len(groups[sid]) < 2:
-            (cond,) = groups[sid]
-            problems.append(
-                f"stem {sid}: expected two or more conditions, got only {cond!r} ({where[(sid, cond)]}); "
-                "fit it with bayesrod fit"
-            )
-            del groups[sid]
-    return groups, problems
+    groups, _, problems = group_paths(root)
+    loaded = {sid: {c: as_dataset(p) for c, p in conds.items()} for sid, conds in groups.items()}
+    return loaded, [line for _, line in problems]
 
 
 def fit_group(

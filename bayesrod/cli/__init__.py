@@ -105,6 +105,11 @@ def build_parser() -> argparse.ArgumentParser:
     fm.add_argument("--prior", default="default", help="prior name or JSON file")
     fm.add_argument("--seed", type=int, default=0, help="random seed of every fit (default 0)")
     fm.add_argument("--forces-only", action="store_true", help="ignore centerlines")
+    fm.add_argument(
+        "--grouped",
+        action="store_true",
+        help="datasets sharing a stem_id: one joint fit per stem (as fit-group) in OUT/groups, tabled in groups.csv",
+    )
     fg = sub.add_parser(
         "fit-group", help="one stem under several conditions: a joint posterior separating stem and anchorage"
     )
@@ -856,13 +861,17 @@ def cmd_fit_many(args: argparse.Namespace) -> int:
         seed=args.seed,
         use_shapes=not args.forces_only,
         progress=_progress(args),
+        grouped=args.grouped,
     )
     res.save(args.out)
     if args.json:
         _emit_json(res.to_dict())
     else:
+        stems = len({r["stem_id"] for r in res.group_rows})
         print(
-            f"wrote {args.out}: {len(res.rows)} of {res.n_datasets} specimens in survey.csv / survey.parquet"
+            f"wrote {args.out}: {len(res.rows)} specimens in survey.csv / survey.parquet"
+            + (f", {stems} stems jointly in groups.csv / groups.parquet" if args.grouped else "")
+            + f" ({res.n_datasets} datasets)"
             + (f"; {len(res.failures)} failed (failures.json)" if res.failures else "")
         )
     return 1 if res.failures else 0
