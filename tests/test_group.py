@@ -144,6 +144,14 @@ def test_find_groups_reports_what_it_cannot_group(tmp_path):
     assert "s1-cut-again" in text and "'cut' again" in text
     assert "stem s2: expected two or more conditions" in text
     assert "loose/specimen.json: stem_id, condition" in text
+    # what fit-many --grouped does with them: the loose dataset and the lone condition are fitted alone,
+    # the repeated condition is the only problem that is not a single
+    from bayesrod.api.group import group_paths
+
+    paths, singles, probs = group_paths(tmp_path)
+    assert {c: p.name for c, p in paths["s1"].items()} == {"cut": "s1-cut", "intact": "s1-intact"}
+    assert sorted(p.name for p in singles) == ["loose", "s2-intact"]
+    assert [p.name for p, _ in probs if p not in singles] == ["s1-cut-again"]
 
 
 @pytest.mark.slow  # about 2 minutes
