@@ -112,7 +112,7 @@ def test_group_rows_are_one_per_condition_and_save_as_groups_tables(tmp_path, sh
     assert not (tmp_path / "plain" / "groups.csv").exists()  # no stems fitted jointly: no groups table
 
 
-@pytest.mark.slow  # 3 min (beside two studies): a Dask cluster, a joint fit and a single fit, then a rerun
+@pytest.mark.slow  # 3.5 min beside two studies: a Dask cluster, a joint fit and a single fit, then a rerun
 def test_fit_many_grouped_fits_stems_jointly_and_the_rest_alone(tmp_path):
     import math
 

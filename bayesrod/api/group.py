@@ -160,21 +160,18 @@ def _safe(s: str) -> str:
     return re.sub(r"[^0-9A-Za-z_.-]", "_", s)
 
 
-def group_paths(root) -> tuple[dict[str, dict[str, Path]], list[Path], list[tuple[Path, str]]]:
-    """Datasets under ``root`` sorted by stem: ``({stem_id: {condition: path}}, singles, problems)``.
-
-    ``singles``: datasets that are no stem's condition (no ``stem_id`` or ``condition``, or the only
-    condition of their stem); ``problems``: ``(path, one line)`` for each of those and for a second dataset
-    of one stem with the same condition (skipped).
-    """
+def _sort_datasets(root) -> tuple[dict, dict[str, dict[str, Path]], list[Path], list[tuple[Path, str]]]:
+    """Every dataset under ``root`` read once and sorted by stem: ``({stem_id: {condition: Dataset}},
+    {stem_id: {condition: path}}, singles, problems)`` (see :func:`group_paths`)."""
     from .survey import find_datasets
 
-    groups: dict[str, dict[str, Path]] = {}
+    groups: dict[str, dict] = {}
+    where: dict[tuple[str, str], Path] = {}
     singles: list[Path] = []
     problems: list[tuple[Path, str]] = []
     for path in find_datasets(root):
-        extra = as_dataset(path).extra
-        sid, cond = extra.get("stem_id"), extra.get("condition")
+        ds = as_dataset(path)
+        sid, cond = ds.extra.get("stem_id"), ds.extra.get("condition")
         if not isinstance(sid, str) or not sid or not isinstance(cond, str) or not cond:
             singles.append(path)
             problems.append(
@@ -185,20 +182,21 @@ def group_paths(root) -> tuple[dict[str, dict[str, Path]], list[Path], list[tupl
                 )
             )
             continue
-        conds = groups.setdefault(sid, {})
-        if cond in conds:
+        if (sid, cond) in where:
             problems.append(
                 (
                     path,
                     f"{path}/specimen.json: condition: expected one dataset per condition of stem {sid!r}, got "
-                    f"{cond!r} again (also {conds[cond]}); this one skipped",
+                    f"{cond!r} again (also {where[(sid, cond)]}); this one skipped",
                 )
             )
             continue
-        conds[cond] = path
+        where[(sid, cond)] = path
+        groups.setdefault(sid, {})[cond] = ds
     for sid in list(groups):
         if len(groups[sid]) < 2:
-            ((cond, path),) = groups.pop(sid).items()
+            (cond,) = groups.pop(sid)
+            path = where[(sid, cond)]
             singles.append(path)
             problems.append(
                 (
@@ -207,7 +205,19 @@ def group_paths(root) -> tuple[dict[str, dict[str, Path]], list[Path], list[tupl
                     "fit it with bayesrod fit",
                 )
             )
-    return groups, singles, problems
+    paths = {sid: {c: where[(sid, c)] for c in conds} for sid, conds in groups.items()}
+    return groups, paths, singles, problems
+
+
+def group_paths(root) -> tuple[dict[str, dict[str, Path]], list[Path], list[tuple[Path, str]]]:
+    """Datasets under ``root`` sorted by stem: ``({stem_id: {condition: path}}, singles, problems)``.
+
+    ``singles``: datasets that are no stem's condition (no ``stem_id`` or ``condition``, or the only
+    condition of their stem); ``problems``: ``(path, one line)`` for each of those and for a second dataset
+    of one stem with the same condition (skipped).
+    """
+    _, paths, singles, problems = _sort_datasets(root)
+    return paths, singles, problems
 
 
 def find_groups(root) -> tuple[dict[str, dict], list[str]]:
@@ -216,9 +226,8 @@ def find_groups(root) -> tuple[dict[str, dict], list[str]]:
     A dataset without ``stem_id`` or ``condition``, a stem with a single condition, and two datasets of
     one stem with the same condition are reported, not fitted.
     """
-    groups, _, problems = group_paths(root)
-    loaded = {sid: {c: as_dataset(p) for c, p in conds.items()} for sid, conds in groups.items()}
-    return loaded, [line for _, line in problems]
+    groups, _, _, problems = _sort_datasets(root)
+    return groups, [line for _, line in problems]
 
 
 def fit_group(

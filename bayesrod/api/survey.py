@@ -31,16 +31,24 @@ from ..dataset.io import write_json
 
 log = logging.getLogger("bayesrod")
 
+_QUANTILES = ("median", "q05", "q95")
+
+
+def _interval_columns(*names: str) -> list[str]:
+    """``<name>_median, <name>_q05, <name>_q95`` for each name, in order."""
+    return [f"{n}_{q}" for n in names for q in _QUANTILES]
+
+
+def _interval_cells(**intervals: Mapping) -> dict:
+    """The cells of :func:`_interval_columns` from ``{median, q05, q95}`` mappings."""
+    return {f"{n}_{q}": iv[q] for n, iv in intervals.items() for q in _QUANTILES}
+
+
 SURVEY_COLUMNS = [
     "specimen",
     "species",
     "length_m",
-    "EI0_median",
-    "EI0_q05",
-    "EI0_q95",
-    "p_median",
-    "p_q05",
-    "p_q95",
+    *_interval_columns("EI0", "p"),
     "rhat_max",
     "ess_bulk_min",
     "force_rmse_N",
@@ -49,7 +57,6 @@ SURVEY_COLUMNS = [
     "run",
 ]
 
-
 #: one row per condition of a stem fitted jointly (``fit_many(..., grouped=True)``); EI0 and p are the
 #: stem's shared ones (the condition's own where they were not shared)
 GROUP_COLUMNS = [
@@ -57,15 +64,7 @@ GROUP_COLUMNS = [
     "condition",
     "species",
     "length_m",
-    "EI0_median",
-    "EI0_q05",
-    "EI0_q95",
-    "p_median",
-    "p_q05",
-    "p_q95",
-    "base_compliance_median",
-    "base_compliance_q05",
-    "base_compliance_q95",
+    *_interval_columns("EI0", "p", "base_compliance"),
     "prob_rigid_clamp",
     "sharing",
     "rhat_max",
@@ -119,15 +118,13 @@ def _group_rows(summary: dict, run: Path) -> list[dict]:
     for c in summary["conditions_order"]:
         cond = summary["conditions"][c]
         stem = {n: summary["shared"].get(n) or cond[n] for n in ("EI0", "p")}
-        kb = cond["base_compliance_rad_per_Nm"]
         rows.append(
             {
                 "stem_id": summary["stem_id"],
                 "condition": c,
                 "species": summary.get("species"),
                 "length_m": summary.get("length_m"),
-                **{f"{n}_{q}": stem[n][q] for n in ("EI0", "p") for q in ("median", "q05", "q95")},
-                **{f"base_compliance_{q}": kb[q] for q in ("median", "q05", "q95")},
+                **_interval_cells(**stem, base_compliance=cond["base_compliance_rad_per_Nm"]),
                 "prob_rigid_clamp": cond["prob_rigid_clamp"],
                 "sharing": (summary.get("sharing") or {}).get("verdict"),
                 "rhat_max": summary["convergence"]["rhat_max"],
@@ -146,12 +143,7 @@ def _row(summary: dict, run: Path) -> dict:
         "specimen": summary["specimen"],
         "species": summary.get("species"),
         "length_m": summary.get("length_m"),
-        "EI0_median": P["EI0"]["median"],
-        "EI0_q05": P["EI0"]["q05"],
-        "EI0_q95": P["EI0"]["q95"],
-        "p_median": P["p"]["median"],
-        "p_q05": P["p"]["q05"],
-        "p_q95": P["p"]["q95"],
+        **_interval_cells(EI0=P["EI0"], p=P["p"]),
         "rhat_max": summary["convergence"]["rhat_max"],
         "ess_bulk_min": summary["convergence"]["ess_bulk_min"],
         "force_rmse_N": fe.get("force_rmse_N"),
