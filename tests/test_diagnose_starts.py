@@ -68,21 +68,18 @@ def test_a_grid_started_candidate_is_fitted_from_its_grid_too_and_the_better_fit
             ll = 50.0 if x0[0] == 9.0 else 1.0
             return SimpleNamespace(loglik=ll, natural=lambda L, ll=ll: {"loglik": ll})
 
-        def errors(self, fit):
-            return {"heldout_force_rmse_N": None}, []
-
     monkeypatch.setattr(D, "_no_worse_start", lambda dg, cur, effects, starts: np.array([0.0, 0.0, 0.0]))
     cur = SimpleNamespace(effects=(), loglik=0.0)
     grid = np.array([9.0, 9.0, 9.0])
-    gate = (1e-3, 1, None, None, 0.1, 0.05, 1.0)
-    row, ok = D._candidate_fit(FakeDiagnoser(), cur, ("base_compliance",), [0.04], grid, *gate)
+    gate = (1e-3, 1, 1.0)
+    row, ok = D._candidate_lr(FakeDiagnoser(), cur, ("base_compliance",), [0.04], grid, *gate)
     assert calls == [(("base_compliance",), 0.0, False), (("base_compliance",), 9.0, True)]
-    assert row["fitted"] == {"loglik": 50.0} and ok[0].loglik == 50.0
+    assert row["fitted"] == {"loglik": 50.0} and ok.loglik == 50.0
     calls.clear()
-    D._candidate_fit(FakeDiagnoser(), cur, ("yield",), None, grid, *gate)
+    D._candidate_lr(FakeDiagnoser(), cur, ("yield",), None, grid, *gate)
     assert calls == [(("yield",), 9.0, True)]
     calls.clear()
-    row, ok = D._candidate_fit(FakeDiagnoser(), cur, ("force_offset",), [0.1], None, *gate)
+    row, ok = D._candidate_lr(FakeDiagnoser(), cur, ("force_offset",), [0.1], None, *gate)
     assert calls == [(("force_offset",), 0.0, False)] and ok is None
 
 
@@ -124,7 +121,7 @@ def test_round_one_refits_a_grid_started_effect_the_screen_passed_over(monkeypat
             return np.array([1.0, 2.0, 3.0]) if effect == "yield" else None
 
     monkeypatch.setattr(D, "Diagnoser", FakeDiagnoser)
-    monkeypatch.setattr(D, "_candidate_fit", candidate_fit)
+    monkeypatch.setattr(D, "_candidate_lr", candidate_fit)
     r = D.diagnose(SimpleNamespace(length_m=1.0), candidates=("force_offset", "yield", "base_compliance"))
     assert sorted(jobs, key=str) == sorted(
         [(("force_offset",), [pytest.approx(0.2)], None), (("yield",), None, [1.0, 2.0, 3.0])], key=str
@@ -132,3 +129,87 @@ def test_round_one_refits_a_grid_started_effect_the_screen_passed_over(monkeypat
     rows = {c["effect"]: c for c in r["candidates"]}
     assert rows["yield"].get("refitted_from_grid") and "refitted_from_grid" not in rows["base_compliance"]
     assert r["added_effects"] == []
+
+
+def test_the_heldout_gate_runs_in_decreasing_likelihood_ratio_and_keeps_the_first_pass():
+    # the decision is that of gating every candidate and keeping the passing one with the largest
+    # likelihood ratio (ties: the first in screen order); no candidate below the kept one is gated
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        n = int(rng.integers(1, 7))
+        lrs = rng.integers(0, 4, n).astype(float)  # ties are common
+        passes = rng.random(n) < 0.4
+        cands = [((f"e{i}",), {"lr_statistic": lrs[i]}, i) for i in range(n)]
+        gated = []
+
+        def gate(row, fit, gated=gated, passes=passes):
+            gated.append(fit)
+            return ("kept", fit) if passes[fit] else None
+
+        got = D._first_passing(cands, gate)
+        ok = [i for i in range(n) if passes[i]]
+        if not ok:
+            assert got is None and sorted(gated) == list(range(n))
+            assert not any("heldout_not_run" in c[1] for c in cands)
+            continue
+        best = max(ok, key=lambda i: (lrs[i], -i))
+        assert got == ((f"e{best}",), ("kept", best), cands[best][1])
+        order = sorted(range(n), key=lambda i: -lrs[i])
+        assert gated == order[: order.index(best) + 1]
+        assert {i for i in range(n) if cands[i][1].get("heldout_not_run")} == set(order[order.index(best) + 1 :])
+
+
+def test_the_loop_gates_held_out_in_ratio_order_and_adds_the_first_that_passes(monkeypatch):
+    # plumbing of the loop: three candidates pass the likelihood ratio (LR 10, 30, 20); the held-out gate
+    # fails the largest and passes the next, which is added; the smallest is never held out
+    lrs = {"force_offset": 10.0, "yield": 30.0, "base_compliance": 20.0}
+
+    def fitted(effects):
+        f = SimpleNamespace(
+            effects=effects, loglik=0.0, sigma_force=0.1, marginal_sigma_force=0.2, rho_force=0.9, shape_scale=1.0
+        )
+        f.natural = lambda L: {"EI0": 1.0, "p": 0.5}
+        return f
+
+    plain = fitted(())
+
+    def candidate_lr(dg, cur, effects, starts, grid, level, dof, L):
+        return {"lr_statistic": lrs[effects[0]], "fitted": {}}, fitted(effects)
+
+    gated = []
+
+    def heldout_gate(dg, cur, new, row, *rest):
+        gated.append(new.effects[0])
+        if new.effects[0] == "yield":
+            row["rejected_because"] = "held-out error not reduced"
+            return None
+        return new, {"heldout_force_rmse_N": 0.5}, []
+
+    class FakeDiagnoser:
+        def __init__(self, model, force_noise):
+            pass
+
+        def fit_plain(self):
+            return plain
+
+        def errors(self, fit, pool=None):
+            return {"heldout_force_rmse_N": 1.0}, []
+
+        def structure(self, fit, ratio):
+            return {"blocks": [], "unexplained_structure": False}
+
+        def score(self, fit, effect):
+            return {"statistic": 40.0, "p_value": 1e-9 if not fit.effects else 1.0, "direction": 1.0}
+
+        def grid_start(self, effect, fit):
+            return None
+
+    monkeypatch.setattr(D, "Diagnoser", FakeDiagnoser)
+    monkeypatch.setattr(D, "_candidate_lr", candidate_lr)
+    monkeypatch.setattr(D, "_heldout_gate", heldout_gate)
+    r = D.diagnose(SimpleNamespace(length_m=1.0), candidates=tuple(lrs))
+    assert gated == ["yield", "base_compliance"] and r["added_effects"] == ["base_compliance"]
+    rows = {c["effect"]: c for c in r["candidates"] if c["round"] == 1}
+    assert rows["base_compliance"]["selected"] and rows["yield"]["rejected_because"] == "held-out error not reduced"
+    assert rows["force_offset"]["heldout_not_run"] and not rows["yield"].get("heldout_not_run")
+    assert rows["force_offset"]["rejected_because"] == "a better-fitting effect was added"

@@ -1186,14 +1186,13 @@ def _quiet(msg: str) -> None:
     """The log of work done in worker processes (their messages are not forwarded)."""
 
 
-def _candidate_fit(
-    dg, cur, effects, starts, grid, level, dof, before_errs, before_rmse, min_gain, heldout_alpha, L, log=_quiet
-):
-    """Fit ``cur`` plus ``effects``; gate on the likelihood ratio, then on the true held-out refits.
+def _candidate_lr(dg, cur, effects, starts, grid, level, dof, L):
+    """Fit ``cur`` plus ``effects`` and gate on the likelihood ratio: (row, fit or None).
 
     ``starts``: the new coordinates' local start (None: no fit from ``cur``); ``grid``: a whole start
     from a grid (:meth:`Diagnoser.grid_start`; None: none), fitted with independent weights first. The
-    better of the two fits is judged.
+    better of the two fits is judged. The held-out gate (:func:`_heldout_gate`) comes after, in the
+    calling process, only for the candidates this one passes.
     """
     model, budget = cur.effects + tuple(effects), 12 if any(e in SLOW for e in effects) else 40
     fitted = []
@@ -1209,21 +1208,51 @@ def _candidate_fit(
             "likelihood ratio below the threshold" if lr >= 0 else "the fit stayed below the current model"
         )
         return row, None
-    log(f"held-out refits with {'+'.join(effects)}")
-    err, errs = dg.errors(new)
+    return row, new
+
+
+def _heldout_gate(dg, cur, new, row, before_errs, before_rmse, min_gain, heldout_alpha, pool=None, log=_quiet):
+    """The held-out gates of a candidate fit ``new`` that passed the likelihood ratio.
+
+    Fills ``row`` and returns (fit, errors, error arrays) when the true held-out refits lower the
+    held-out force RMSE by ``min_gain`` and the parametric bootstrap finds that fall significant;
+    None otherwise (``row["rejected_because"]`` says which gate).
+    """
+    log(f"held-out refits with {'+'.join(new.effects[len(cur.effects) :])}")
+    err, errs = dg.errors(new, pool)
     row["heldout_force_rmse_N"] = err["heldout_force_rmse_N"]
     if before_rmse is None:  # nothing to hold out (one short push): the likelihood ratio decides
-        return row, (new, err, errs, lr)
+        return new, err, errs
     t = heldout_comparison(before_errs, errs)
     row["heldout_gain"], row["heldout_log_score_gain"] = t["gain"], t["log_score_gain"]
     if t["gain"] < min_gain:
         row["rejected_because"] = "held-out error not reduced"
-        return row, None
+        return None
     row["heldout_p_value"] = null_heldout_gain(dg, cur, new, t["gain"])
     if row["heldout_p_value"] >= heldout_alpha:
         row["rejected_because"] = "held-out improvement not significant"
-        return row, None
-    return row, (new, err, errs, lr)
+        return None
+    return new, err, errs
+
+
+def _first_passing(candidates: list[tuple], gate) -> tuple | None:
+    """The candidate with the largest likelihood ratio among those ``gate`` passes.
+
+    ``candidates``: (effects, row, fit) that passed the likelihood ratio; ``gate(row, fit)`` returns
+    None (failed) or what to keep. The gate runs in decreasing likelihood ratio (ties: in the given
+    order) and stops at the first pass: the decision is that of gating all and keeping the largest
+    ratio, without the held-out refits of the candidates below it (their rows get
+    ``heldout_not_run: true``). Returns (effects, gate's result, row) or None.
+    """
+    order = sorted(range(len(candidates)), key=lambda i: -candidates[i][1]["lr_statistic"])
+    for rank, i in enumerate(order):
+        effects, row, fit = candidates[i]
+        kept = gate(row, fit)
+        if kept is not None:
+            for j in order[rank + 1 :]:
+                candidates[j][1]["heldout_not_run"] = True
+            return effects, kept, row
+    return None
 
 
 def diagnose(
@@ -1317,10 +1346,9 @@ def _loop(
     added: list[str] = []
     rows: list[dict] = []
     history = [{"effects": [], "errors": before, "loglik": cur.loglik}]
-    gate = (min_heldout_gain, heldout_alpha, L, log if pool is None else _quiet)
 
-    def fits(groups, rnd, cur, level, cur_errs, cur_rmse):
-        """(row, ok) of the candidate fit of each group of screen rows (one effect, or a pair)."""
+    def fits(groups, rnd, cur, level):
+        """(row, fit or None) of the candidate fit of each group of screen rows (one effect, or a pair)."""
         if groups:
             log(f"round {rnd}: fitting with {', '.join(' + '.join(t['effect'] for t in g) for g in groups)}")
 
@@ -1340,13 +1368,17 @@ def _loop(
                 grids.get(g[0]["effect"]) if len(g) == 1 else None,
                 level,
                 len(g),
-                cur_errs,
-                cur_rmse,
-                *gate,
+                L,
             )
             for g in groups
         ]
-        return _map(pool, _candidate_fit, jobs)
+        return _map(pool, _candidate_lr, jobs)
+
+    def gate(cur, cur_errs, cur_rmse):
+        """The held-out gates of one candidate fit (its refits spread over ``pool``)."""
+        return lambda row, new: _heldout_gate(
+            dg, cur, new, row, cur_errs, cur_rmse, min_heldout_gain, heldout_alpha, pool, log
+        )
 
     for rnd in range(1, max_effects + 1):
         remaining = [c for c in candidates if c not in added]
@@ -1361,8 +1393,7 @@ def _loop(
         tests.sort(key=lambda t: t["p_value"])
         rows += tests
         cur_rmse = history[-1]["errors"]["heldout_force_rmse_N"]
-        accepted = None  # (effects, (fit, errors, error arrays, lr), row)
-        state = (rnd, cur, level, cur_errs, cur_rmse)
+        state = (rnd, cur, level)
         # While the model is plain, an effect whose grid start fits better than the plain fit is refitted
         # from that start whatever its screen says (and from there only: the screen says the local step
         # shows nothing). The screen is local, at the plain optimum, and that optimum can hide the effect
@@ -1372,28 +1403,31 @@ def _loop(
             if grids.get(t["effect"]) is not None and t["p_value"] >= level:
                 t["refitted_from_grid"] = True
         screened = [t for t in tests if t["p_value"] < level or t.get("refitted_from_grid")]
-        for t, (row, ok) in zip(screened, fits([(t,) for t in screened], *state), strict=True):
-            e = t["effect"]
+        passed = []  # (effects, row, fit) past the likelihood ratio
+        for t, (row, new) in zip(screened, fits([(t,) for t in screened], *state), strict=True):
             t.update(row)
-            if ok and (accepted is None or ok[3] > accepted[1][3]):
-                accepted = ((e,), ok, t)
+            if new is not None:
+                passed.append(((t["effect"],), t, new))
+        accepted = _first_passing(passed, gate(cur, cur_errs, cur_rmse))
         if accepted is None and pairs and len(remaining) >= 2 and len(added) + 2 <= max_effects:
             if dg.structure(cur, ratio=structure_ratio)["unexplained_structure"]:
                 # pairs of the (up to three) singles that moved the likelihood (LR above chi^2_1 at 0.05)
                 moved = [t for t in tests if t.get("lr_statistic", 0.0) > stats.chi2.isf(0.05, 1)]
                 top = sorted(moved, key=lambda t: -t["lr_statistic"])[:3]
                 duos = list(combinations(top, 2))
-                for (a, b), (row, ok) in zip(duos, fits(duos, *state), strict=True):
+                passed = []
+                for (a, b), (row, new) in zip(duos, fits(duos, *state), strict=True):
                     effs = (a["effect"], b["effect"])
                     prow = {"effect": "+".join(effs), "round": rnd, "pair": list(effs), "level": level}
                     prow.update(row, selected=False, statistic=float(row["lr_statistic"]))
                     prow["p_value"] = float(stats.chi2.sf(max(row["lr_statistic"], 0.0), 2))
                     rows.append(prow)
-                    if ok and (accepted is None or ok[3] > accepted[1][3]):
-                        accepted = (effs, ok, prow)
+                    if new is not None:
+                        passed.append((effs, prow, new))
+                accepted = _first_passing(passed, gate(cur, cur_errs, cur_rmse))
         if accepted is None:
             break
-        effs, (cur, err, cur_errs, _), trow = accepted
+        effs, (cur, err, cur_errs), trow = accepted
         trow["selected"] = True
         for t in rows:
             if t.get("round") == rnd and "lr_statistic" in t and not t["selected"] and "rejected_because" not in t:
