@@ -752,7 +752,9 @@ def force_from_displacement_nd(
     f_sol, ok = np.zeros(B), np.ones(B, bool)
     if moved.size:
         f_guess = d_[moved] * _linear_kx_nd(_subset(P, moved))
-        f_sol[moved], ok[moved] = _bracket_and_solve(g_elastic, f_guess)
+        # the slip boundary to 1e-10 (relative, in force), not to round-off: only a displacement within
+        # about that of the branch's end can be classed differently, and the search costs a round per 8x
+        f_sol[moved], ok[moved] = _bracket_and_solve(g_elastic, f_guess, boundary_rtol=1e-10)
     phi_p = np.zeros(B)
     sol = _equilibrium(np.nan_to_num(f_sol), phi_p, P, n_steps, keep_shape)
     yielded = ok & (sol["m0"] > P["m_yield"])
