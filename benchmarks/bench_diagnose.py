@@ -1,9 +1,10 @@
 """Speed of ``bayesrod diagnose`` and of the correlated-noise fit (issue 19), same process.
 
-Run:  python benchmarks/bench_diagnose.py [--repeat 3] [--every-sample]
+Run:  python benchmarks/bench_diagnose.py [--repeat 3] [--every-sample] [--cases clean yield]
 
 1. Diagnosis of a three-height forces-only dataset: the simulated twig (3 heights,
-   AR(1) force noise rho = 0.9, no effect, and one with an undeclared base spring),
+   AR(1) force noise rho = 0.9, no effect, one with an undeclared base spring, and the
+   diagnosis study's yielding twig, seed 11: its friction candidate is the slowest fit),
    the whole catalog tested, AR(1) noise. Wall time per diagnosis with 1 and with 2
    worker processes, median over ``--repeat`` runs; references in the same process:
    the same diagnosis (1 worker) with the root search of the forward solves done by
@@ -44,12 +45,19 @@ def one_diagnosis(spec, n_nodes: int | None, workers: int = 1, bisection: bool =
         elastica.EXPAND_POINTS, elastica.BOUNDARY_SECTIONS = points
 
 
-def diagnosis_table(repeat: int, every_sample: bool) -> None:
-    """The first table: diagnoses of the clean and the base-spring twig."""
-    cases = {
-        "clean": bayesrod.simulate("twig", seed=1, noise_rho=0.9),
-        "base spring 8 N m/rad": bayesrod.simulate("twig", seed=2, noise_rho=0.9, effects={"base_compliance": 8.0}),
-    }
+CASES = {
+    "clean": lambda: bayesrod.simulate("twig", seed=1, noise_rho=0.9),
+    "spring": lambda: bayesrod.simulate("twig", seed=2, noise_rho=0.9, effects={"base_compliance": 8.0}),
+    "yield": lambda: bayesrod.simulate(
+        "twig", seed=11, noise_rho=0.9, effects={"yield": 3.0}, config_overrides={"n_frames_engaged": 8}
+    ),
+}
+NAMES = {"clean": "clean", "spring": "base spring 8 N m/rad", "yield": "yield 3 N m (study seed 11)"}
+
+
+def diagnosis_table(repeat: int, every_sample: bool, names=tuple(CASES)) -> None:
+    """The first table: diagnoses of the clean, the base-spring and the yielding twig."""
+    cases = {NAMES[k]: CASES[k]() for k in names}
     print(
         "| case | n_force | 1 worker: median s (runs) | 2 workers: median s (runs) | added "
         "| bisection, 1 worker: s (ratio) | every sample, 1 worker: s (ratio) |"
@@ -76,9 +84,10 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--fit-only", action="store_true", help="only the second table (the AR(1) fit's ESS/s)")
     ap.add_argument("--every-sample", action="store_true", help="also time the every-sample reference (slow)")
+    ap.add_argument("--cases", nargs="+", choices=tuple(CASES), default=list(CASES), help="diagnosis cases")
     args = ap.parse_args()
     if not args.fit_only:
-        diagnosis_table(args.repeat, args.every_sample)
+        diagnosis_table(args.repeat, args.every_sample, args.cases)
         print()
     print("| fit | median wall s | bulk ESS min(EI0, p) | ESS/s |")
     print("|---|---|---|---|")

@@ -10,12 +10,34 @@ from scipy import stats
 
 from bayesrod.inference.priors import ParameterSpace, ParamPrior
 
+
+class _TruncArcsine:
+    """scipy's arcsine law on [-1, 1] (density 1 / (pi sqrt(1 - x^2))), truncated to [lo, hi]."""
+
+    def __init__(self, lo, hi):
+        self.ref, self.lo, self.hi = stats.arcsine(loc=-1.0, scale=2.0), lo, hi
+        self.mass = self.ref.cdf(hi) - self.ref.cdf(lo)
+
+    def logpdf(self, x):
+        return self.ref.logpdf(x) - np.log(self.mass)
+
+    def cdf(self, x):
+        return np.clip((self.ref.cdf(x) - self.ref.cdf(self.lo)) / self.mass, 0.0, 1.0)
+
+    def ppf(self, q):
+        return self.ref.ppf(self.ref.cdf(self.lo) + np.asarray(q) * self.mass)
+
+    def support(self):
+        return self.lo, self.hi
+
+
 CASES = [
     ("lognormal", (2.5, 0.7), stats.lognorm(0.7, scale=2.5)),
     ("halfnormal", (0.3,), stats.halfnorm(scale=0.3)),
     ("normal", (0.4, 0.15), stats.norm(0.4, 0.15)),
     ("truncnormal", (0.5, 0.8, 0.0, 3.0), stats.truncnorm((0.0 - 0.5) / 0.8, (3.0 - 0.5) / 0.8, loc=0.5, scale=0.8)),
     ("uniform", (0.2, 1.4), stats.uniform(0.2, 1.2)),
+    ("arcsine", (-0.5, 0.995), _TruncArcsine(-0.5, 0.995)),
 ]
 
 
@@ -50,7 +72,9 @@ def test_draws_and_quantiles_follow_the_distribution(dist, args, ref):
     assert (lo, hi) == pytest.approx(tuple(ref.support()))
 
 
-@pytest.mark.parametrize("dist, args", [("truncnormal", (0.5, 0.8, 0.0, 3.0)), ("uniform", (0.2, 1.4))])
+@pytest.mark.parametrize(
+    "dist, args", [("truncnormal", (0.5, 0.8, 0.0, 3.0)), ("uniform", (0.2, 1.4)), ("arcsine", (-0.5, 0.995))]
+)
 def test_outside_a_bounded_support_the_density_is_zero_and_at_the_edge_it_is_not(dist, args):
     pr = ParamPrior("x", dist, args)
     lo, hi = pr.bounds()
@@ -104,7 +128,8 @@ def test_a_prior_file_loads_with_every_value_where_it_belongs(tmp_path):
     assert pr.get("EI0") == ParamPrior("EI0", "lognormal", (2.0, 1.0), "N m^2")
     assert pr.get("p").args == (0.5, 0.4, 0.0, 3.0) and pr.get("x_norm").args == (-1.0, 2.0)
     assert pr.get("base_tilt") == ParamPrior("base_tilt", "uniform", (-0.1, 0.2), "rad")
-    assert pr.get("rho_force").dist == "uniform"  # a nuisance default when the file has none
+    # a nuisance default when the file has none: the AR(1) reference prior (docs/priors.md)
+    assert pr.get("rho_force") == ParamPrior("rho_force", "arcsine", (-0.5, 0.995), "1")
     with pytest.raises(ValueError, match=r"^prior mine: expected a prior for nope, got none in .*pr.json$"):
         pr.get("nope")
     unnamed = load_prior(_write(tmp_path, {"parameters": GOOD}, "other.json"))
@@ -121,7 +146,8 @@ def test_a_prior_file_loads_with_every_value_where_it_belongs(tmp_path):
     [
         (
             {"EI0": {"dist": "gamma"}},
-            r"pr.json: EI0.dist: expected one of halfnormal, lognormal, normal, truncnormal, uniform, got 'gamma'",
+            r"pr.json: EI0.dist: expected one of arcsine, halfnormal, lognormal, normal, truncnormal, uniform, "
+            r"got 'gamma'",
         ),
         ({"EI0": 3.0}, r"EI0.dist: expected one of .*, got 3.0"),
         (
@@ -143,6 +169,12 @@ def test_a_prior_file_loads_with_every_value_where_it_belongs(tmp_path):
         ({"p": {"dist": "uniform", "low": 2.0, "high": 1.0}}, r"p: expected low < high, got 2.0 and 1.0"),
         ({"p": {"dist": "truncnormal", "mean": 0.5, "sd": 1.0, "low": 0.5, "high": 0.4}}, r"p: expected low < high"),
         ({"p": {"dist": "uniform", "low": -2.0, "high": 1.0}}, None),
+        ({"rho_force": {"dist": "arcsine", "low": -0.9, "high": 0.99}}, None),
+        (
+            {"rho_force": {"dist": "arcsine", "low": -0.5, "high": 1.0}},
+            r"rho_force: expected -1 < low < high < 1 for an arcsine prior, got -0.5 and 1.0",
+        ),
+        ({"rho_force": {"dist": "arcsine", "low": 0.5, "high": 0.2}}, r"rho_force: expected low < high"),
         ({"p": {"dist": "uniform", "low": 0.0, "high": float("inf")}}, r"p.high: expected a finite number"),
     ],
 )
