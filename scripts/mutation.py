@@ -93,15 +93,29 @@ def classify(diff: list[str]) -> str:
     return "open"
 
 
-def _copy_tree(dest: Path) -> None:
-    files = subprocess.run(
+def _tracked() -> list[str]:
+    return subprocess.run(
         ["git", "ls-files", "--cached", "--others", "--exclude-standard"],
         cwd=ROOT,
         capture_output=True,
         text=True,
         check=True,
     ).stdout.split()
-    for f in files:
+
+
+def _stale(dest: Path) -> bool:
+    """Whether a working copy left by an earlier run differs from the checkout (its results would be
+    for other code: it is copied again, and mutmut starts over)."""
+    mutmut_config = {"pyproject.toml"}  # _configure appends mutmut's section to the copy
+    return any(
+        f not in mutmut_config and (not (dest / f).exists() or (dest / f).read_bytes() != (ROOT / f).read_bytes())
+        for f in _tracked()
+        if (ROOT / f).is_file()
+    )
+
+
+def _copy_tree(dest: Path) -> None:
+    for f in _tracked():
         target = dest / f
         target.parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(ROOT / f, target)
@@ -138,6 +152,9 @@ def _mutmut(dest: Path, *args: str, log=None) -> str:
 def run_target(name: str, work: Path, workers: int) -> dict:
     module, tests, patterns = TARGETS[name]
     dest = work / name
+    if dest.exists() and _stale(dest):
+        print(f"  {dest} holds other code than the checkout: copied again", flush=True)
+        shutil.rmtree(dest)
     if not dest.exists():
         _copy_tree(dest)
     _configure(dest, module, tests)

@@ -175,6 +175,10 @@ def test_a_prior_file_loads_with_every_value_where_it_belongs(tmp_path):
             r"rho_force: expected -1 < low < high < 1 for an arcsine prior, got -0.5 and 1.0",
         ),
         ({"rho_force": {"dist": "arcsine", "low": 0.5, "high": 0.2}}, r"rho_force: expected low < high"),
+        (
+            {"rho_force": {"dist": "arcsine", "low": -1.0, "high": 0.9}},
+            r"rho_force: expected -1 < low < high < 1 for an arcsine prior, got -1.0 and 0.9",
+        ),
         ({"p": {"dist": "uniform", "low": 0.0, "high": float("inf")}}, r"p.high: expected a finite number"),
     ],
 )
