@@ -63,6 +63,26 @@ TARGETS: dict[str, tuple[str, list[str], list[str] | None]] = {
     "compare": ("bayesrod/inference/hierarchical.py", ["tests/test_compare.py"], None),
     "design": ("bayesrod/inference/design.py", ["tests/test_design.py"], None),
     "direct": ("bayesrod/inference/direct.py", ["tests/test_direct.py"], None),
+    "diagnose": (
+        "bayesrod/inference/diagnose.py",
+        ["tests/test_diagnose_refits.py", "tests/test_diagnose_starts.py"],
+        [  # the statistics of the verdict (the fits themselves are checked by the slow tests)
+            f"*.x_{f}__mutmut_*"
+            for f in (
+                "lag1",
+                "heldout_comparison",
+                "_ar1_noise",
+                "null_heldout_gain",
+                "_whiten_rows",
+                "_legendre",
+                "_first_passing",
+                "_candidate_lr",
+                "_scale_fit",
+                "_hold",
+            )
+        ]
+        + ["*.xǁDiagnoserǁstructure__mutmut_*"],
+    ),
 }
 
 STATUSES = ("killed", "timeout", "survived", "no tests", "suspicious", "skipped", "segfault")

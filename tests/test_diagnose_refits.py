@@ -255,3 +255,116 @@ def test_structure_pooled_over_pushes_holds_its_level_and_finds_what_each_push_m
     assert 0.002 <= pooled_rate <= 0.025 and push_rate <= 0.01
     _, pooled_rate, push_rate = run(0.13, 300)
     assert pooled_rate >= 0.7 and push_rate <= 0.55
+
+
+def test_structure_blocks_match_an_independent_gls_and_wls_computation():
+    """Every number of the structure blocks against a dense reference written here: forces by GLS under the
+    AR(1) correlation matrix (Cholesky), shapes by weighted least squares with each point's sd, the pooled
+    block by summing the force blocks; which blocks exist (at least 20 rows; a push without forces still
+    gets its shape block) and the strict inequalities of the verdict."""
+    from scipy import linalg, stats
+
+    from bayesrod.dataset.simulate import ar1_noise
+    from bayesrod.inference.diagnose import MapFit, _legendre
+    from bayesrod.inference.likelihood import PushData
+
+    rng = np.random.default_rng(11)
+    rho, sig_m, scale = 0.8, 0.04, 2.5
+    D = np.linspace(0.0, 0.06, 60)
+    u = 2 * D / D[-1] - 1
+    pushes, rf, rs = [], [], []
+    for name, h, n_force, n_pts in (("a", 0.45, 60, 20), ("b", 0.55, 60, 19), ("c", 0.65, 0, 35)):
+        Dk = D[:n_force]
+        z = np.linspace(0.05, h, n_pts)
+        sd = 0.001 * (1.0 + rng.random(n_pts))  # per-point sd: uneven weights
+        pushes.append(PushData(name, h, Dk, np.zeros(n_force), np.zeros(0), np.zeros(n_pts, int), z, z, sd))
+        rf.append(ar1_noise(rng, sig_m, rho, n_force) + 0.02 * (u[:n_force] ** 3 - 0.6 * u[:n_force]))
+        rs.append(scale * sd * rng.standard_normal(n_pts) + 0.002 * np.sin(3 * z / h))
+    m = ForwardModel(pushes, 0.8)
+    r_force, r_shape = np.concatenate(rf), np.concatenate(rs)
+    e = np.zeros(0)
+    fit = MapFit((), np.zeros(2), sig_m * np.sqrt(1 - rho**2), scale, r_force, r_shape, e, 0.0, rho)
+    st = Diagnoser(m).structure(fit, ratio=0.0, alpha=1.0, pooled_alpha=1.0)
+    got = {(b["push"], b["kind"]): b for b in st["blocks"]}
+    assert list(got) == [("a", "force"), ("a", "shape"), ("b", "force"), ("c", "shape"), ("all", "force (pooled)")]
+
+    def f_test(yw, Bw):
+        coef = np.linalg.lstsq(Bw, yw, rcond=None)[0]
+        fitted = Bw @ coef
+        q, n = Bw.shape[1], yw.size
+        ss_fit, ss_res = fitted @ fitted, np.sum((yw - fitted) ** 2)
+        return coef, ss_fit, ss_res, stats.f.sf((ss_fit / q) / (ss_res / (n - q)), q, n - q)
+
+    pooled = np.zeros(4)
+    for k, name in ((0, "a"), (1, "b")):
+        n = rf[k].size
+        chol = linalg.cholesky(linalg.toeplitz(rho ** np.arange(n)), lower=True)
+        B = _legendre(D)
+        coef, ss_fit, ss_res, p = f_test(
+            linalg.solve_triangular(chol, rf[k], lower=True), linalg.solve_triangular(chol, B, lower=True)
+        )
+        smooth = B @ coef
+        b = got[(name, "force")]
+        assert b["n"] == n and b["p_value"] == pytest.approx(p, rel=1e-8)
+        assert b["structured_sd_ratio"] == pytest.approx(np.std(smooth) / sig_m, rel=1e-8)
+        pooled += [ss_fit * (1 - rho**2), ss_res * (1 - rho**2), np.sum((smooth - smooth.mean()) ** 2), n]
+    q = 6
+    b = got[("all", "force (pooled)")]
+    assert b["n"] == 120
+    assert b["p_value"] == pytest.approx(
+        stats.f.sf((pooled[0] / (2 * q)) / (pooled[1] / (120 - 2 * q)), 2 * q, 120 - 2 * q), rel=1e-8
+    )
+    assert b["structured_sd_ratio"] == pytest.approx(np.sqrt(pooled[2] / pooled[3]) / sig_m, rel=1e-8)
+    for k, name in ((0, "a"), (2, "c")):
+        w = 1.0 / (pushes[k].sd_m * scale)
+        B = _legendre(pushes[k].z_m)
+        _, ss_fit, ss_res, p = f_test(rs[k] * w, B * w[:, None])
+        n = rs[k].size
+        s2 = ss_res / (n - q)
+        b = got[(name, "shape")]
+        assert b["n"] == n and b["p_value"] == pytest.approx(p, rel=1e-8)
+        assert b["structured_sd_ratio"] == pytest.approx(np.sqrt(max(0.0, (ss_fit - q * s2) / n) / s2), rel=1e-8)
+    # the verdict's inequalities are strict: a block exactly at alpha (or at the sd ratio) is not structured
+    for key, level in ((("a", "force"), "alpha"), (("all", "force (pooled)"), "pooled_alpha")):
+        p_at = got[key]["p_value"]
+        at = {(x["push"], x["kind"]): x for x in Diagnoser(m).structure(fit, ratio=0.0, **{level: p_at})["blocks"]}
+        above = {
+            (x["push"], x["kind"]): x
+            for x in Diagnoser(m).structure(fit, ratio=0.0, **{level: np.nextafter(p_at, 1.0)})["blocks"]
+        }
+        assert not at[key]["structured"] and above[key]["structured"]
+        r_at = got[key]["structured_sd_ratio"]
+        flags = [
+            {(x["push"], x["kind"]): x for x in Diagnoser(m).structure(fit, ratio=r, **{level: 1.0})["blocks"]}[key]
+            for r in (r_at, np.nextafter(r_at, 0.0))
+        ]
+        assert not flags[0]["structured"] and flags[1]["structured"]
+
+
+def test_heldout_comparison_is_the_pooled_rmse_drop_and_the_dense_ar1_log_density_gain():
+    """gain = 1 - RMSE after / RMSE before over all held-out samples pooled; log_score_gain = the sum over
+    units of the held-out log density under each refit's AR(1) noise (dense multivariate normal here)."""
+    from scipy import linalg, stats
+
+    from bayesrod.inference.diagnose import HeldoutErrors, heldout_comparison
+
+    rng = np.random.default_rng(2)
+    sizes = (30, 45)
+    before = [HeldoutErrors(rng.normal(0, 0.3, n), 0.1, 0.7) for n in sizes]
+    after = [HeldoutErrors(rng.normal(0, 0.2, n), 0.08, 0.5) for n in sizes]
+
+    def dense(u):  # sigma_force is the innovation sd: the marginal variance is sigma^2 / (1 - rho^2)
+        n = u.errors_N.size
+        cov = u.sigma_force**2 / (1 - u.rho_force**2) * linalg.toeplitz(u.rho_force ** np.arange(n))
+        return stats.multivariate_normal(np.zeros(n), cov).logpdf(u.errors_N)
+
+    got = heldout_comparison(before, after)
+    rms = [np.sqrt(np.mean(np.concatenate([u.errors_N for u in us]) ** 2)) for us in (before, after)]
+    assert got["gain"] == pytest.approx(1 - rms[1] / rms[0], rel=1e-12)
+    want = sum(dense(a) - dense(b) for a, b in zip(after, before, strict=True))
+    assert got["log_score_gain"] == pytest.approx(want, rel=1e-10)
+    for u in before:
+        assert u.log_density().sum() == pytest.approx(dense(u), rel=1e-12)
+    zero = [HeldoutErrors(np.zeros(5), 0.1, 0.5)]
+    assert heldout_comparison(zero, zero)["gain"] == 0.0  # no error before: nothing to gain
+    assert heldout_comparison([], []) == {"gain": 0.0, "log_score_gain": 0.0}
