@@ -368,3 +368,37 @@ def test_heldout_comparison_is_the_pooled_rmse_drop_and_the_dense_ar1_log_densit
     zero = [HeldoutErrors(np.zeros(5), 0.1, 0.5)]
     assert heldout_comparison(zero, zero)["gain"] == 0.0  # no error before: nothing to gain
     assert heldout_comparison([], []) == {"gain": 0.0, "log_score_gain": 0.0}
+
+
+def test_the_small_helpers_of_the_verdict_against_their_definitions():
+    """_ar1_noise: stationary AR(1) per push (marginal variance sigma^2 / (1 - rho^2) from each push's
+    first sample on, lag-1 correlation rho inside a push, none across a restart); lag1 pooled over pushes;
+    _hold: past a slip the last finite force is held (0 before any); _legendre over the range of t."""
+    from bayesrod.inference.diagnose import _ar1_noise, _hold, _legendre, lag1
+
+    rho, sigma = 0.8, 0.3
+    first = np.zeros(50, bool)
+    first[[0, 30]] = True
+    x = _ar1_noise(first, sigma, rho, 40_000, np.random.default_rng(0))
+    var = x.var(axis=1)
+    np.testing.assert_allclose(var, sigma**2 / (1 - rho**2), rtol=0.05)
+    corr = np.mean(x[1:] * x[:-1], axis=1) / sigma**2 * (1 - rho**2)
+    np.testing.assert_allclose(np.delete(corr, 29), rho, atol=0.02)
+    assert abs(corr[29]) < 0.02  # sample 30 restarts: independent of sample 29
+
+    r = np.array([1.0, 2.0, -1.0, 0.5, 3.0, -2.0])
+    f = np.array([True, False, False, True, False, False])
+    num = 1.0 * 2.0 + 2.0 * -1.0 + 0.5 * 3.0 + 3.0 * -2.0  # pairs within a push only
+    assert lag1(r, f) == pytest.approx(num / (1.0 + 4.0 + 0.25 + 9.0))
+    assert lag1(np.array([1.0, 2.0, 3.0]), np.array([True, False, False])) == pytest.approx(8.0 / 5.0)
+    assert lag1(np.array([1.0, 2.0]), np.array([True, False])) == 0.0  # under three samples
+    assert lag1(np.zeros(4), np.array([True, False, False, False])) == 0.0  # no variance
+
+    np.testing.assert_array_equal(_hold([np.nan, 1.0, 2.0, np.nan, np.inf, 5.0, np.nan]), [0, 1, 2, 2, 2, 5, 5])
+    np.testing.assert_array_equal(_hold([1.0, 2.0]), [1.0, 2.0])
+    np.testing.assert_array_equal(_hold([np.nan, np.nan]), [0.0, 0.0])
+
+    t = np.array([3.0, 5.0, 4.0, 7.0])
+    B = _legendre(t)
+    assert B.shape == (4, 6)
+    np.testing.assert_allclose(B, np.polynomial.legendre.legvander(np.array([-1.0, 0.0, -0.5, 1.0]), 5))
