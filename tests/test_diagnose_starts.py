@@ -213,3 +213,41 @@ def test_the_loop_gates_held_out_in_ratio_order_and_adds_the_first_that_passes(m
     assert rows["base_compliance"]["selected"] and rows["yield"]["rejected_because"] == "held-out error not reduced"
     assert rows["force_offset"]["heldout_not_run"] and not rows["yield"].get("heldout_not_run")
     assert rows["force_offset"]["rejected_because"] == "a better-fitting effect was added"
+
+
+def test_the_likelihood_ratio_gate_of_a_candidate(monkeypatch):
+    # the ratio is 2 (loglik new - loglik current), compared with chi^2 at the round's level (a ratio exactly
+    # at the threshold fails), the budget is 12 evaluations for the slow effects and 40 for the others, the
+    # fitted values are read at the given length, and a fit below the current model says so
+    from scipy import stats
+
+    calls = []
+
+    class FakeDiagnoser:
+        def __init__(self, ll):
+            self.ll = ll
+
+        def fit(self, effects, x0, max_nfev=40, ols_first=False):
+            calls.append((effects, max_nfev))
+            return SimpleNamespace(loglik=self.ll, natural=lambda L: {"L": L})
+
+    monkeypatch.setattr(D, "_no_worse_start", lambda dg, cur, effects, starts: np.zeros(3))
+    cur = SimpleNamespace(effects=("yield",), loglik=5.0)
+    row, new = D._candidate_lr(FakeDiagnoser(50.0), cur, ("force_offset",), [0.1], None, 1e-3, 1, 0.9)
+    assert row == {"lr_statistic": 90.0, "fitted": {"L": 0.9}} and new.loglik == 50.0
+    assert calls == [(("yield", "force_offset"), 40)]
+    calls.clear()
+    D._candidate_lr(FakeDiagnoser(50.0), cur, ("contact_friction",), None, np.zeros(3), 1e-3, 1, 0.9)
+    D._candidate_lr(FakeDiagnoser(50.0), cur, ("self_weight",), [0.1], None, 1e-3, 1, 0.9)
+    assert calls == [(("yield", "contact_friction"), 12), (("yield", "self_weight"), 12)]
+    thr = stats.chi2.isf(2e-3, 2)  # a fit whose ratio is exactly the threshold (x2 is exact in binary)
+    plain = SimpleNamespace(effects=(), loglik=0.0)
+    row, new = D._candidate_lr(FakeDiagnoser(thr / 2), plain, ("force_offset",), [0.1], None, 2e-3, 2, 0.9)
+    assert row["lr_statistic"] == thr and new is None
+    assert row["rejected_because"] == "likelihood ratio below the threshold"
+    row, new = D._candidate_lr(FakeDiagnoser(thr / 2), plain, ("force_offset",), [0.1], None, 2.01e-3, 2, 0.9)
+    assert new is not None and "rejected_because" not in row
+    row, _ = D._candidate_lr(FakeDiagnoser(5.0), cur, ("force_offset",), [0.1], None, 1e-3, 1, 0.9)
+    assert row["lr_statistic"] == 0.0 and row["rejected_because"] == "likelihood ratio below the threshold"
+    row, _ = D._candidate_lr(FakeDiagnoser(4.0), cur, ("force_offset",), [0.1], None, 1e-3, 1, 0.9)
+    assert row["rejected_because"] == "the fit stayed below the current model"
