@@ -402,3 +402,89 @@ def test_the_small_helpers_of_the_verdict_against_their_definitions():
     B = _legendre(t)
     assert B.shape == (4, 6)
     np.testing.assert_allclose(B, np.polynomial.legendre.legvander(np.array([-1.0, 0.0, -0.5, 1.0]), 5))
+
+
+def test_the_bootstrap_p_value_is_one_plus_the_draws_at_or_above_over_draws_plus_one():
+    """The bootstrap's p-value (1 + #{draws with gain >= observed}) / (n_draws + 1): 1 / (n + 1) for a gain no
+    draw reaches, 1 for one every draw reaches, reproducible for a seed (0 by default, 500 draws), and 1
+    when nothing can be held out."""
+    from bayesrod.inference.diagnose import MapFit, null_heldout_gain
+    from bayesrod.inference.likelihood import PushData
+
+    n, e = 40, np.zeros(0)
+    D = np.linspace(0.001, 0.05, n)
+    pushes = [PushData(f"h{k}", 0.4 + 0.1 * k, D, np.zeros(n), e, e.astype(int), e, e, None) for k in range(3)]
+    m = ForwardModel(pushes, 0.8)
+    u = D[np.arange(3 * n) % n] / D[-1]
+    J = np.column_stack([u, u**2])
+    rng = np.random.default_rng(3)
+    cur = MapFit((), np.zeros(2), 0.02, 1.0, rng.normal(0, 0.02, 3 * n), e, J, 0.0, 0.5, J)
+    new = MapFit((), np.zeros(2), 0.02, 1.0, cur.r_force - 0.01 * u**3, e, J, 0.0, 0.5, J)
+    dg = Diagnoser(m)
+    assert null_heldout_gain(dg, cur, new, np.inf) == pytest.approx(1 / 501)
+    assert null_heldout_gain(dg, cur, new, np.inf, n_draws=99) == pytest.approx(1 / 100)
+    assert null_heldout_gain(dg, cur, new, -np.inf) == 1.0
+    mid = null_heldout_gain(dg, cur, new, 0.0)
+    assert 0.05 < mid < 0.95  # a gain some draws reach: the count matters
+    assert mid == null_heldout_gain(dg, cur, new, 0.0, n_draws=500, seed=0)
+    assert mid != null_heldout_gain(dg, cur, new, 0.0, seed=1)
+    one = ForwardModel([PushData("h", 0.5, D[:4], np.zeros(4), e, e.astype(int), e, e, None)], 0.8)  # too short
+    J1 = J[:4]
+    short = MapFit((), np.zeros(2), 0.02, 1.0, np.zeros(4), e, J1, 0.0, 0.5, J1)
+    assert null_heldout_gain(Diagnoser(one), short, short, 0.1) == 1.0
+
+
+def test_the_bootstrap_refits_match_dense_generalised_least_squares_draw_by_draw():
+    """The bootstrap's linearised refits written out densely here (AR(1) covariance of the training forces,
+    each shape point's variance, leave one height out) from the same random stream: the same p-value at
+    observed gains between consecutive draws' gains. Shapes weigh against forces, so the relative
+    weighting of the two is checked as well."""
+    from scipy import linalg
+
+    from bayesrod.inference.diagnose import MapFit, null_heldout_gain
+    from bayesrod.inference.likelihood import PushData
+
+    n, npt, rho, sig, scale = 30, 12, 0.7, 0.02, 1.5
+    D = np.linspace(0.001, 0.05, n)
+    rng = np.random.default_rng(4)
+    pushes = []
+    for k in range(3):
+        z = np.linspace(0.05, 0.4 + 0.1 * k, npt)
+        sd = 0.002 * (1 + rng.random(npt))
+        pushes.append(PushData(f"h{k}", 0.4 + 0.1 * k, D, np.zeros(n), np.zeros(0), np.zeros(npt, int), z, z, sd))
+    m = ForwardModel(pushes, 0.8)
+    u = np.r_[D[np.arange(3 * n) % n] / D[-1], np.concatenate([p.z_m for p in pushes])]
+    J = np.column_stack([u, u**2, np.r_[np.zeros(3 * n), np.ones(3 * npt) * 0.01]])
+    rf, rs = rng.normal(0, 0.02, 3 * n), rng.normal(0, 0.003, 3 * npt)
+    cur = MapFit((), np.zeros(2), sig, scale, rf, rs, J, 0.0, rho, J)
+    delta = 0.01 * u**3
+    new = MapFit((), np.zeros(2), sig, scale, rf - delta[: 3 * n], rs - delta[3 * n :], J, 0.0, rho, J)
+    n_draws, seed = 200, 5
+
+    # the reference: the same draws, dense GLS refits
+    g = np.random.default_rng(seed)
+    eta = g.standard_normal((3 * n, n_draws)) * sig
+    eps_f = np.empty_like(eta)
+    for t in range(3 * n):
+        eps_f[t] = eta[t] / np.sqrt(1 - rho**2) if t % n == 0 else rho * eps_f[t - 1] + eta[t]
+    sd_p = scale * np.concatenate([p.sd_m for p in pushes])
+    eps = np.r_[eps_f, g.standard_normal((3 * npt, n_draws)) * sd_p[:, None]]
+    block = sig**2 / (1 - rho**2) * linalg.toeplitz(rho ** np.arange(n))
+    push_of = np.r_[np.repeat(np.arange(3), n), np.repeat(np.arange(3), npt)]
+    is_force = np.r_[np.ones(3 * n, bool), np.zeros(3 * npt, bool)]
+    X1 = np.column_stack([J, delta])
+    sq = np.zeros((2, n_draws))
+    for k in range(3):
+        train = push_of != k  # two pushes' forces (one AR(1) block each), then their shape points
+        Ci = np.linalg.inv(linalg.block_diag(block, block, np.diag(sd_p[push_of[3 * n :] != k] ** 2)))
+        held = is_force & (push_of == k)
+        order = np.r_[np.flatnonzero(is_force & train), np.flatnonzero(~is_force & train)]
+        for i, X in enumerate((J, X1)):
+            A = X[order]
+            coef = np.linalg.solve(A.T @ Ci @ A, A.T @ Ci @ eps[order])
+            sq[i] += np.sum((eps[held] - X[held] @ coef) ** 2, axis=0)
+    gains = np.sort(1 - np.sqrt(sq[1] / sq[0]))
+    for i in (20, 100, 180):
+        obs = 0.5 * (gains[i] + gains[i + 1])
+        want = (1 + np.sum(gains >= obs)) / (n_draws + 1)
+        assert null_heldout_gain(Diagnoser(m), cur, new, obs, n_draws=n_draws, seed=seed) == pytest.approx(want)
