@@ -19,7 +19,9 @@ import argparse
 import numpy as np
 from scipy import stats
 
-N, PUSHES, RHO = 68, 3, 0.9
+from bayesrod.dataset.simulate import ar1_noise
+
+N, PUSHES, RHO, SIGMA = 68, 3, 0.9, 0.05
 BETA = np.array([1.0, 0.5])
 GRID = np.linspace(-0.5, 0.995, 400)
 PRIORS = {"uniform": np.ones_like(GRID), "arcsine": 1 / np.sqrt(1 - GRID**2), "1/(1-rho)": 1 / (1 - GRID)}
@@ -38,18 +40,6 @@ def whiten(v: np.ndarray, rho: float, first: np.ndarray) -> tuple[np.ndarray, np
     prev[first] = 0.0
     sd = np.where(first, 1.0, np.sqrt(1 - rho**2))
     return ((v - rho * prev).T / sd).T, sd
-
-
-def ar1(rng, sigma: float = 0.05) -> np.ndarray:
-    out = np.empty(N * PUSHES)
-    for j in range(PUSHES):
-        e = rng.normal(0, sigma, N)
-        x = np.empty(N)
-        x[0] = e[0]
-        for t in range(1, N):
-            x[t] = RHO * x[t - 1] + np.sqrt(1 - RHO**2) * e[t]
-        out[j * N : (j + 1) * N] = x
-    return out
 
 
 def intervals(y, X, first) -> dict[str, np.ndarray]:
@@ -99,7 +89,8 @@ def main() -> None:
     covered = {k: np.zeros(2, int) for k in PRIORS}
     widths = {k: [] for k in PRIORS}
     for _ in range(args.replicates):
-        for name, qs in intervals(X @ BETA + ar1(rng), X, first).items():
+        y = X @ BETA + np.concatenate([ar1_noise(rng, SIGMA, RHO, N) for _ in range(PUSHES)])
+        for name, qs in intervals(y, X, first).items():
             covered[name] += (qs[:, 0] <= BETA) & (BETA <= qs[:, 1])
             widths[name].append(qs[0, 1] - qs[0, 0])
     n = args.replicates

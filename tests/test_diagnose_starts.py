@@ -83,6 +83,40 @@ def test_a_grid_started_candidate_is_fitted_from_its_grid_too_and_the_better_fit
     assert calls == [(("force_offset",), 0.0, False)] and ok is None
 
 
+def _fake_fit(effects=()):
+    """A stand-in for a MapFit: what the loop reads of a fit."""
+    f = SimpleNamespace(
+        effects=effects, loglik=0.0, sigma_force=0.1, marginal_sigma_force=0.2, rho_force=0.9, shape_scale=1.0
+    )
+    f.natural = lambda L: {"EI0": 1.0, "p": 0.5}
+    return f
+
+
+def _fake_diagnoser(score, grid_start=lambda effect, fit: None):
+    """A Diagnoser for the loop's plumbing: a plain fit, held-out RMSE 1, no structure, the given screen."""
+
+    class FakeDiagnoser:
+        def __init__(self, model, force_noise):
+            self.plain = _fake_fit()
+
+        def fit_plain(self):
+            return self.plain
+
+        def errors(self, fit, pool=None):
+            return {"heldout_force_rmse_N": 1.0}, []
+
+        def structure(self, fit, ratio):
+            return {"blocks": [], "unexplained_structure": False}
+
+        def score(self, fit, effect):
+            return score(fit, effect)
+
+        def grid_start(self, effect, fit):
+            return grid_start(effect, fit)
+
+    return FakeDiagnoser
+
+
 def test_round_one_refits_a_grid_started_effect_the_screen_passed_over(monkeypatch):
     # plumbing of the loop: while the model is plain, an effect with a grid start is refitted from that
     # start alone even when its screen does not pass; one without a grid start is not refitted
@@ -92,35 +126,15 @@ def test_round_one_refits_a_grid_started_effect_the_screen_passed_over(monkeypat
         jobs.append((effects, starts, None if grid is None else grid.tolist()))
         return {"lr_statistic": 0.0, "rejected_because": "likelihood ratio below the threshold"}, None
 
-    plain = SimpleNamespace(
-        effects=(), loglik=0.0, sigma_force=0.1, marginal_sigma_force=0.2, rho_force=0.9, shape_scale=1.0
-    )
-    plain.natural = lambda L: {"EI0": 1.0, "p": 0.5}
+    def score(fit, effect):
+        return {
+            "statistic": 40.0 if effect == "force_offset" else 0.0,
+            "p_value": 1e-9 if effect == "force_offset" else 1.0,
+            "direction": 1.0,
+        }
 
-    class FakeDiagnoser:
-        def __init__(self, model, force_noise):
-            pass
-
-        def fit_plain(self):
-            return plain
-
-        def errors(self, fit, pool=None):
-            return {"heldout_force_rmse_N": 1.0}, []
-
-        def structure(self, fit, ratio):
-            return {"blocks": [], "unexplained_structure": False}
-
-        def score(self, fit, effect):
-            return {
-                "statistic": 40.0 if effect == "force_offset" else 0.0,
-                "p_value": 1e-9 if effect == "force_offset" else 1.0,
-                "direction": 1.0,
-            }
-
-        def grid_start(self, effect, fit):
-            return np.array([1.0, 2.0, 3.0]) if effect == "yield" else None
-
-    monkeypatch.setattr(D, "Diagnoser", FakeDiagnoser)
+    grid = lambda effect, fit: np.array([1.0, 2.0, 3.0]) if effect == "yield" else None  # noqa: E731
+    monkeypatch.setattr(D, "Diagnoser", _fake_diagnoser(score, grid))
     monkeypatch.setattr(D, "_candidate_lr", candidate_fit)
     r = D.diagnose(SimpleNamespace(length_m=1.0), candidates=("force_offset", "yield", "base_compliance"))
     assert sorted(jobs, key=str) == sorted(
@@ -164,17 +178,8 @@ def test_the_loop_gates_held_out_in_ratio_order_and_adds_the_first_that_passes(m
     # fails the largest and passes the next, which is added; the smallest is never held out
     lrs = {"force_offset": 10.0, "yield": 30.0, "base_compliance": 20.0}
 
-    def fitted(effects):
-        f = SimpleNamespace(
-            effects=effects, loglik=0.0, sigma_force=0.1, marginal_sigma_force=0.2, rho_force=0.9, shape_scale=1.0
-        )
-        f.natural = lambda L: {"EI0": 1.0, "p": 0.5}
-        return f
-
-    plain = fitted(())
-
     def candidate_lr(dg, cur, effects, starts, grid, level, dof, L):
-        return {"lr_statistic": lrs[effects[0]], "fitted": {}}, fitted(effects)
+        return {"lr_statistic": lrs[effects[0]], "fitted": {}}, _fake_fit(effects)
 
     gated = []
 
@@ -185,26 +190,10 @@ def test_the_loop_gates_held_out_in_ratio_order_and_adds_the_first_that_passes(m
             return None
         return new, {"heldout_force_rmse_N": 0.5}, []
 
-    class FakeDiagnoser:
-        def __init__(self, model, force_noise):
-            pass
+    def score(fit, effect):  # every candidate passes the screen in round 1, none after
+        return {"statistic": 40.0, "p_value": 1e-9 if not fit.effects else 1.0, "direction": 1.0}
 
-        def fit_plain(self):
-            return plain
-
-        def errors(self, fit, pool=None):
-            return {"heldout_force_rmse_N": 1.0}, []
-
-        def structure(self, fit, ratio):
-            return {"blocks": [], "unexplained_structure": False}
-
-        def score(self, fit, effect):
-            return {"statistic": 40.0, "p_value": 1e-9 if not fit.effects else 1.0, "direction": 1.0}
-
-        def grid_start(self, effect, fit):
-            return None
-
-    monkeypatch.setattr(D, "Diagnoser", FakeDiagnoser)
+    monkeypatch.setattr(D, "Diagnoser", _fake_diagnoser(score))
     monkeypatch.setattr(D, "_candidate_lr", candidate_lr)
     monkeypatch.setattr(D, "_heldout_gate", heldout_gate)
     r = D.diagnose(SimpleNamespace(length_m=1.0), candidates=tuple(lrs))

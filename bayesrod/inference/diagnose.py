@@ -1374,12 +1374,6 @@ def _loop(
         ]
         return _map(pool, _candidate_lr, jobs)
 
-    def gate(cur, cur_errs, cur_rmse):
-        """The held-out gates of one candidate fit (its refits spread over ``pool``)."""
-        return lambda row, new: _heldout_gate(
-            dg, cur, new, row, cur_errs, cur_rmse, min_heldout_gain, heldout_alpha, pool, log
-        )
-
     for rnd in range(1, max_effects + 1):
         remaining = [c for c in candidates if c not in added]
         if not remaining:
@@ -1394,6 +1388,11 @@ def _loop(
         rows += tests
         cur_rmse = history[-1]["errors"]["heldout_force_rmse_N"]
         state = (rnd, cur, level)
+
+        def gate(row, new, cur=cur, cur_errs=cur_errs, cur_rmse=cur_rmse):
+            """The held-out gates of one candidate fit against this round's model (refits over ``pool``)."""
+            return _heldout_gate(dg, cur, new, row, cur_errs, cur_rmse, min_heldout_gain, heldout_alpha, pool, log)
+
         # While the model is plain, an effect whose grid start fits better than the plain fit is refitted
         # from that start whatever its screen says (and from there only: the screen says the local step
         # shows nothing). The screen is local, at the plain optimum, and that optimum can hide the effect
@@ -1408,7 +1407,7 @@ def _loop(
             t.update(row)
             if new is not None:
                 passed.append(((t["effect"],), t, new))
-        accepted = _first_passing(passed, gate(cur, cur_errs, cur_rmse))
+        accepted = _first_passing(passed, gate)
         if accepted is None and pairs and len(remaining) >= 2 and len(added) + 2 <= max_effects:
             if dg.structure(cur, ratio=structure_ratio)["unexplained_structure"]:
                 # pairs of the (up to three) singles that moved the likelihood (LR above chi^2_1 at 0.05)
@@ -1424,7 +1423,7 @@ def _loop(
                     rows.append(prow)
                     if new is not None:
                         passed.append((effs, prow, new))
-                accepted = _first_passing(passed, gate(cur, cur_errs, cur_rmse))
+                accepted = _first_passing(passed, gate)
         if accepted is None:
             break
         effs, (cur, err, cur_errs), trow = accepted

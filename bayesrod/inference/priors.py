@@ -41,6 +41,10 @@ class ParamPrior:
     def from_sample(self, u):
         return np.exp(u) if self.log_space else np.asarray(u, float)
 
+    def _angles(self) -> tuple[float, float]:
+        """An arcsine prior's support as angles: x = sin(t) with t uniform on (asin(low), asin(high))."""
+        return math.asin(self.args[0]), math.asin(self.args[1])
+
     def logpdf_sample(self, u) -> np.ndarray:
         """Log density of the sampling-space value u (vectorised); -inf outside the support."""
         u = np.asarray(u, float)
@@ -63,7 +67,8 @@ class ParamPrior:
         if self.dist == "arcsine":  # density (1 - x^2)^(-1/2) / (asin(high) - asin(low)) on [low, high]
             lo, hi = a
             inside = (u >= lo) & (u <= hi)
-            out = -0.5 * np.log1p(-(np.where(inside, u, 0.0) ** 2)) - math.log(math.asin(hi) - math.asin(lo))
+            t0, t1 = self._angles()
+            out = -0.5 * np.log1p(-(np.where(inside, u, 0.0) ** 2)) - math.log(t1 - t0)
             return np.where(inside, out, -np.inf)
         raise AssertionError(self.dist)
 
@@ -90,7 +95,7 @@ class ParamPrior:
             mean, sd, lo, hi = a
             return stats.truncnorm.rvs((lo - mean) / sd, (hi - mean) / sd, loc=mean, scale=sd, size=n, random_state=rng)
         if self.dist == "arcsine":  # x = sin(t), t uniform: dx = cos(t) dt = sqrt(1 - x^2) dt
-            return np.sin(rng.uniform(math.asin(a[0]), math.asin(a[1]), n))
+            return np.sin(rng.uniform(*self._angles(), n))
         return rng.uniform(a[0], a[1], n)
 
     def quantile(self, q: float) -> float:
@@ -105,7 +110,8 @@ class ParamPrior:
             mean, sd, lo, hi = a
             return float(stats.truncnorm.ppf(q, (lo - mean) / sd, (hi - mean) / sd, loc=mean, scale=sd))
         if self.dist == "arcsine":
-            return float(math.sin(math.asin(a[0]) + q * (math.asin(a[1]) - math.asin(a[0]))))
+            t0, t1 = self._angles()
+            return float(math.sin(t0 + q * (t1 - t0)))
         return float(a[0] + q * (a[1] - a[0]))
 
 
