@@ -208,11 +208,77 @@ def test_heldout_bootstrap_p_values_are_uniform_when_the_effect_is_absent():
             sq0 += np.sum((y[held] - J0[held] @ gls(J0, y, train)) ** 2)
             sq1 += np.sum((y[held] - X1[held] @ gls(X1, y, train)) ** 2)
         gain = 1 - np.sqrt(sq1 / sq0)
-        mk = lambda r: MapFit((), np.zeros(2), sig, 1.0, r, np.zeros(0), J0, 0.0, rho, J0)  # noqa: E731
+        # p = 1: far inside its bounds (the bounded case is the next test)
+        mk = lambda r: MapFit((), np.array([0.0, 1.0]), sig, 1.0, r, np.zeros(0), J0, 0.0, rho, J0)  # noqa: E731
         pv.append(null_heldout_gain(dg, mk(r0), mk(r1), gain, n_draws=400, seed=len(pv)))
     pv = np.array(pv)
     assert 0.01 <= np.mean(pv < 0.05) <= 0.11, np.mean(pv < 0.05)
     assert 0.38 <= np.mean(pv < 0.5) <= 0.62, np.mean(pv < 0.5)
+
+
+def test_heldout_bootstrap_refits_keep_the_bounds_of_the_true_refits():
+    """p at its bound (0) in the truth and the fit, a one-sided effect (base compliance) absent: the true
+    refits are bounded (p >= 0, amplitude >= 0; exact GLS over every active set, written here), and so
+    must the bootstrap's be for uniform p-values. Unbounded, the null refits fit noise the true refits
+    cannot (the study's base-compliance seed 13 was rejected so) and the p-values come out too large."""
+    from itertools import product
+
+    from bayesrod.dataset.simulate import ar1_noise
+    from bayesrod.inference.diagnose import MapFit, null_heldout_gain
+    from bayesrod.inference.likelihood import PushData
+
+    rng = np.random.default_rng(5)
+    n, rho, sig = 40, 0.9, 0.02
+    D = np.linspace(0.001, 0.05, n) / 0.05
+    e = np.zeros(0)
+    pushes = [PushData(f"h{k}", 0.4 + 0.1 * k, D, np.zeros(n), e, e.astype(int), e, e, None) for k in range(3)]
+    m = ForwardModel(pushes, 0.8)
+    push = m.force_push
+    t = D[np.arange(3 * n) % n] * (1.0 + 0.3 * push)
+    J0 = np.column_stack([t, t**2])  # (log EI0, p): p = 0 at its lower bound
+    X1 = np.column_stack([J0, t**3])  # + a one-sided effect's signature
+    lag = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+    Ci = np.linalg.inv(sig**2 / (1 - rho**2) * rho**lag)
+
+    def bounded_gls(X, y, rows):  # minimise the GLS objective with every column but the first >= 0
+        best, best_obj = None, np.inf
+        for fixed in product((False, True), repeat=X.shape[1] - 1):
+            free = np.r_[True, ~np.array(fixed)]
+            A, b = np.zeros((free.sum(),) * 2), np.zeros(free.sum())
+            for k in np.unique(push[rows]):
+                s = rows & (push == k)
+                A += X[s][:, free].T @ Ci @ X[s][:, free]
+                b += X[s][:, free].T @ Ci @ y[s]
+            c = np.zeros(X.shape[1])
+            c[free] = np.linalg.solve(A, b)
+            if np.all(c[1:] >= -1e-12):
+                r = y - X @ c
+                obj = sum(r[rows & (push == k)] @ Ci @ r[rows & (push == k)] for k in np.unique(push[rows]))
+                if obj < best_obj:
+                    best, best_obj = c, obj
+        return best
+
+    dg = Diagnoser(m)
+    pv = []
+    for _ in range(100):
+        y = 0.5 * J0[:, 0] + np.concatenate([ar1_noise(rng, sig / np.sqrt(1 - rho**2), rho, n) for _ in range(3)])
+        allrows = np.ones(3 * n, bool)
+        c0, c1 = bounded_gls(J0, y, allrows), bounded_gls(X1, y, allrows)
+        r0, r1 = y - J0 @ c0, y - X1 @ c1
+        sq0 = sq1 = 0.0
+        for k in range(3):
+            train, held = push != k, push == k
+            sq0 += np.sum((y[held] - J0[held] @ bounded_gls(J0, y, train)) ** 2)
+            sq1 += np.sum((y[held] - X1[held] @ bounded_gls(X1, y, train)) ** 2)
+        gain = 1 - np.sqrt(sq1 / sq0)
+        cur = MapFit((), c0, sig, 1.0, r0, e, J0, 0.0, rho, J0)  # the bootstrap's box: p moves to >= 0
+        new = MapFit(("base_compliance",), c1, sig, 1.0, r1, e, X1, 0.0, rho, X1)
+        pv.append(null_heldout_gain(dg, cur, new, gain, n_draws=200, seed=len(pv)))
+    pv = np.array(pv)
+    # about half the observed gains are exactly 0 (the effect stays at its bound in every refit): their
+    # p-values are large, so the check is one-sided: valid (not below the level), not uniform
+    assert np.mean(pv < 0.05) <= 0.12, np.mean(pv < 0.05)
+    assert 0.12 <= np.mean(pv < 0.2) <= 0.28, np.mean(pv < 0.2)
 
 
 def test_structure_pooled_over_pushes_holds_its_level_and_finds_what_each_push_misses():
@@ -418,8 +484,9 @@ def test_the_bootstrap_p_value_is_one_plus_the_draws_at_or_above_over_draws_plus
     u = D[np.arange(3 * n) % n] / D[-1]
     J = np.column_stack([u, u**2])
     rng = np.random.default_rng(3)
-    cur = MapFit((), np.zeros(2), 0.02, 1.0, rng.normal(0, 0.02, 3 * n), e, J, 0.0, 0.5, J)
-    new = MapFit((), np.zeros(2), 0.02, 1.0, cur.r_force - 0.01 * u**3, e, J, 0.0, 0.5, J)
+    x = np.array([0.0, 1.0])  # p inside its bounds
+    cur = MapFit((), x, 0.02, 1.0, rng.normal(0, 0.02, 3 * n), e, J, 0.0, 0.5, J)
+    new = MapFit((), x, 0.02, 1.0, cur.r_force - 0.01 * u**3, e, J, 0.0, 0.5, J)
     dg = Diagnoser(m)
     assert null_heldout_gain(dg, cur, new, np.inf) == pytest.approx(1 / 501)
     assert null_heldout_gain(dg, cur, new, np.inf, n_draws=99) == pytest.approx(1 / 100)
@@ -434,11 +501,16 @@ def test_the_bootstrap_p_value_is_one_plus_the_draws_at_or_above_over_draws_plus
     assert null_heldout_gain(Diagnoser(one), short, short, 0.1) == 1.0
 
 
-def test_the_bootstrap_refits_match_dense_generalised_least_squares_draw_by_draw():
+@pytest.mark.parametrize("bounded", [False, True])
+def test_the_bootstrap_refits_match_dense_generalised_least_squares_draw_by_draw(bounded):
     """The bootstrap's linearised refits written out densely here (AR(1) covariance of the training forces,
     each shape point's variance, leave one height out) from the same random stream: the same p-value at
     observed gains between consecutive draws' gains. Shapes weigh against forces, so the relative
-    weighting of the two is checked as well."""
+    weighting of the two is checked as well. ``bounded``: the second parameter sits 0.002 above its lower
+    bound and the added effect is one-sided (amplitude >= 0); the reference minimises the GLS objective
+    over every active set of the two bounds, draw by draw."""
+    from itertools import product
+
     from scipy import linalg
 
     from bayesrod.inference.diagnose import MapFit, null_heldout_gain
@@ -456,9 +528,12 @@ def test_the_bootstrap_refits_match_dense_generalised_least_squares_draw_by_draw
     u = np.r_[D[np.arange(3 * n) % n] / D[-1], np.concatenate([p.z_m for p in pushes])]
     J = np.column_stack([u, u**2, np.r_[np.zeros(3 * n), np.ones(3 * npt) * 0.01]])
     rf, rs = rng.normal(0, 0.02, 3 * n), rng.normal(0, 0.003, 3 * npt)
-    cur = MapFit((), np.zeros(2), sig, scale, rf, rs, J, 0.0, rho, J)
+    x = np.array([0.0, 0.002 if bounded else 0.0, 0.0])
+    cur = MapFit((), x, sig, scale, rf, rs, J, 0.0, rho, J)
     delta = 0.01 * u**3
-    new = MapFit((), np.zeros(2), sig, scale, rf - delta[: 3 * n], rs - delta[3 * n :], J, 0.0, rho, J)
+    added = ("base_compliance",) if bounded else ()
+    new = MapFit(added, np.r_[x, 0.0], sig, scale, rf - delta[: 3 * n], rs - delta[3 * n :], J, 0.0, rho, J)
+    box = (np.array([-np.inf, 0.0 if bounded else -np.inf, -np.inf]), np.full(3, np.inf))
     n_draws, seed = 200, 5
 
     # the reference: the same draws, dense GLS refits
@@ -480,11 +555,28 @@ def test_the_bootstrap_refits_match_dense_generalised_least_squares_draw_by_draw
         held = is_force & (push_of == k)
         order = np.r_[np.flatnonzero(is_force & train), np.flatnonzero(~is_force & train)]
         for i, X in enumerate((J, X1)):
-            A = X[order]
-            coef = np.linalg.solve(A.T @ Ci @ A, A.T @ Ci @ eps[order])
-            sq[i] += np.sum((eps[held] - X[held] @ coef) ** 2, axis=0)
+            A, y = X[order], eps[order]
+            lower = np.r_[-np.inf, -x[1] if bounded else -np.inf, -np.inf, 0.0 if bounded else -np.inf][: X.shape[1]]
+            best, obj = np.zeros((X.shape[1], n_draws)), np.full(n_draws, np.inf)
+            for fixed in product((False, True), repeat=X.shape[1]):  # columns held at their lower bound
+                fixed = np.array(fixed)
+                if not np.all(np.isfinite(lower[fixed])):
+                    continue
+                coef = np.zeros((X.shape[1], n_draws))
+                coef[fixed] = lower[fixed][:, None]
+                free = ~fixed
+                rest = y - A[:, fixed] @ coef[fixed]
+                coef[free] = np.linalg.solve(A[:, free].T @ Ci @ A[:, free], A[:, free].T @ Ci @ rest)
+                r = y - A @ coef
+                o = np.einsum("nd,nm,md->d", r, Ci, r)
+                take = np.all(coef >= lower[:, None] - 1e-12, axis=0) & (o < obj - 1e-12)
+                best[:, take], obj[take] = coef[:, take], o[take]
+            if bounded:  # the bounds bind in some draws, or this checks nothing new
+                assert np.mean(np.any(np.isclose(best, lower[:, None]), axis=0)) > 0.1
+            sq[i] += np.sum((eps[held] - X[held] @ best) ** 2, axis=0)
     gains = np.sort(1 - np.sqrt(sq[1] / sq[0]))
     for i in (20, 100, 180):
         obs = 0.5 * (gains[i] + gains[i + 1])
         want = (1 + np.sum(gains >= obs)) / (n_draws + 1)
-        assert null_heldout_gain(Diagnoser(m), cur, new, obs, n_draws=n_draws, seed=seed) == pytest.approx(want)
+        got = null_heldout_gain(Diagnoser(m), cur, new, obs, n_draws=n_draws, seed=seed, bounds=box)
+        assert got == pytest.approx(want)

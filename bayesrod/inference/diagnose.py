@@ -41,7 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 from scipy.interpolate import CubicSpline, PchipInterpolator
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, lsq_linear
 
 from ..physics import Effects
 from ..physics.effects import EFFECT_NAMES
@@ -587,7 +587,26 @@ def _first_of(mask: NDArray, push: NDArray) -> NDArray:
     return np.r_[True, sel_push[1:] != sel_push[:-1]] if sel_push.size else np.zeros(0, bool)
 
 
-def null_heldout_gain(dg: Diagnoser, cur: MapFit, new: MapFit, observed_gain: float, n_draws: int = 500, seed=0):
+def _box_lstsq(A: NDArray, Y: NDArray, lo: NDArray, hi: NDArray) -> NDArray:
+    """Least-squares coefficients (k, d) of each column of ``Y`` (n, d) on ``A`` (n, k) within the box
+    ``lo <= coef <= hi`` (k,): every column solved unconstrained, those that leave the box again by
+    bounded-variable least squares (the constrained minimum; the box must contain 0)."""
+    coef, *_ = np.linalg.lstsq(A, Y, rcond=None)
+    outside = ((coef < lo[:, None]) | (coef > hi[:, None])).any(axis=0)
+    for j in np.flatnonzero(outside):
+        coef[:, j] = lsq_linear(A, Y[:, j], bounds=(lo, hi), method="bvls").x
+    return coef
+
+
+def null_heldout_gain(
+    dg: Diagnoser,
+    cur: MapFit,
+    new: MapFit,
+    observed_gain: float,
+    n_draws: int = 500,
+    seed=0,
+    bounds: tuple[NDArray, NDArray] | None = None,
+):
     """Parametric bootstrap p-value of a held-out gain under "the added effect is absent".
 
     Data are simulated from ``cur`` with its fitted noise (AR(1) forces per push, independent shape
@@ -596,11 +615,24 @@ def null_heldout_gain(dg: Diagnoser, cur: MapFit, new: MapFit, observed_gain: fl
     Jacobian, model ``new`` by the same plus one column, the fitted change of the predictions
     (``new`` - ``cur``: the effect's signature with a free amplitude). The p-value is the share of draws
     whose held-out RMSE gain reaches ``observed_gain``. Calibration: docs/validation.md.
+
+    The linearised refits keep the true refits' bounds (``bounds``: those of ``cur``'s parameters,
+    default :meth:`Diagnoser.bounds`): a parameter at or near a bound (p at 0, a preload at 0) moves
+    only inwards, and the amplitude of a one-sided effect (base compliance, self weight) is not
+    negative. Unbounded, a plain fit at p ~ 0 let the null refits bend p below zero and fit noise that
+    the true refits cannot, which fattened the null's tail (docs/validation.md, seed 13).
     """
     m = dg.m
     masks = m.heldout_masks()
     if not masks or cur.jac_pred is None:
         return 1.0
+    lo, hi = dg.bounds(cur.effects) if bounds is None else (np.asarray(b, float) for b in bounds)
+    lo = np.minimum(lo - cur.x, 0.0)  # the box of a step from cur's parameters
+    hi = np.maximum(hi - cur.x, 0.0)
+    hi = np.where(hi > lo, hi, np.inf)  # a degenerate box (lo = hi = x) is left free
+    added = new.effects[len(cur.effects) :]
+    one_sided = bool(added) and all(e in _ONE_SIDED for e in added)
+    lo1, hi1 = np.r_[lo, 0.0 if one_sided else -np.inf], np.r_[hi, np.inf]
     rng = np.random.default_rng(seed)
     nf = m.n_force
     sig = np.concatenate([cur.r_force - new.r_force, cur.r_shape - new.r_shape])  # new - cur predictions
@@ -621,13 +653,14 @@ def null_heldout_gain(dg: Diagnoser, cur: MapFit, new: MapFit, observed_gain: fl
             return np.concatenate([f, (v[nf:][train_p].T / sd_p[train_p]).T])
 
         y = w(np.concatenate([eps_f, eps_p]))
-        for J, acc in ((J0, 0), (J1, 1)):
+        for J, acc, blo, bhi in ((J0, 0, lo, hi), (J1, 1, lo1, hi1)):
             keep = np.arange(J.shape[1]) != (own if own is not None else -1)
-            coef, *_ = np.linalg.lstsq(w(J[:, keep]), y, rcond=None)
+            coef = _box_lstsq(w(J[:, keep]), y, blo[keep], bhi[keep])
             e = eps_f[held_f] - J[:nf][held_f][:, keep] @ coef
-            if own is not None:  # least squares of the push's preload column on what is left
+            if own is not None:  # least squares of the push's preload column on what is left, within its box
                 col = J[:nf][held_f][:, own]
-                e = e - np.outer(col, col @ e) / max(float(col @ col), 1e-300)
+                c = np.clip((col @ e) / max(float(col @ col), 1e-300), blo[own], bhi[own])
+                e = e - np.outer(col, c)
             if acc == 0:
                 sq0 = sq0 + np.sum(e**2, axis=0)
             else:
@@ -758,12 +791,7 @@ class Diagnoser:
         fitted model profiles its AR(1) from the start.
         """
         effects = tuple(effects)
-        n_pre = self.m.n_preloads
-        lb = list(self.m.length_bounds_m or ())
-        lo = np.array([-np.inf, 0.0] + [0.0] * n_pre + lb[:1] + [self._bound(e, 2) for e in effects])
-        hi = np.array(
-            [np.inf, P_MAX] + [PRELOAD_MAX_L * self.m.length_m] * n_pre + lb[1:] + [self._bound(e, 3) for e in effects]
-        )
+        lo, hi = self.bounds(effects)
         x = np.clip(np.array(x0, float), lo + 1e-9 * np.isfinite(lo), hi - 1e-9 * np.isfinite(hi))
         rf, rs = self.raw_residuals(x, effects)
         noise = self.profile_noise(rf, rs)
@@ -799,6 +827,18 @@ class Diagnoser:
         sf, rho, ss = noise
         ll = self.loglik(rf, rs, noise)
         return MapFit(effects, x, sf, ss, rf, rs, jw, ll, rho, J, length_fitted=self.m.length_bounds_m is not None)
+
+    def bounds(self, effects: tuple[str, ...]) -> tuple[NDArray, NDArray]:
+        """Lower and upper bounds (n_par,) of a parameter vector with ``effects``: log EI0 free, p in
+        [0, P_MAX], each preload in [0, PRELOAD_MAX_L L], the length within its bounds, each effect's
+        coordinate within its own (``_COORD``)."""
+        n_pre = self.m.n_preloads
+        lb = list(self.m.length_bounds_m or ())
+        lo = np.array([-np.inf, 0.0] + [0.0] * n_pre + lb[:1] + [self._bound(e, 2) for e in effects])
+        hi = np.array(
+            [np.inf, P_MAX] + [PRELOAD_MAX_L * self.m.length_m] * n_pre + lb[1:] + [self._bound(e, 3) for e in effects]
+        )
+        return lo, hi
 
     def _bound(self, effect: str, k: int) -> float:
         if effect == "rest_curvature":  # the unloaded stem must still rise: |kappa0 L| <= 1.2 rad
