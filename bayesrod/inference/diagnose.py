@@ -657,9 +657,11 @@ def null_heldout_gain(
             keep = np.arange(J.shape[1]) != (own if own is not None else -1)
             coef = _box_lstsq(w(J[:, keep]), y, blo[keep], bhi[keep])
             e = eps_f[held_f] - J[:nf][held_f][:, keep] @ coef
-            if own is not None:  # least squares of the push's preload column on what is left, within its box
+            if own is not None:  # the push's preload column fitted to what is left, as _held_preload fits it:
+                # least squares on the AR(1)-whitened residuals, within its box
                 col = J[:nf][held_f][:, own]
-                c = np.clip((col @ e) / max(float(col @ col), 1e-300), blo[own], bhi[own])
+                cw, ew = _whiten_rows(col, None, cur.rho_force), _whiten_rows(e, None, cur.rho_force)
+                c = np.clip((cw @ ew) / max(float(cw @ cw), 1e-300), blo[own], bhi[own])
                 e = e - np.outer(col, c)
             if acc == 0:
                 sq0 = sq0 + np.sum(e**2, axis=0)
