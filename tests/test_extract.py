@@ -104,6 +104,8 @@ def test_extract_cli_writes_valid_copy_and_reports_skipped_frames(twig_frames, t
     rep = json.loads((out / "extract_report.json").read_text())
     skipped = rep["pushes"]["h450"]["skipped"]
     assert [s["frame"] for s in skipped] == [2] and "depth" in skipped[0]["reason"]
+    colour = rep["diameters"]["colour_model"]  # auto by default: the flat-coloured render keeps projection
+    assert colour["requested"] == "auto" and colour["model"] == "projection", colour
     assert len(spec.pushes[0].shapes) == len(spec.pushes[0].frames) - 1  # skipped, never invented
     assert (out / "figures" / "extract_h450.png").is_file()
     assert main(["extract", str(src), "--out", str(out)]) == 2  # non-empty --out refused

@@ -87,6 +87,62 @@ def test_unmixing_reads_a_shaded_stem_that_projection_reads_too_wide():
         width_profile(img, None, line, cam, colour_model="ratio")
 
 
+@pytest.mark.parametrize("w0", [3.27, 4.0, 8.0])
+@pytest.mark.parametrize("shaded", [False, True])
+def test_auto_colour_model_unmixes_shaded_stems_and_keeps_projection_on_flat_ones(w0, shaded):
+    """``auto`` compares the two models at the stations at least WIDE_PX wide: a shaded stem of 3.3-8 px is
+    unmixed (projection reads it 0.33-0.65 px too wide), a flat one keeps projection (the models agree to
+    0.02 px), and a flat 3.27-px stem with too few 3-px stations to compare keeps projection, saying why;
+    the chosen model reads the width to 0.06 px."""
+    from bayesrod.vision.width import choose_colour_model
+
+    img, line, truth = _synthetic(w0, 0.43 if w0 > 3.5 else 1.6, 2.0, shaded=shaded)
+    cam = {"fx": F, "fy": F, "base_px": [128, 441.6]}
+    c = choose_colour_model(img, None, line, cam)
+    assert c.model == ("unmixing" if shaded else "projection"), c
+    if shaded:
+        assert c.stations >= 10 and c.shading_px > 0.3, c
+    elif w0 > 3.5:
+        assert c.stations >= 10 and abs(c.shading_px) < 0.05, c
+    else:
+        assert c.stations < 10 and "too narrow" in c.reason and np.isnan(c.shading_px), c
+    wp = width_profile(img, None, line, cam, colour_model=c.model)
+    ok = wp.flag == "ok"
+    assert abs(np.median(wp.width_px[ok] - truth(wp.s_m[ok]))) < 0.06
+    assert json.dumps(c.to_dict())  # the extract report's record: plain JSON (NaN written as null)
+
+
+def test_auto_colour_model_keeps_projection_when_stem_and_background_share_their_chromaticity():
+    """Shading on a grey stem before a grey background: unmixing cannot separate brightness from coverage,
+    so ``auto`` keeps projection and says so."""
+    from bayesrod.vision.width import choose_colour_model
+
+    img, line, _ = _synthetic(8.0, 0.43, 0.0, shaded=True)
+    grey = img.astype(float).mean(axis=2, keepdims=True).repeat(3, axis=2).astype(np.uint8)
+    c = choose_colour_model(grey, None, line, {"fx": F, "fy": F, "base_px": [128, 441.6]})
+    assert c.model == "projection" and "cannot unmix" in c.reason and abs(c.shading_px) > 0.15, c
+
+
+def test_colour_verdict_needs_a_difference_both_large_and_significant():
+    """The rule alone: a median difference above SHADING_PX and SHADING_Z of its standard error (the
+    median's: sqrt(pi/2) 1.4826 MAD / sqrt(n)), with colours that can be unmixed; too few stations: none."""
+    from bayesrod.vision.width import SHADING_PX, SHADING_Z, colour_verdict
+
+    rng = np.random.default_rng(0)
+    z = rng.standard_normal(40)
+    z = (z - np.median(z)) / (1.4826 * np.median(np.abs(z - np.median(z))))  # median 0, MAD 1/1.4826
+    se1 = np.sqrt(np.pi / 2) / np.sqrt(40)  # the se at unit spread
+    big = 2 * SHADING_PX
+    assert colour_verdict(big + 0.1 * z, 0.9).model == "unmixing"
+    noisy = colour_verdict(big + z * big / (SHADING_Z * se1) * 1.01, 0.9)  # the same median, just short of Z se
+    assert noisy.model == "projection" and noisy.se_px == pytest.approx(big / SHADING_Z * 1.01), noisy
+    assert colour_verdict(big + z * big / (SHADING_Z * se1) * 0.99, 0.9).model == "unmixing"
+    assert colour_verdict(0.99 * SHADING_PX + 0.001 * z, 0.9).model == "projection"
+    assert colour_verdict(-big + 0.1 * z, 0.9).model == "unmixing"  # narrower by projection: shading too
+    assert colour_verdict(big + 0.1 * z, 0.999).model == "projection"
+    assert colour_verdict((big + 0.1 * z)[:9], 0.9).model == "projection"
+
+
 def test_shaded_render_darkens_the_limbs_and_keeps_the_coverage():
     """render_style "shaded": the stem's colour falls towards its limbs (a row projects to more than the
     stem's width against the core colour), the coverage drawn is the same; "flat" keeps one colour."""

@@ -143,7 +143,7 @@ def _camera_dict(ds) -> dict | None:
     return None if c is None else {"fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "base_px": list(c.base_px)}
 
 
-def extract(dataset, *, progress: bool = True, width_colour_model: str = "projection") -> Extraction:
+def extract(dataset, *, progress: bool = True, width_colour_model: str = "auto") -> Extraction:
     """Extract centerlines (with per-point sd) from every push with RGB-D frames (docs/vision.md).
 
     Parameters
@@ -152,18 +152,20 @@ def extract(dataset, *, progress: bool = True, width_colour_model: str = "projec
         A dataset whose pushes have ``frames`` (read from disk: the frames are files).
     progress : bool
         A progress bar, only on a terminal or in a notebook.
-    width_colour_model : {"projection", "unmixing"}
+    width_colour_model : {"auto", "projection", "unmixing"}
         How the diameter profile reads coverage from colour (:func:`bayesrod.vision.width.width_profile`);
-        ``unmixing`` for round stems with strong shading.
+        ``unmixing`` for round stems with strong shading; ``auto`` (default) chooses on the first extracted
+        frame (:func:`bayesrod.vision.width.choose_colour_model`) and uses the choice for every frame. The
+        choice and why: ``report["diameters"]["colour_model"]``.
     """
-    from ..vision.width import COLOUR_MODELS
+    from ..vision.width import COLOUR_CHOICES
 
-    if width_colour_model not in COLOUR_MODELS:
-        raise ValueError(f"width_colour_model: expected one of {', '.join(COLOUR_MODELS)}, got {width_colour_model!r}")
+    if width_colour_model not in COLOUR_CHOICES:
+        raise ValueError(f"width_colour_model: expected one of {', '.join(COLOUR_CHOICES)}, got {width_colour_model!r}")
     from tqdm.auto import tqdm
 
     from ..vision.extract import ExtractionError, extract_frame
-    from ..vision.width import SPACING_PX, combine_profiles, width_profile
+    from ..vision.width import SPACING_PX, ColourChoice, choose_colour_model, combine_profiles, width_profile
     from ._common import as_dataset, progress_enabled
 
     spec = as_dataset(dataset)
@@ -175,6 +177,7 @@ def extract(dataset, *, progress: bool = True, width_colour_model: str = "projec
     report = {"dataset": str(Path(spec.root).resolve()) if spec.root else None, "pushes": {}}
     columns, examples = {}, {}
     stations, widths = None, []
+    colour = None if width_colour_model == "auto" else ColourChoice(width_colour_model, np.nan, np.nan, 0, "given")
     total = sum(len(p.frames) for p in pushes)
     bar = tqdm(total=total, desc="extracting frames", unit="frame", disable=not progress_enabled(progress), leave=False)
     for push in pushes:
@@ -193,6 +196,9 @@ def extract(dataset, *, progress: bool = True, width_colour_model: str = "projec
             plane = plane or line.plane_depth_m  # the plane of the push: from its first good frame
             if stations is None:  # width stations every SPACING_PX of the first extracted frame, over the stem
                 stations = np.arange(0.0, spec.length_m, SPACING_PX * plane / np.sqrt(camera["fx"] * camera["fy"]))
+            if colour is None:  # auto: chosen on the first extracted frame, kept for every frame
+                colour = choose_colour_model(rgb, depth, line, camera, direction=push.direction)
+                log.info("width colour model: %s (%s)", colour.model, colour.reason)
             widths.append(
                 width_profile(
                     rgb,
@@ -201,7 +207,7 @@ def extract(dataset, *, progress: bool = True, width_colour_model: str = "projec
                     camera,
                     direction=push.direction,
                     s_m=stations,
-                    colour_model=width_colour_model,
+                    colour_model=colour.model,
                 )
             )
             n = line.x_m.size
@@ -240,6 +246,7 @@ def extract(dataset, *, progress: bool = True, width_colour_model: str = "projec
             "stations": int(diameters.s_m.size),
             "flags": {str(f): int(n) for f, n in zip(flags, counts, strict=True)},
             "frames": len(widths),
+            "colour_model": colour.to_dict() | {"requested": width_colour_model},
             # the factor each frame's narrow stations were divided by (vision.width.contrast_scale): its spread
             # over frames is an error the stations of a frame share
             "contrast_scale": {

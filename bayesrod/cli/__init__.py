@@ -22,7 +22,7 @@ from pathlib import Path
 from .._version import __version__
 from ..physics.effects import parse_effect_assignments
 from ..physics.presets import PRESETS
-from ..vision.width import COLOUR_MODELS
+from ..vision.width import COLOUR_CHOICES
 from .parse import parse_values
 
 EXIT_BAD_INPUT = 2
@@ -93,9 +93,10 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
     ex.add_argument(
         "--width-colour-model",
-        choices=COLOUR_MODELS,
-        default=COLOUR_MODELS[0],
-        help="how the diameter profile reads coverage from colour: unmixing for round stems with strong shading",
+        choices=COLOUR_CHOICES,
+        default="auto",
+        help="how the diameter profile reads coverage from colour: unmixing for round stems with strong shading; "
+        "auto (default) chooses from the stem's wide stations on the first frame (extract_report.json says which)",
     )
     fm = sub.add_parser("fit-many", help="fit every dataset of a folder on a Dask cluster; survey table")
     fm.add_argument("root", metavar="DIR_OF_DATASETS", help="folder whose sub-directories are datasets")

@@ -41,6 +41,18 @@ from ..dataset.model import SHARED_DIAMETER_ERRORS, Diameters
 #: flag names, in the order they are tested (the first that applies is reported)
 FLAGS = ("ok", "occluded", "low_contrast", "edge", "base")
 COLOUR_MODELS = ("projection", "unmixing")
+#: what ``bayesrod extract`` takes: either model, or ``auto`` (:func:`choose_colour_model`, per push)
+COLOUR_CHOICES = ("auto", *COLOUR_MODELS)
+#: ``auto`` picks unmixing when the two models' widths differ by more than this [px] at a frame's wide
+#: stations (and by more than SHADING_Z of its standard error): a flat stem reads within ~0.02 px alike
+#: (tests/test_width.py), a shaded twig 0.45 px apart (docs/validation.md, "Shaded stems")
+SHADING_PX = 0.15
+SHADING_Z = 4.0
+#: unmixing needs stem and background of different chromaticity: cosine of their RGB angle below this
+UNMIX_MAX_COS = 0.998
+#: ``auto`` compares the models at stations at least this wide [px]: narrower ones are mostly limb and blur
+#: (on a 5-px shaded stem the models differ by 0.41 px, on a flat one by -0.02 px at these stations)
+WIDE_PX = 3.0
 STEP_PX = 0.25  # sample spacing along the normal [px]
 SPACING_PX = 3.0  # default station spacing along the centerline [px]
 BG_PX = 3.0  # width of each background strip [px]
@@ -232,6 +244,96 @@ def width_profile(
         uv=np.column_stack([u, v]),
         contrast_scale=float(scale),
     )
+
+
+@dataclass(frozen=True)
+class ColourChoice:
+    """Which colour model reads a push's widths (:func:`choose_colour_model`).
+
+    ``model``: ``projection`` or ``unmixing``; ``shading_px``: median of projection - unmixing widths
+    [px] at the frame's wide stations (NaN where there were fewer than ``min_stations``), ``se_px``
+    its standard error; ``stations``: how many; ``reason``: one line saying why.
+    """
+
+    model: str
+    shading_px: float
+    se_px: float
+    stations: int
+    reason: str
+
+    def to_dict(self) -> dict:
+        return {
+            "model": self.model,
+            "shading_px": None if not np.isfinite(self.shading_px) else float(self.shading_px),
+            "se_px": None if not np.isfinite(self.se_px) else float(self.se_px),
+            "stations": int(self.stations),
+            "reason": self.reason,
+        }
+
+
+def choose_colour_model(
+    rgb: NDArray, depth_mm: NDArray | None, line, camera: dict, *, direction: int = 1, min_stations: int = 10
+) -> ColourChoice:
+    """Projection or unmixing for a stem, from the shape of its colour across its wide stations.
+
+    Both models read the same width from a stem of one colour; a round stem lit from the camera, darker
+    at its limbs, reads wider (or narrower) by projection, by about half a pixel on a 4-8 px twig. At the
+    stations at least ``WIDE_PX`` wide, the two models' widths are compared:
+    unmixing is chosen when their median difference exceeds ``SHADING_PX`` and ``SHADING_Z`` standard
+    errors, and the stem's and background's colours differ in chromaticity enough to unmix
+    (``UNMIX_MAX_COS``). A stem too narrow to show shading keeps projection (the default).
+
+    Returns
+    -------
+    ColourChoice
+    """
+    proj = width_profile(rgb, depth_mm, line, camera, direction=direction, colour_model="projection")
+    wide = (proj.flag == "ok") & (proj.width_px >= WIDE_PX)
+    if wide.sum() < min_stations:
+        return ColourChoice(
+            "projection",
+            np.nan,
+            np.nan,
+            int(wide.sum()),
+            f"fewer than {min_stations} stations {WIDE_PX:g} px wide or wider: too narrow to show shading",
+        )
+    stem, bg = _wide_colours(rgb, proj, wide)
+    cos = float(stem @ bg / max(np.linalg.norm(stem) * np.linalg.norm(bg), 1e-12))
+    unmix = width_profile(rgb, depth_mm, line, camera, direction=direction, colour_model="unmixing")
+    both = wide & (unmix.flag == "ok")
+    return colour_verdict(proj.width_px[both] - unmix.width_px[both], cos, min_stations)
+
+
+def colour_verdict(d_px: NDArray, cos: float, min_stations: int = 10) -> ColourChoice:
+    """The rule of :func:`choose_colour_model` from the stations' width differences ``d_px`` (n,) [px]
+    (projection - unmixing) and the cosine ``cos`` of the stem's and background's colours in RGB."""
+    d = np.asarray(d_px, float)
+    n = int(d.size)
+    if n < min_stations:
+        return ColourChoice("projection", np.nan, np.nan, n, "too few stations read by both models")
+    med = float(np.median(d))
+    se = float(np.sqrt(np.pi / 2) * 1.4826 * np.median(np.abs(d - med)) / np.sqrt(n))  # the median's se
+    if abs(med) <= SHADING_PX or abs(med) <= SHADING_Z * se:
+        return ColourChoice("projection", med, se, n, f"the models agree ({med:+.3f} px): a stem of one colour")
+    if cos > UNMIX_MAX_COS:
+        return ColourChoice(
+            "projection",
+            med,
+            se,
+            n,
+            f"shading ({med:+.3f} px) but stem and background share their chromaticity (cos {cos:.4f}): cannot unmix",
+        )
+    return ColourChoice("unmixing", med, se, n, f"shaded stem: projection reads {med:+.3f} px wider than unmixing")
+
+
+def _wide_colours(rgb: NDArray, prof: WidthProfile, wide: NDArray) -> tuple[NDArray, NDArray]:
+    """Median colour (3,) on the centerline at the ``wide`` stations, and the image's median colour
+    (the background's, a stem being a small part of a frame)."""
+    uv = prof.uv[wide]
+    ui = np.clip(np.round(uv[:, 0]).astype(int), 0, rgb.shape[1] - 1)
+    vi = np.clip(np.round(uv[:, 1]).astype(int), 0, rgb.shape[0] - 1)
+    img = np.asarray(rgb, float)
+    return np.median(img[vi, ui], axis=0), np.median(img.reshape(-1, 3), axis=0)
 
 
 def _blurred_box(t: NDArray, w: NDArray, sigma: float) -> NDArray:
