@@ -33,10 +33,10 @@ import bayesrod
 from bayesrod.dataset.io import read_rows
 from bayesrod.physics import stem_diameter
 from bayesrod.vision.render import STYLES
-from bayesrod.vision.width import COLOUR_MODELS
+from bayesrod.vision.width import COLOUR_CHOICES, COLOUR_MODELS
 
 FIELDS = ["stem", "style", "colour_model", "seed", "stations_ok", "px_mm", "offset_px", "median_abs_err_px"]
-FIELDS += ["z_sd_within", "depth_rel_err", "seconds"]
+FIELDS += ["z_sd_within", "depth_rel_err", "seconds", "model_used"]
 
 
 def one(job) -> dict:
@@ -72,6 +72,7 @@ def one(job) -> dict:
         "z_sd_within": float(np.std((err - offset) / dp.sd_m[ok])),
         "depth_rel_err": Z / plane_depth(L) - 1.0,
         "seconds": round(time.perf_counter() - t0, 1),
+        "model_used": ex.doc["diameters"]["colour_model"]["model"],  # what auto chose (or the model asked for)
     }
 
 
@@ -103,7 +104,7 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--stems", nargs="+", default=["twig", "grass"])
     ap.add_argument("--style", default=STYLES[0], choices=STYLES)
-    ap.add_argument("--colour-model", default=COLOUR_MODELS[0], choices=COLOUR_MODELS)
+    ap.add_argument("--colour-model", default=COLOUR_MODELS[0], choices=COLOUR_CHOICES)
     a = ap.parse_args()
     a.out.mkdir(parents=True, exist_ok=True)
     csv_path = a.out / "width_error_study.csv"
