@@ -509,7 +509,6 @@ def test_the_bootstrap_refits_match_dense_generalised_least_squares_draw_by_draw
     weighting of the two is checked as well. ``bounded``: the second parameter sits 0.002 above its lower
     bound and the added effect is one-sided (amplitude >= 0); the reference minimises the GLS objective
     over every active set of the two bounds, draw by draw."""
-    from itertools import product
 
     from scipy import linalg
 
@@ -557,20 +556,7 @@ def test_the_bootstrap_refits_match_dense_generalised_least_squares_draw_by_draw
         for i, X in enumerate((J, X1)):
             A, y = X[order], eps[order]
             lower = np.r_[-np.inf, -x[1] if bounded else -np.inf, -np.inf, 0.0 if bounded else -np.inf][: X.shape[1]]
-            best, obj = np.zeros((X.shape[1], n_draws)), np.full(n_draws, np.inf)
-            for fixed in product((False, True), repeat=X.shape[1]):  # columns held at their lower bound
-                fixed = np.array(fixed)
-                if not np.all(np.isfinite(lower[fixed])):
-                    continue
-                coef = np.zeros((X.shape[1], n_draws))
-                coef[fixed] = lower[fixed][:, None]
-                free = ~fixed
-                rest = y - A[:, fixed] @ coef[fixed]
-                coef[free] = np.linalg.solve(A[:, free].T @ Ci @ A[:, free], A[:, free].T @ Ci @ rest)
-                r = y - A @ coef
-                o = np.einsum("nd,nm,md->d", r, Ci, r)
-                take = np.all(coef >= lower[:, None] - 1e-12, axis=0) & (o < obj - 1e-12)
-                best[:, take], obj[take] = coef[:, take], o[take]
+            best = _lower_bounded_gls(A, y, Ci, lower)
             if bounded:  # the bounds bind in some draws, or this checks nothing new
                 assert np.mean(np.any(np.isclose(best, lower[:, None]), axis=0)) > 0.1
             sq[i] += np.sum((eps[held] - X[held] @ best) ** 2, axis=0)
@@ -587,7 +573,6 @@ def test_the_bootstrap_with_preloads_matches_dense_bounded_refits_and_a_whitened
     near 0, a one-sided effect), then fits the held-out push's preload to what is left by least squares on
     its AR(1)-whitened residuals within its box, as ``_held_preload`` does; the bootstrap's p-values match
     at observed gains between consecutive draws' gains."""
-    from itertools import product
 
     from scipy import linalg
 
@@ -628,20 +613,7 @@ def test_the_bootstrap_with_preloads_matches_dense_bounded_refits_and_a_whitened
             cols = [c for c in range(X.shape[1]) if c != 2 + k]
             A, y = X[train][:, cols], eps[train]
             lower = lower_all[cols]
-            best, obj = np.zeros((len(cols), n_draws)), np.full(n_draws, np.inf)
-            for fixed in product((False, True), repeat=len(cols)):
-                fixed = np.array(fixed)
-                if not np.all(np.isfinite(lower[fixed])):
-                    continue
-                coef = np.zeros((len(cols), n_draws))
-                coef[fixed] = lower[fixed][:, None]
-                free = ~fixed
-                rest = y - A[:, fixed] @ coef[fixed]
-                coef[free] = np.linalg.solve(A[:, free].T @ Ci2 @ A[:, free], A[:, free].T @ Ci2 @ rest)
-                r = y - A @ coef
-                o = np.einsum("nd,nm,md->d", r, Ci2, r)
-                take = np.all(coef >= lower[:, None] - 1e-12, axis=0) & (o < obj - 1e-12)
-                best[:, take], obj[take] = coef[:, take], o[take]
+            best = _lower_bounded_gls(A, y, Ci2, lower)
             err = eps[held] - X[held][:, cols] @ best
             col = X[held][:, 2 + k]
             c = np.clip((col @ Ci1 @ err) / (col @ Ci1 @ col), lower_all[2 + k], upper_all[2 + k])
@@ -666,3 +638,27 @@ def _between_draws(gains: np.ndarray, at=(0.1, 0.5, 0.9)) -> list[float]:
         assert i + 1 < g.size
         out.append(0.5 * (g[i] + g[i + 1]))
     return out
+
+
+def _lower_bounded_gls(A: np.ndarray, Y: np.ndarray, Ci: np.ndarray, lower: np.ndarray) -> np.ndarray:
+    """Coefficients (k, d) minimising (y - A c)' Ci (y - A c) for each column y of Y subject to c >= lower,
+    by brute force: every set of columns held at their (finite) lower bound is solved, and of the feasible
+    solutions the one with the least objective is kept (exact for this convex problem)."""
+    from itertools import product
+
+    k, d = A.shape[1], Y.shape[1]
+    best, obj = np.zeros((k, d)), np.full(d, np.inf)
+    for fixed in product((False, True), repeat=k):
+        fixed = np.array(fixed)
+        if not np.all(np.isfinite(lower[fixed])):
+            continue
+        coef = np.zeros((k, d))
+        coef[fixed] = lower[fixed][:, None]
+        free = ~fixed
+        rest = Y - A[:, fixed] @ coef[fixed]
+        coef[free] = np.linalg.solve(A[:, free].T @ Ci @ A[:, free], A[:, free].T @ Ci @ rest)
+        r = Y - A @ coef
+        o = np.einsum("nd,nm,md->d", r, Ci, r)
+        take = np.all(coef >= lower[:, None] - 1e-12, axis=0) & (o < obj - 1e-12)
+        best[:, take], obj[take] = coef[:, take], o[take]
+    return best
