@@ -119,6 +119,37 @@ def test_device_tables_round_trip_and_recover_EI0(tmp_path, name, flags, capsys)
     assert q["q95"] / q["q05"] < 3  # an interval that says something
 
 
+@pytest.mark.parametrize(
+    "time_unit,force_unit,disp_unit",
+    [("ms", "lbf", "in"), ("min", "ozf", "um"), ("s", "kgf", "cm"), ("s", "mN", "mm")],
+)
+def test_every_unit_converts_to_the_same_push(tmp_path, time_unit, force_unit, disp_unit):
+    """One push written in SI and again in other units (a US testing machine's lbf and inches, ...) imports
+    to the same forces, displacements and times; the factors are the exact ones (international inch and
+    pound, standard gravity)."""
+    from bayesrod.dataset.importers import DISPLACEMENT_UNITS, FORCE_UNITS, TIME_UNITS
+
+    assert FORCE_UNITS["lbf"] == pytest.approx(4.4482216152605, rel=1e-13)
+    assert FORCE_UNITS["ozf"] == pytest.approx(0.27801385095378, rel=1e-13)
+    assert FORCE_UNITS["kgf"] == 9.80665 and DISPLACEMENT_UNITS["in"] == 0.0254 and TIME_UNITS["min"] == 60.0
+    t = np.linspace(0.0, 6.0, 61)
+    x = 0.01 * t  # 10 mm/s, contact at 10 mm (the load cell reads 0.05 N before it)
+    F = 0.05 + 25.0 * np.clip(x - 0.01, 0.0, None)
+    tables = {}
+    for name, (tu, fu, du) in {"si": ("s", "N", "m"), "other": (time_unit, force_unit, disp_unit)}.items():
+        path = tmp_path / f"{name}.csv"
+        cols = np.column_stack([t / TIME_UNITS[tu], F / FORCE_UNITS[fu], x / DISPLACEMENT_UNITS[du]])
+        np.savetxt(path, cols, delimiter=",", header="t,load,travel", comments="", fmt="%.15g")
+        opts = dict(time="t", force="load", displacement="travel", height_m=0.5, length_m=0.9, specimen=name)
+        imp = bayesrod.import_table(path, time_unit=tu, force_unit=fu, displacement_unit=du, **opts)
+        tables[name] = read_dataset(imp.save(tmp_path / f"out-{name}") / name).pushes[0].force
+    a, b = tables["si"], tables["other"]
+    for col in ("time_s", "force_N", "robot_x_m"):
+        np.testing.assert_allclose(getattr(b, col), getattr(a, col), rtol=1e-9, atol=1e-12)
+    assert a.force_N.max() == pytest.approx(25.0 * 0.05, abs=0.01)  # tared, counted from contact
+    assert a.robot_x_m.max() == pytest.approx(0.05, abs=1e-3)
+
+
 def test_instron_units_row_is_skipped_and_reported(tmp_path):
     code, out = _import(tmp_path, "utm_instron.csv", UTM)
     rep = json.loads((out / "import_report.json").read_text())["files"][0]

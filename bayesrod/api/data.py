@@ -265,9 +265,9 @@ def import_table(files, *, metadata=None, **options):
         Per-file options: a CSV with a column ``file`` (or ``{file name: {option: value}}``).
     **options
         As :class:`bayesrod.dataset.importers.TableOptions`: ``time``, ``force`` (column names), either
-        ``displacement`` or ``angle`` with ``arm_height_m``; units ``time_unit`` (s, ms), ``force_unit``
-        (N, kN, gf), ``displacement_unit`` (m, cm, mm), ``angle_unit`` (deg, rad); ``height_m``,
-        ``length_m``, ``length_unknown``, ``specimen``, ``species``, ``header_row``, ``cycles``
+        ``displacement`` or ``angle`` with ``arm_height_m``; units ``time_unit`` (s, ms, min), ``force_unit``
+        (N, mN, kN, gf, kgf, lbf, ozf), ``displacement_unit`` (m, cm, mm, um, in), ``angle_unit`` (deg, rad);
+        ``height_m``, ``length_m``, ``length_unknown``, ``specimen``, ``species``, ``header_row``, ``cycles``
         (``all``: every loading ramp a push; ``first``), ``force_sign``, ``tare`` (auto, none).
 
     Returns

@@ -20,6 +20,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from .._version import __version__
+from ..dataset.importers import ANGLE_UNITS, DISPLACEMENT_UNITS, FORCE_UNITS, TIME_UNITS
 from ..physics.effects import parse_effect_assignments
 from ..physics.presets import PRESETS
 from ..vision.width import COLOUR_CHOICES
@@ -176,10 +177,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="table: the rotating arm's length from its pivot "
         "to the probe [m]: the contact advances by H sin(angle - angle at the start)",
     )
-    im.add_argument("--time-unit", default="s", choices=["s", "ms"], help="table: time unit (default s)")
-    im.add_argument("--force-unit", default="N", choices=["N", "kN", "gf"], help="table: force unit (default N)")
-    im.add_argument("--displacement-unit", default="m", choices=["m", "cm", "mm"], help="table: default m")
-    im.add_argument("--angle-unit", default="deg", choices=["deg", "rad"], help="table: default deg")
+    im.add_argument("--time-unit", default="s", choices=list(TIME_UNITS), help="table: time unit (default s)")
+    im.add_argument("--force-unit", default="N", choices=list(FORCE_UNITS), help="table: force unit (default N)")
+    im.add_argument(
+        "--displacement-unit", default="m", choices=list(DISPLACEMENT_UNITS), help="table: default m (um: micrometres)"
+    )
+    im.add_argument("--angle-unit", default="deg", choices=list(ANGLE_UNITS), help="table: default deg")
     im.add_argument("--height-m", type=float, help="table: contact height on the stem [m]")
     im.add_argument(
         "--specimen", help="table: specimen name (default: the file name); files sharing it form one dataset"

@@ -304,9 +304,19 @@ def import_blueberry(src: Path, out: Path, length_m: float) -> dict:
 # --------------------------------------------------------------------------- #
 # generic rig tables (docs/data.md, "Raw rig tables")
 # --------------------------------------------------------------------------- #
-TIME_UNITS = {"s": 1.0, "ms": 1e-3}
-FORCE_UNITS = {"N": 1.0, "kN": 1e3, "gf": GF_TO_N}
-DISPLACEMENT_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
+#: units of a rig table's columns, to SI (exact conversions: the international inch, pound and ounce,
+#: standard gravity for the gram-, kilogram-, pound- and ounce-force)
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "min": 60.0}
+FORCE_UNITS = {
+    "N": 1.0,
+    "mN": 1e-3,
+    "kN": 1e3,
+    "gf": GF_TO_N,
+    "kgf": 1e3 * GF_TO_N,
+    "lbf": 0.45359237 * 9.80665,
+    "ozf": 0.45359237 / 16 * 9.80665,
+}
+DISPLACEMENT_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "in": 0.0254}
 ANGLE_UNITS = {"deg": np.pi / 180.0, "rad": 1.0}
 #: per-file fields a metadata table may set (the same names as the options)
 METADATA_FIELDS = (
