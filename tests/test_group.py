@@ -178,6 +178,8 @@ def test_fit_group_cli_writes_the_contract_and_recovers_the_stem(tmp_path):
     assert c["prob_b_softer"] > 0.99
     assert s["sharing"]["verdict"] == "supported"
     assert [k["height_m"] for k in s["conditions"]["cut"]["k_theta"]] == [0.45, 0.65]
+    conv = s["convergence"]  # a budget spent before the targets is said, in the warnings too
+    assert conv["converged"] == (not any("not converged" in w for w in s["warnings"])), (conv, s["warnings"])
     index = json.loads((tmp_path / "run" / "groups.json").read_text())
     assert index["stems"] == {"m7": "m7"} and index["problems"] == []
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
+import bayesrod
 from bayesrod.cli import main
 from bayesrod.dataset import read_dataset
 from bayesrod.inference.likelihood import LogPosterior, RodLikelihood
@@ -136,6 +137,7 @@ def _check_fit(run, truth, effects=()):
         assert abs(q["median"] - truth[name]) < 3 * draws.std(), (name, q, truth[name], draws.std())
     assert summary["convergence"]["rhat_max"] <= 1.01
     assert summary["convergence"]["ess_bulk_min"] >= 400
+    assert summary["convergence"]["converged"] is True and "message" not in summary["convergence"]
     assert (run / "posterior.nc").is_file() and (run / "report.html").is_file()
     assert set(summary["parameters"]) <= set(idata.posterior.data_vars)
     return summary
@@ -247,6 +249,26 @@ def test_fit_recovers_each_tabled_effect(tmp_path, name, value, shapes):
     q, _ = _fit_effect(tmp_path, name, value, use_shapes=shapes)
     assert q[name][0] < value < q[name][2], q  # 99% interval
     assert q["EI0"][0] < 2.63 < q["EI0"][2], q
+
+
+def test_a_run_that_spends_its_budget_says_it_did_not_converge(twig_noisy):
+    """max_steps below what the targets need: summary.json says converged false with the numbers, and the
+    user is warned (a short run must not pass as a posterior)."""
+    import logging
+
+    seen = []
+    handler = logging.Handler(logging.WARNING)
+    handler.emit = lambda record: seen.append(record.getMessage())
+    logger = logging.getLogger("bayesrod")  # the CLI may stop its propagation: listen on it directly
+    logger.addHandler(handler)
+    try:
+        post = bayesrod.fit(twig_noisy, use_shapes=False, progress=False, max_steps=100, target_ess=5000)
+    finally:
+        logger.removeHandler(handler)
+    conv = post.to_dict()["convergence"]
+    assert conv["converged"] is False and "not converged within 100 steps" in conv["message"], conv
+    assert "target 5000" in conv["message"] and "rerun with more steps" in conv["message"]
+    assert any("not converged" in m for m in seen), seen
 
 
 def test_bad_effects_leave_no_run_behind(tmp_path, capsys, twig_noisy):

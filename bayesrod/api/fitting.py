@@ -34,7 +34,7 @@ from ..inference.likelihood import (
     length_is_approximate,
 )
 from ..inference.priors import load_prior
-from ..inference.sampler import find_start, run_ensembles
+from ..inference.sampler import convergence_message, find_start, run_ensembles
 from ..inference.summary import (
     build_summary,
     credible_interval,
@@ -863,6 +863,11 @@ def fit(
     if extra["model_check"]["verdict"] == "misfit":
         log.warning("warning: %s: %s", spec.specimen, extra["model_check"]["message"])
     doc = build_summary(spec, post, samples, res.diagnostics, lik.fit_error(median), effects, extra)
+    not_converged = convergence_message(res, max_steps, target_ess)
+    doc["convergence"]["converged"] = not_converged is None
+    if not_converged:
+        doc["convergence"]["message"] = not_converged
+        log.warning("warning: %s: %s", spec.specimen, not_converged)
     idata = to_inference_data(
         res.chain,
         res.log_prob,

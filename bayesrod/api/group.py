@@ -31,7 +31,7 @@ from ..inference.group import (
     start_point,
 )
 from ..inference.priors import load_prior
-from ..inference.sampler import run_ensembles
+from ..inference.sampler import convergence_message, run_ensembles
 from ..inference.summary import LEVEL, credible_interval
 from ..physics import k_theta
 from ._common import as_dataset, plain_json, progress_enabled, readonly
@@ -310,6 +310,10 @@ def fit_group(
         samples[f"base_compliance_rad_per_Nm__{c}"] = base_compliance(u, per[c]["EI0"], lik.liks[c].L)
     check = sharing_check(lik, theta0) if sharing else None
     doc = _summary(sid, lik, nat, per, samples, res, pr, check, time.perf_counter() - t0)
+    not_converged = convergence_message(res, max_steps, target_ess)
+    doc["convergence"]["converged"] = not_converged is None
+    if not_converged:
+        doc["warnings"].append(not_converged)
     doc["species"] = next(iter(species.values()))
     doc["length_m"] = float(lik.liks[lik.conditions[0]].L)
     ro = {k: readonly(v) for k, v in samples.items()}

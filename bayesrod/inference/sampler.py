@@ -144,6 +144,21 @@ class SamplingResult:
     acceptance: float
     n_ensembles: int = 1
     diagnostics: dict | None = None
+    converged: bool = True  # False: the step budget was spent before the targets were met
+
+
+def convergence_message(
+    res: SamplingResult, max_steps: int, target_ess: float, target_rhat: float = 1.01
+) -> str | None:
+    """None when the run met its targets; else one line for the user: what was missed and what to do."""
+    if res.converged or res.diagnostics is None:
+        return None
+    rhat = max(res.diagnostics["rhat"].values())
+    ess = min(list(res.diagnostics["ess_bulk"].values())[:2])  # the target's parameters: EI0 and p
+    return (
+        f"not converged within {max_steps} steps (R-hat max {rhat:.3f}, target {target_rhat:g}; bulk ESS of "
+        f"EI0 and p {ess:.0f}, target {target_ess:g}): treat the intervals as provisional and rerun with more steps"
+    )
 
 
 def _ball(theta0, n, rng, post):
@@ -222,6 +237,7 @@ def run_ensembles(
         )
         if enough or todo <= 0 or res.n_steps >= max_steps:
             res.diagnostics = diag
+            res.converged = bool(enough)
             return res
 
 
