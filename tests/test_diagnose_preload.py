@@ -57,12 +57,26 @@ def test_preloads_are_recovered_and_the_held_out_push_fits_its_own():
     assert out0["heldout_force_rmse_N"] > 5 * out["heldout_force_rmse_N"]
 
 
-def test_preload_needs_forces_only():
+def test_a_preload_shifts_the_frames_of_its_push_as_it_shifts_its_forces():
+    """With centerlines, each push's preload moves its frames' contact displacements: the preloaded model's
+    shapes are the plain model's on frames taken that much further into each push, push by push."""
+    from dataclasses import replace
+
     ds = bayesrod.simulate("twig", seed=1, config_overrides={"n_frames_engaged": 2})
-    with pytest.raises(ValueError, match="preload"):
-        ForwardModel(prepare_data(ds, use_shapes=True), ds.length_m, preload=True)
-    with pytest.raises(ValueError, match="preload"):
-        bayesrod.diagnose(ds, preload=True)
+    data = prepare_data(ds, use_shapes=True)
+    m = ForwardModel(data, ds.length_m, preload=True)
+    deltas = np.array([0.004, 0.0, 0.009])
+    x = np.concatenate([[np.log(EI0), P], deltas])
+    shifted = [replace(d, frame_D_m=d.frame_D_m + deltas[k]) for k, d in enumerate(data)]
+    ref = ForwardModel(shifted, ds.length_m).shapes(x[[0, 1]], ())
+    got = m.shapes(x, ())
+    np.testing.assert_allclose(got[0], ref[0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got[1], ref[1], rtol=0, atol=1e-12)
+    unshifted = ForwardModel(data, ds.length_m).shapes(x[[0, 1]], ())
+    for k in (0, 2):  # the preloaded pushes' centerlines moved; the one without a preload did not
+        sel = m.point_push == k
+        assert np.nanmax(np.abs(got[0][sel] - unshifted[0][sel])) > 1e-3
+    np.testing.assert_array_equal(got[0][m.point_push == 1], unshifted[0][m.point_push == 1])
     with pytest.raises(ValueError, match="preload"):
         bayesrod.diagnose(ds, preload="yes")
 

@@ -127,8 +127,8 @@ def diagnose(
     preload : {"auto", True, False}
         Fit each push's preload (the contact displacement already made when recording began; a
         nuisance in [0, 0.1 L], docs/diagnose.md). ``"auto"`` (default): when some push starts
-        loaded (its first force above 5 noise sd and 2% of its peak, the dataset check's rule) and
-        the diagnosis uses forces only.
+        loaded (its first force above 5 noise sd and 2% of its peak, the dataset check's rule); a
+        push's preload shifts its frames' contact displacements as it shifts its forces'.
     length : {"known", "unknown", "auto"}
         The stem length L: ``"known"`` (default) holds it at the dataset's, with a warning when
         specimen.json marks it approximate; ``"unknown"`` fits it in every model as a nuisance within
@@ -181,18 +181,12 @@ def diagnose(
             else "diagnose with length 'unknown' to fit it in every model",
         )
     length_bounds = default_length_prior(spec).bounds() if fit_length else None
-    if preload is True and shapes_used:
-        raise ValueError(
-            "preload: expected a force-only diagnosis (use_shapes=False): the shapes of a preloaded push "
-            "are not modelled yet"
-        )
     loaded = [p.id for p in spec.pushes if starts_loaded(p.force.force_N)]
-    use_preload = bool(loaded) and not shapes_used if preload == "auto" else bool(preload)
+    use_preload = bool(loaded) if preload == "auto" else bool(preload)
     if loaded and not use_preload:
         log.warning(
-            "pushes %s start loaded but their preload is not fitted (%s): expect structure at the start",
+            "pushes %s start loaded but their preload is not fitted (preload=False): expect structure at the start",
             ", ".join(loaded),
-            "preload=False" if preload is False else "centerlines are used; diagnose with forces only to fit it",
         )
     model = ForwardModel(data, spec.length_m, preload=use_preload, length_bounds_m=length_bounds)
     res = diagnose_model(

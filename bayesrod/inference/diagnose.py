@@ -184,9 +184,9 @@ class ForwardModel:
         nodes is read off a monotone cubic).
     preload : bool
         Each push with forces has a preload [m]: the contact displacement already made when recording
-        began, added to its displacements (a nuisance, in [0, PRELOAD_MAX_L L] as in the fit's prior).
-        Parameter vectors are then (log EI0, p, preload of each push with forces, effect coordinates);
-        forces only.
+        began, added to its displacements (a nuisance, in [0, PRELOAD_MAX_L L] as in the fit's prior),
+        those of its forces and of its frames alike. Parameter vectors are then (log EI0, p, preload of
+        each push with forces, effect coordinates).
     length_bounds_m : (float, float) or None
         Fit the stem length as a nuisance within these bounds [m] (the fit's length prior's support,
         :func:`~bayesrod.inference.likelihood.default_length_prior`) instead of holding it at
@@ -226,11 +226,6 @@ class ForwardModel:
         self.first_sample = np.zeros(self.n_force, bool)  # first force sample of each push (AR(1) whitening)
         for sl in self._slices:
             self.first_sample[sl.start] = True
-        if self.preload and self.n_points:
-            raise ValueError(
-                "preload: expected a force-only diagnosis (centerlines not used): the shapes of a preloaded "
-                "push are not modelled yet"
-            )
         if self.length_bounds_m is not None:
             if self.n_points:
                 raise ValueError(
@@ -442,17 +437,20 @@ class ForwardModel:
         L = self.length_m
         EI0 = float(np.exp(np.clip(x[0], -60.0, 60.0)))
         eff = effects_from_coords(dict(zip(effects, x[self.n_base :], strict=True)), EI0, L)
+        # a push's preload shifts its frames' contact displacements as it shifts its forces'
+        pre = dict(zip(self.force_pushes, x[2 : 2 + self.n_preloads], strict=True)) if self.preload else {}
         xs, cs = [], []
-        for d in self.data:
+        for k, d in enumerate(self.data):
             if d.x_m.size:
-                a, c = self._shape(d, EI0, float(x[1]), eff)
+                a, c = self._shape(d, EI0, float(x[1]), eff, float(pre.get(k, 0.0)))
                 xs.append(a)
                 cs.append(c)
         return np.concatenate(xs), np.concatenate(cs)
 
-    def _shape(self, d: PushData, EI0: float, p: float, eff: Effects):
+    def _shape(self, d: PushData, EI0: float, p: float, eff: Effects, preload_m: float = 0.0):
         L = self.length_m
-        r = force_from_displacement_nd(d.frame_D_m / L, d.height_m / L, p, eff.nondim(L, EI0), keep_shape=True)
+        D = (d.frame_D_m + preload_m) / L
+        r = force_from_displacement_nd(D, d.height_m / L, p, eff.nondim(L, EI0), keep_shape=True)
         sig = np.linspace(0.0, 1.0, 961)
         xz = centerline_at(r["grid"], sig)  # (2, 961, M)
         dx, dz = np.gradient(xz[0], sig, axis=0), np.gradient(xz[1], sig, axis=0)
