@@ -57,6 +57,37 @@ def test_preloads_are_recovered_and_the_held_out_push_fits_its_own():
     assert out0["heldout_force_rmse_N"] > 5 * out["heldout_force_rmse_N"]
 
 
+def test_a_preloaded_push_whose_contact_starts_behind_the_origin_is_fitted_at_every_sample():
+    """Behind a wire sensor a push recorded from a preload starts at a negative contact displacement (robot
+    advance minus the wire's take-up): those samples are in contact, so the spline's nodes must reach them
+    (they were read at d = 0, 6x the noise in force rmse on a simulated wire push)."""
+    from bayesrod.inference.diagnose import _spline_matrix
+
+    D = np.linspace(-0.01, 0.05, 60)
+    nodes, S = _spline_matrix(D, 32, preloaded=True)
+    assert nodes[0] == pytest.approx(-0.01) and nodes[-1] == pytest.approx(0.05)
+    np.testing.assert_allclose(S @ np.sin(40 * nodes), np.sin(40 * D), atol=2e-4)  # reads every sample
+    assert _spline_matrix(D, 32)[0][0] == 0.0  # not preloaded: nothing before first contact but zeros
+    rng = np.random.default_rng(3)
+    Ds, Fs = [], []
+    for h, delta in zip(HEIGHTS, (0.02, 0.015, 0.025), strict=True):
+        d = np.linspace(-0.012, 0.15 * h / 0.4, 60)
+        Fs.append(force_from_displacement(d + delta, h, EI0, P, L).force_N + rng.normal(0, 0.004, d.size))
+        Ds.append(d)
+    data = prepare_data(
+        bayesrod.Dataset.from_arrays(length_m=L, height_m=list(HEIGHTS), displacement_m=Ds, force_N=Fs),
+        use_shapes=False,
+    )
+    assert all(d.D_m[0] < 0 for d in data)
+    dg = Diagnoser(ForwardModel(data, L, preload=True), force_noise="iid")
+    # the preloads start where the table forces reach each push's first sample, counted from its first
+    # displacement (not from zero: 12 mm off here)
+    np.testing.assert_allclose(dg.start()[2:5], (0.02, 0.015, 0.025), atol=4e-3)
+    fit = dg.fit_plain()
+    np.testing.assert_allclose(fit.preloads_m, (0.02, 0.015, 0.025), atol=1.5e-3)
+    assert np.sqrt(np.mean(fit.r_force**2)) < 1.5 * 0.004
+
+
 def test_a_preload_shifts_the_frames_of_its_push_as_it_shifts_its_forces():
     """With centerlines, each push's preload moves its frames' contact displacements: the preloaded model's
     shapes are the plain model's on frames taken that much further into each push, push by push."""

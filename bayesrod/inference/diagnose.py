@@ -112,19 +112,21 @@ def _scale_fit(g: NDArray, F: NDArray) -> tuple[NDArray, NDArray]:
     return a, np.where(a > 0, np.sum((F[None, :] - a[:, None] * g) ** 2, axis=1), np.inf)
 
 
-def _spline_matrix(D: NDArray, n_nodes: int) -> tuple[NDArray, NDArray]:
+def _spline_matrix(D: NDArray, n_nodes: int, preloaded: bool = False) -> tuple[NDArray, NDArray]:
     """Solver nodes (n_nodes,) of one push and the matrix (n, n_nodes) reading its n samples off them.
 
     With at most ``n_nodes`` samples the nodes are the samples (padded by repeating the last one) and
     the matrix selects them; otherwise the nodes are evenly spaced over the displacements and the matrix
     is the not-a-knot cubic spline through them (linear in the node values), the nodes spaced as
-    Chebyshev-Lobatto points between first contact and the largest displacement.
+    Chebyshev-Lobatto points between first contact and the largest displacement. ``preloaded``: the push
+    is in contact from its first sample (a preload is added to every displacement), so displacements
+    below zero are nodes too (a wire sensor's contact point starts behind the robot's origin).
     """
     if D.size <= n_nodes:
         pad = np.full(n_nodes - D.size, D[-1] if D.size else 0.0)
         return np.concatenate([D, pad]), np.eye(D.size, n_nodes)
     # the force is zero (plus any offset) up to first contact, d = 0: a kink the spline must not straddle
-    lo = max(float(D.min()), 0.0)
+    lo = float(D.min()) if preloaded else max(float(D.min()), 0.0)
     hi = max(float(D.max()), lo + 1e-12)
     nodes = lo + (hi - lo) * 0.5 * (1.0 - np.cos(np.linspace(0.0, np.pi, n_nodes)))  # denser at both ends
     return nodes, CubicSpline(nodes, np.eye(n_nodes))(np.maximum(D, lo))
@@ -217,7 +219,7 @@ class ForwardModel:
         start = 0
         for d in self.data:
             if d.D_m.size:
-                nd, S = _spline_matrix(d.D_m, self.n_nodes)
+                nd, S = _spline_matrix(d.D_m, self.n_nodes, preloaded=self.preload)
                 nodes.append(nd)
                 self._spline.append(S)
                 self._slices.append(slice(start, start + d.D_m.size))
@@ -876,7 +878,9 @@ class Diagnoser:
         for j in self.m.force_pushes:
             d = self.m.data[j]
             f = ForceCurves(d.height_m / L, p_grid).force(grid)[k] * EI0 / L**2
-            out.append(float(np.interp(max(float(d.F_N[0]), 0.0), np.maximum.accumulate(f), grid)) * L)
+            at = float(np.interp(max(float(d.F_N[0]), 0.0), np.maximum.accumulate(f), grid)) * L
+            # the first sample sits at D[0] (below zero behind a wire sensor): the preload makes up the rest
+            out.append(float(np.clip(at - d.D_m[0], 0.0, PRELOAD_MAX_L * L)))
         return np.array(out)
 
     def _unit_forces(
