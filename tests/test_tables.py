@@ -93,7 +93,10 @@ def test_rotating_arm_with_three_cycles_and_a_preload_imports_and_fits(tmp_path,
     warn = [str(p) for p in validate_dataset(out / "A-07")]
     assert any("preload" in w for w in warn) and not any(p.severity == "error" for p in validate_dataset(out / "A-07"))
     plain = bayesrod.fit(out / "A-07", use_shapes=False, progress=False, target_ess=150, max_steps=500)  # a verdict
-    assert plain.to_dict()["model_check"]["verdict"] == "misfit"  # a preloaded push is not the plain model
+    check = plain.to_dict()["model_check"]
+    assert check["verdict"] == "misfit"  # a preloaded push is not the plain model ...
+    assert check["pushes_starting_loaded"] == ["h500-c1", "h500-c2", "h500-c3"]  # ... and the user is told why
+    assert "start loaded: fit each push's preload" in check["message"], check["message"]
     pre = bayesrod.fit(out / "A-07", use_shapes=False, progress=False, target_ess=150, max_steps=1500, preload=True)
     s = pre.summary()
     truth = TRUTH["preload_displacement_m"]["darling_arm.txt"]
