@@ -384,8 +384,8 @@ class RodLikelihood:
             )
         if self.preload and use_shapes and any(p.shapes for p in spec.pushes):
             raise ValueError(
-                "preload: expected a force-only fit (centerlines not used): the shapes of a "
-                "preloaded push are not modelled yet"
+                "preload: expected a force-only fit (centerlines not used): the fit's shape tables do not "
+                "move with a preload yet (diagnose models a preload with centerlines)"
             )
         self.spec = spec
         self.L = float(spec.length_m)
