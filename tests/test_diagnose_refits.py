@@ -168,14 +168,10 @@ def test_heldout_bootstrap_p_values_are_uniform_when_the_effect_is_absent():
     from exact GLS refits (dense covariance, written here independently); the bootstrap p-values are uniform."""
     from bayesrod.dataset.simulate import ar1_noise
     from bayesrod.inference.diagnose import MapFit, null_heldout_gain
-    from bayesrod.inference.likelihood import PushData
 
     rng = np.random.default_rng(11)
     n, rho, sig = 60, 0.9, 0.02
-    D = np.linspace(0.001, 0.05, n) / 0.05
-    e = np.zeros(0)
-    pushes = [PushData(f"h{k}", 0.4 + 0.1 * k, D, np.zeros(n), e, e.astype(int), e, e, None) for k in range(3)]
-    m = ForwardModel(pushes, 0.8)
+    m, D, e = _three_linear_pushes(n)
     push = m.force_push
     scale = 1.0 + 0.3 * push  # the heights differ
     J0 = np.column_stack([D[np.arange(3 * n) % n] * scale, (D[np.arange(3 * n) % n] ** 2) * scale**2])
@@ -202,12 +198,7 @@ def test_heldout_bootstrap_p_values_are_uniform_when_the_effect_is_absent():
         X1 = np.column_stack([J0, G])
         r0 = y - J0 @ gls(J0, y, allrows)
         r1 = y - X1 @ gls(X1, y, allrows)
-        sq0 = sq1 = 0.0
-        for k in range(3):
-            train, held = push != k, push == k
-            sq0 += np.sum((y[held] - J0[held] @ gls(J0, y, train)) ** 2)
-            sq1 += np.sum((y[held] - X1[held] @ gls(X1, y, train)) ** 2)
-        gain = 1 - np.sqrt(sq1 / sq0)
+        gain = _loho_gain(gls, J0, X1, y, push)
         # p = 1: far inside its bounds (the bounded case is the next test)
         mk = lambda r: MapFit((), np.array([0.0, 1.0]), sig, 1.0, r, np.zeros(0), J0, 0.0, rho, J0)  # noqa: E731
         pv.append(null_heldout_gain(dg, mk(r0), mk(r1), gain, n_draws=400, seed=len(pv)))
@@ -221,18 +212,13 @@ def test_heldout_bootstrap_refits_keep_the_bounds_of_the_true_refits():
     refits are bounded (p >= 0, amplitude >= 0; exact GLS over every active set, written here), and so
     must the bootstrap's be for uniform p-values. Unbounded, the null refits fit noise the true refits
     cannot (the study's base-compliance seed 13 was rejected so) and the p-values come out too large."""
-    from itertools import product
 
     from bayesrod.dataset.simulate import ar1_noise
     from bayesrod.inference.diagnose import MapFit, null_heldout_gain
-    from bayesrod.inference.likelihood import PushData
 
     rng = np.random.default_rng(5)
     n, rho, sig = 40, 0.9, 0.02
-    D = np.linspace(0.001, 0.05, n) / 0.05
-    e = np.zeros(0)
-    pushes = [PushData(f"h{k}", 0.4 + 0.1 * k, D, np.zeros(n), e, e.astype(int), e, e, None) for k in range(3)]
-    m = ForwardModel(pushes, 0.8)
+    m, D, e = _three_linear_pushes(n)
     push = m.force_push
     t = D[np.arange(3 * n) % n] * (1.0 + 0.3 * push)
     J0 = np.column_stack([t, t**2])  # (log EI0, p): p = 0 at its lower bound
@@ -240,23 +226,11 @@ def test_heldout_bootstrap_refits_keep_the_bounds_of_the_true_refits():
     lag = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
     Ci = np.linalg.inv(sig**2 / (1 - rho**2) * rho**lag)
 
+    Ci_all = np.kron(np.eye(3), Ci)  # the pushes' AR(1) blocks are independent
+
     def bounded_gls(X, y, rows):  # minimise the GLS objective with every column but the first >= 0
-        best, best_obj = None, np.inf
-        for fixed in product((False, True), repeat=X.shape[1] - 1):
-            free = np.r_[True, ~np.array(fixed)]
-            A, b = np.zeros((free.sum(),) * 2), np.zeros(free.sum())
-            for k in np.unique(push[rows]):
-                s = rows & (push == k)
-                A += X[s][:, free].T @ Ci @ X[s][:, free]
-                b += X[s][:, free].T @ Ci @ y[s]
-            c = np.zeros(X.shape[1])
-            c[free] = np.linalg.solve(A, b)
-            if np.all(c[1:] >= -1e-12):
-                r = y - X @ c
-                obj = sum(r[rows & (push == k)] @ Ci @ r[rows & (push == k)] for k in np.unique(push[rows]))
-                if obj < best_obj:
-                    best, best_obj = c, obj
-        return best
+        lower = np.r_[-np.inf, np.zeros(X.shape[1] - 1)]
+        return _lower_bounded_gls(X[rows], y[rows][:, None], Ci_all[np.ix_(rows, rows)], lower)[:, 0]
 
     dg = Diagnoser(m)
     pv = []
@@ -265,12 +239,7 @@ def test_heldout_bootstrap_refits_keep_the_bounds_of_the_true_refits():
         allrows = np.ones(3 * n, bool)
         c0, c1 = bounded_gls(J0, y, allrows), bounded_gls(X1, y, allrows)
         r0, r1 = y - J0 @ c0, y - X1 @ c1
-        sq0 = sq1 = 0.0
-        for k in range(3):
-            train, held = push != k, push == k
-            sq0 += np.sum((y[held] - J0[held] @ bounded_gls(J0, y, train)) ** 2)
-            sq1 += np.sum((y[held] - X1[held] @ bounded_gls(X1, y, train)) ** 2)
-        gain = 1 - np.sqrt(sq1 / sq0)
+        gain = _loho_gain(bounded_gls, J0, X1, y, push)
         cur = MapFit((), c0, sig, 1.0, r0, e, J0, 0.0, rho, J0)  # the bootstrap's box: p moves to >= 0
         new = MapFit(("base_compliance",), c1, sig, 1.0, r1, e, X1, 0.0, rho, X1)
         pv.append(null_heldout_gain(dg, cur, new, gain, n_draws=200, seed=len(pv)))
@@ -662,3 +631,25 @@ def _lower_bounded_gls(A: np.ndarray, Y: np.ndarray, Ci: np.ndarray, lower: np.n
         take = np.all(coef >= lower[:, None] - 1e-12, axis=0) & (o < obj - 1e-12)
         best[:, take], obj[take] = coef[:, take], o[take]
     return best
+
+
+def _three_linear_pushes(n: int):
+    """A model of three pushes of ``n`` force samples each (heights 0.4-0.6 m, L 0.8 m) for linear stand-ins:
+    (model, the samples' displacement scaled to [0.02, 1], an empty array)."""
+    from bayesrod.inference.likelihood import PushData
+
+    D = np.linspace(0.001, 0.05, n) / 0.05
+    e = np.zeros(0)
+    pushes = [PushData(f"h{k}", 0.4 + 0.1 * k, D, np.zeros(n), e, e.astype(int), e, e, None) for k in range(3)]
+    return ForwardModel(pushes, 0.8), D, e
+
+
+def _loho_gain(fit, J0: np.ndarray, X1: np.ndarray, y: np.ndarray, push: np.ndarray) -> float:
+    """Held-out RMSE gain of the linear model X1 over J0, each refitted without one push at a time
+    (``fit(X, y, rows)``: the coefficients from the rows ``rows``)."""
+    sq0 = sq1 = 0.0
+    for k in np.unique(push):
+        train, held = push != k, push == k
+        sq0 += np.sum((y[held] - J0[held] @ fit(J0, y, train)) ** 2)
+        sq1 += np.sum((y[held] - X1[held] @ fit(X1, y, train)) ** 2)
+    return float(1 - np.sqrt(sq1 / sq0))
