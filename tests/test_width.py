@@ -91,9 +91,9 @@ def test_unmixing_reads_a_shaded_stem_that_projection_reads_too_wide():
 @pytest.mark.parametrize("shaded", [False, True])
 def test_auto_colour_model_unmixes_shaded_stems_and_keeps_projection_on_flat_ones(w0, shaded):
     """``auto`` compares the two models at the stations at least WIDE_PX wide: a shaded stem of 3.3-8 px is
-    unmixed (projection reads it 0.33-0.65 px too wide), a flat one keeps projection (the models agree to
-    0.02 px), and a flat 3.27-px stem with too few 3-px stations to compare keeps projection, saying why;
-    the chosen model reads the width to 0.06 px."""
+    unmixed (projection reads it 0.33-0.58 px wider than unmixing), a flat one keeps projection (the models
+    agree within 0.03 px), and a flat 3.27-px stem with too few 3-px stations to compare keeps projection,
+    saying why; the chosen model reads the width to 0.06 px."""
     from bayesrod.vision.width import choose_colour_model
 
     img, line, truth = _synthetic(w0, 0.43 if w0 > 3.5 else 1.6, 2.0, shaded=shaded)

@@ -861,15 +861,18 @@ def fit(
     from ..inference.checks import model_check
 
     extra["model_check"] = model_check(lik, samples, seed=seed)
-    loaded = [p.id for p in spec.pushes if use_forces and starts_loaded(p.force.force_N)]
-    if extra["model_check"]["verdict"] == "misfit" and loaded and not preload:
+    misfit = extra["model_check"]["verdict"] == "misfit"
+    loaded = []
+    if misfit and use_forces and not preload:
+        loaded = [p.id for p in spec.pushes if starts_loaded(p.force.force_N)]
+    if loaded:
         # the likeliest thing missing is in the data's own first sample: say so beside the generic advice
         extra["model_check"]["message"] += (
             f" Push{'es' if len(loaded) > 1 else ''} {', '.join(loaded)} start{'' if len(loaded) > 1 else 's'} "
             "loaded: fit each push's preload (preload=True), or let diagnose fit it."
         )
         extra["model_check"]["pushes_starting_loaded"] = loaded
-    if extra["model_check"]["verdict"] == "misfit":
+    if misfit:
         log.warning("warning: %s: %s", spec.specimen, extra["model_check"]["message"])
     doc = build_summary(spec, post, samples, res.diagnostics, lik.fit_error(median), effects, extra)
     not_converged = convergence_message(res, max_steps, target_ess)

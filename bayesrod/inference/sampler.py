@@ -154,10 +154,12 @@ def convergence_message(
     if res.converged or res.diagnostics is None:
         return None
     rhat = max(res.diagnostics["rhat"].values())
-    ess = min(list(res.diagnostics["ess_bulk"].values())[:2])  # the target's parameters: EI0 and p
+    targeted = list(res.diagnostics["ess_bulk"])[:2]  # run_ensembles' ESS target: the first two parameters
+    ess = min(res.diagnostics["ess_bulk"][n] for n in targeted)
     return (
         f"not converged within {max_steps} steps (R-hat max {rhat:.3f}, target {target_rhat:g}; bulk ESS of "
-        f"EI0 and p {ess:.0f}, target {target_ess:g}): treat the intervals as provisional and rerun with more steps"
+        f"{' and '.join(targeted)} {ess:.0f}, target {target_ess:g}): treat the intervals as provisional and "
+        "rerun with more steps"
     )
 
 

@@ -44,8 +44,9 @@ COLOUR_MODELS = ("projection", "unmixing")
 #: what ``bayesrod extract`` takes: either model, or ``auto`` (:func:`choose_colour_model`, per push)
 COLOUR_CHOICES = ("auto", *COLOUR_MODELS)
 #: ``auto`` picks unmixing when the two models' widths differ by more than this [px] at a frame's wide
-#: stations (and by more than SHADING_Z of its standard error): a flat stem reads within ~0.02 px alike
-#: (tests/test_width.py), a shaded twig 0.45 px apart (docs/validation.md, "Shaded stems")
+#: stations (and by more than SHADING_Z of its standard error): flat synthetic stems read within 0.03 px
+#: alike, shaded ones 0.33-0.58 px apart (tests/test_width.py); the rendered shaded twig 0.45 px apart
+#: (docs/validation.md, "Shaded stems")
 SHADING_PX = 0.15
 SHADING_Z = 4.0
 #: unmixing needs stem and background of different chromaticity: cosine of their RGB angle below this
