@@ -145,6 +145,7 @@ def sample_species(
     """
     import emcee
 
+    from .moves import default_moves
     from .summary import import_arviz
 
     post = HierarchicalPosterior(specimens, prior)
@@ -161,7 +162,7 @@ def sample_species(
             post.ndim,
             post.log_prob,
             vectorize=True,
-            moves=[(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)],
+            moves=default_moves(),  # emcee's own snooker move is biased (inference/moves.py)
         )
         s.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()
         samplers.append(s)

@@ -192,6 +192,8 @@ def run_ensembles(
     """Run independent ensembles until bulk ESS >= target and R-hat <= target (or max_steps)."""
     import emcee
 
+    from .moves import default_moves
+
     ndim = post.ndim
     n_walkers = n_walkers or max(16, 4 * ndim)
     rng = np.random.default_rng(seed)
@@ -208,7 +210,7 @@ def run_ensembles(
             post.log_prob,
             vectorize=True,
             backend=backend,
-            moves=[(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)],
+            moves=default_moves(),  # emcee's own snooker move is biased (inference/moves.py)
         )
         samplers.append(s)
     for k, s in enumerate(samplers):
