@@ -333,6 +333,13 @@ def test_push_frames_take_the_engaged_force_at_each_frame_time_in_the_push_direc
     assert f.sd_m.size == 28 and f.height_m == 0.45 and f.push_id == "a"
     assert 0 < f.force_sd_N < 0.01
     assert _push_frames(dataclasses.replace(push, shapes=None)) == []
+    # frames at the first and last engaged sample are kept; a point at exactly z = 0 is kept; no sd: None
+    t_eng = t[F > 0.3 + 0.01]
+    z0 = np.linspace(0.0, 0.5, 11)
+    ends = tuple(ShapeFrame(ts, 0.001 * z0, z0) for ts in (0.0, 7.9))
+    out = _push_frames(dataclasses.replace(push, shapes=ends))
+    assert [f.time_s for f in out] == [0.0, 7.9] and t_eng[-1] == pytest.approx(7.9)
+    assert out[0].z_m.size == 11 and out[0].sd_m is None
 
 
 def _elastica_push(pid, h, EI0, p, L, D_max, n_frames=5, n_points=80, sd=2e-5):
@@ -378,3 +385,178 @@ def test_two_stage_fit_on_an_elastica_specimen_recovers_its_taper():
         "median_shape_rmse_mm": r.shape_rmse_mm,
         "median_force_error_N": r.force_error_N,
     }
+
+
+# ------------------------------------------------------- edges the mutation run found untested (direct)
+def test_frame_curvature_edges_points_near_the_contact_duplicates_and_the_known_noise():
+    from bayesrod.vision.curvature import fit_curvature_gp, tangent_angles
+
+    fs = _beam_frame(0.3, n=200)
+    s = np.array([0.1, 0.3, 0.38])
+    base = _frame_curvature(fs, s)
+    # points between 1% and 6% below the contact are used (moving them changes the curvature near the top)
+    near = (fs.z_m > 0.94 * H) & (fs.z_m < 0.99 * H)
+    assert near.sum() >= 5
+    moved = _frame_curvature(dataclasses.replace(fs, x_m=fs.x_m + np.where(near, 2e-4, 0.0)), s)
+    assert abs(moved[0][1] - base[0][1]) > 1e-4
+    # a repeated point (a zero-length segment) is dropped, not turned into a NaN tangent
+    k = 40
+    dup = dataclasses.replace(
+        fs,
+        x_m=np.insert(fs.x_m, k, fs.x_m[k]),
+        z_m=np.insert(fs.z_m, k, fs.z_m[k]),
+        sd_m=np.insert(fs.sd_m, k, fs.sd_m[k]),
+    )
+    np.testing.assert_allclose(_frame_curvature(dup, s), base, rtol=1e-9)
+    # the GP is the one with the points' known noise covariance, evaluated at the query points
+    below = fs.z_m < 0.99 * H
+    ta = tangent_angles(fs.x_m[below], fs.z_m[below], fs.sd_m[below])
+    pr = fit_curvature_gp(ta["s"], ta["theta"], noise_cov=ta["cov"]).predict(s)
+    np.testing.assert_allclose(base[0], pr["kappa"], rtol=1e-9)
+    np.testing.assert_allclose(base[1], pr["kappa_sd"], rtol=1e-9)
+    np.testing.assert_allclose(base[2], np.sqrt(pr["kappa_se2"]), rtol=1e-9)
+    # queries exactly at the first and last tangent's arc length are inside
+    ends = _frame_curvature(fs, np.array([ta["s"][0], ta["s"][-1]]))
+    assert np.isfinite(ends).all()
+    # eight points below the contact are enough
+    z8 = np.linspace(0.0, 0.3, 8)
+    eight = FrameSample("p", H, 0.0, 0.3, 0.01, 0.0, _beam_x(z8, 0.3), z8, np.full(8, 2e-5))
+    assert np.isfinite(_frame_curvature(eight, np.array([0.15]))[0]).all()
+
+
+def test_direct_estimate_edges(monkeypatch):
+    from types import SimpleNamespace
+
+    # defaults: 24 bins from 2 cm; bin counts are integers
+    frames = [_beam_frame(F, pid=f"p{k}") for k, F in enumerate((0.2, 0.3))]
+    de = direct_estimate(None, frames=frames)
+    assert de.s_m.size == 24 and de.s_m[0] == pytest.approx(0.02 + 0.5 * (H - 0.02) / 24)
+    assert de.n.dtype.kind == "i"
+    with pytest.raises(ValueError, match="^s: the direct estimator needs engaged centerline frames"):
+        direct_estimate(SimpleNamespace(specimen="s", pushes=()))
+
+    def frame(F, sd=0.0):
+        return FrameSample("p", 1.0, 0.0, F, sd, 0.0, np.full(3, 0.01), np.zeros(3), None)
+
+    # a frame at exactly 3 force sd is left out, one at 3.5 sd is pooled; a frame left out first does
+    # not stop the frames after it
+    kap = {}
+    monkeypatch.setattr(
+        dmod,
+        "_frame_curvature",
+        lambda fs, s: (
+            np.full(s.size, kap.get(fs.force_N, 0.1 * fs.force_N)),
+            *(np.full(s.size, 0.01),) * 2,
+            np.zeros(s.size),
+        ),
+    )
+    de = direct_estimate(None, n_bins=1, s_min_m=0.0, frames=[frame(0.3, 0.1), frame(1.0), frame(2.0)])
+    assert de.n[0] == 2
+    de = direct_estimate(None, n_bins=1, s_min_m=0.0, frames=[frame(0.35, 0.1), frame(1.0), frame(2.0)])
+    assert de.n[0] == 3
+    # a pooled compliance of exactly 0: no EI (not an infinite one), and no sample EI either
+    kap.update({1.0: 0.0, 2.0: 0.0})
+    de = direct_estimate(None, n_bins=1, s_min_m=0.0, frames=[frame(1.0), frame(2.0)])
+    assert np.isnan(de.EI[0]) and np.isnan(de.samples["EI"]).all()
+    # a bin with one frame before bins with two: the later bins are still pooled
+    monkeypatch.setattr(
+        dmod,
+        "_frame_curvature",
+        lambda fs, s: (
+            np.where(np.arange(s.size) == 0, np.nan if fs.force_N > 1.5 else 0.1, 0.1 * fs.force_N),
+            *(np.full(s.size, 0.01),) * 2,
+            np.zeros(s.size),
+        ),
+    )
+    de = direct_estimate(None, n_bins=3, s_min_m=0.0, frames=[frame(1.0), frame(2.0)])
+    np.testing.assert_array_equal(de.n, [1, 2, 2])
+    assert np.isnan(de.EI[0]) and np.isfinite(de.EI[1:]).all()
+
+
+def test_fit_p_edges_a_bin_at_the_length_and_three_bins_with_scatter():
+    L = 0.8
+    s = np.array([0.1, 0.3, 0.5, 0.8])  # the last bin at the stem's length: log(1 - s/L) is -inf; skipped
+    EIs = 2.0 * (1 - s / L) ** 2.4 * np.array([1.1, 0.9, 1.05, 1.0])
+    rel = np.full(4, 0.01)
+    p, p_se, _, nb = fit_p(DirectEstimate(s, EIs, EIs * rel, rel, np.full(4, 5), {}), L)
+    assert nb == 3 and np.isfinite(p)
+    x, y, w = np.log1p(-s[:3] / L), np.log(EIs[:3]), rel[:3] ** -2.0
+    coef, cov = np.polyfit(x, y, 1, w=np.sqrt(w), cov="unscaled")
+    chi2 = w @ (y - np.polyval(coef, x)) ** 2
+    # three bins: one degree of freedom
+    assert p_se == pytest.approx(np.sqrt(cov[0, 0] * chi2 / 1) / 4, rel=1e-10)
+
+
+def test_observed_x_at_extrapolates_with_the_last_four_points_only():
+    z = np.array([0.0, 0.1, 0.2, 0.3, 0.35])
+    x = np.array([0.5, 0.0, 0.01, 0.02, 0.03])  # the first point far off the line of the last four
+    fs = FrameSample("p", 0.4, 0.0, 1.0, 0.1, 0.0, x, z, None)
+    assert _observed_x_at(fs, 0.4) == pytest.approx(np.polyval(np.polyfit(z[1:], x[1:], 1), 0.4))
+
+
+def test_fit_EI0_from_one_frame_at_exactly_three_sd_excluded():
+    L, EI0, p = 0.8, 2.5, 0.4
+    (one,) = _elastica_frames(EI0, p, L, [3.0], [0.35])
+    assert fit_EI0([one], p, L) == pytest.approx(EI0, rel=2e-3)
+    at3 = dataclasses.replace(one, force_N=0.03, force_sd_N=0.01, x_m=one.x_m + 0.3)
+    assert fit_EI0([one, at3], p, L) == pytest.approx(fit_EI0([one], p, L), rel=1e-9)
+    above = dataclasses.replace(one, force_N=0.041, force_sd_N=0.01, x_m=one.x_m + 0.3)
+    assert abs(fit_EI0([one, above], p, L) / fit_EI0([one], p, L) - 1) > 1e-3
+
+
+def test_seed_error_metrics_subsample_200_points_and_skip_what_they_cannot_use():
+    L, EI0, p = 0.8, 2.5, 0.4
+    frames = _elastica_frames(EI0, p, L, [2.0, 4.0], [0.3, 0.4], n=500)
+    # a shape error growing as z^3: the RMSE depends on which points are taken, 200 spread evenly
+    bent = [dataclasses.replace(f, x_m=f.x_m + 0.05 * f.z_m**3) for f in frames]
+    shape_mm, _ = seed_error_metrics(bent, EI0, p, L)
+    want = []
+    for f in bent:
+        sol = force_from_displacement(f.displacement_m, f.height_m, EI0, p, L, keep_shape=True)
+        xz = sol.shape_xz_m
+        idx = np.flatnonzero(f.z_m < f.height_m)
+        idx = idx[np.linspace(0, idx.size - 1, 200).astype(int)]
+        zeta = np.maximum.accumulate(xz[:, 1])
+        slope = np.interp(f.z_m[idx], zeta, np.gradient(xz[:, 0], zeta))
+        r = (f.x_m[idx] - np.interp(f.z_m[idx], zeta, xz[:, 0])) / np.sqrt(1 + slope**2)
+        want.append(1000 * np.sqrt(np.mean(r**2)))
+    assert shape_mm == pytest.approx(np.median(want), rel=1e-9)
+    # a slipped frame or one with fewer than two points below the contact first: the others still count
+    slipped = dataclasses.replace(frames[0], displacement_m=5 * L)
+    two = dataclasses.replace(frames[0], z_m=np.r_[0.1, 0.2, 0.5], x_m=np.r_[0.0, 0.0, 0.0])
+    one = dataclasses.replace(frames[0], z_m=np.r_[0.1, 0.5], x_m=np.r_[0.0, 0.0])
+    assert np.isfinite(seed_error_metrics([slipped, *bent], EI0, p, L)).all()
+    assert seed_error_metrics([one, *bent], EI0, p, L)[0] == pytest.approx(shape_mm, rel=1e-9)
+    rmse_two = seed_error_metrics([two], EI0, p, L)[0]
+    assert np.isfinite(rmse_two) and rmse_two > 0
+
+
+def test_two_stage_fit_passes_its_settings_and_clips_p_to_the_tables(monkeypatch):
+    from types import SimpleNamespace
+
+    seen = {}
+    frames = [_beam_frame(0.3)]
+    monkeypatch.setattr(dmod, "engaged_frames", lambda spec: frames)
+
+    def fake_direct(spec, *, n_bins, s_min_m, frames):
+        seen["direct"] = (spec, n_bins, s_min_m, frames)
+        return "estimate"
+
+    monkeypatch.setattr(dmod, "direct_estimate", fake_direct)
+    monkeypatch.setattr(dmod, "fit_EI0", lambda fr, p, L: seen.setdefault("EI0", []).append((fr, p, L)) or 2.0)
+
+    def fake_metrics(fr, EI0, p, L):
+        seen["metrics"] = (fr, EI0, p, L)
+        return 0.1, 0.2
+
+    monkeypatch.setattr(dmod, "seed_error_metrics", fake_metrics)
+    spec = SimpleNamespace(specimen="s", length_m=0.8)
+    for p_raw, p_used in ((-0.4, 0.0), (3.6, 3.0), (0.7, 0.7)):
+        seen.pop("metrics", None)
+        monkeypatch.setattr(dmod, "fit_p", lambda de, L, p_raw=p_raw: (p_raw, 0.1, 0.9, 5))
+        r = dmod.two_stage_fit(spec)
+        assert seen["direct"] == (spec, 24, 0.02, frames)
+        assert seen["EI0"][-1] == (frames, p_used, 0.8)
+        assert seen["metrics"] == (frames, 2.0, p_used, 0.8)
+        assert r.p == p_raw and r.EI0 == 2.0 and r.direct == "estimate"
+        assert (r.shape_rmse_mm, r.force_error_N, r.p_se, r.r2, r.n_bins) == (0.1, 0.2, 0.1, 0.9, 5)
