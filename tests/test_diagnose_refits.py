@@ -542,7 +542,7 @@ def test_the_bootstrap_with_preloads_matches_dense_bounded_refits_and_a_whitened
     """Forces only, a preload per push (the held-out push's own preload cannot be learnt from the others):
     the dense reference refits the training pushes by GLS within the bounds (p and the training preloads
     near 0, a one-sided effect), then fits the held-out push's preload to what is left by least squares on
-    its AR(1)-whitened residuals within its box, as ``_held_preload`` does; the bootstrap's p-values match
+    its AR(1)-whitened residuals within its box, as ``_held_x`` does; the bootstrap's p-values match
     at observed gains between consecutive draws' gains."""
 
     from scipy import linalg

@@ -360,6 +360,14 @@ def build_parser() -> argparse.ArgumentParser:
         "fit it when specimen.json marks it length_m_approximate (auto); fitting needs forces only",
     )
     dg.add_argument(
+        "--height-sd",
+        type=float,
+        default=0.0,
+        metavar="M",
+        help="sd of each push's contact-height error [m] (e.g. 0.003): fitted in every model under its prior "
+        "(default 0: heights exact)",
+    )
+    dg.add_argument(
         "--workers", type=int, default=2, help="processes for the candidate fits and held-out refits (default 2)"
     )
     dg.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
@@ -1100,6 +1108,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         force_noise=args.force_noise,
         preload={"auto": "auto", "yes": True, "no": False}[args.preload],
         length=args.length,
+        height_sd_m=args.height_sd,
         n_workers=args.workers,
     )
     res.save(out, overwrite=args.force)
@@ -1114,6 +1123,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     if doc["settings"]["length"] == "unknown":
         lo, hi = doc["settings"]["length_bounds_m"]
         print(f"  stem length fitted: {doc['fitted']['length_m']:.3g} m (within [{lo:.3g}, {hi:.3g}] m)")
+    if doc["fitted"].get("height_error_m"):
+        dh = ", ".join(f"{1000 * v:+.3g}" for v in doc["fitted"]["height_error_m"])
+        print(f"  contact-height error per push [mm]: {dh}")
     for k in ("force_rmse_N", "shape_rmse_mm", "heldout_force_rmse_N"):
         if b[k] is not None:
             print(f"  {k:>22}: {b[k]:.4g} -> {a[k]:.4g}")

@@ -46,7 +46,7 @@ from scipy.optimize import least_squares, lsq_linear
 from ..physics import Effects
 from ..physics.effects import EFFECT_NAMES
 from ..physics.elastica import centerline_at, force_from_displacement_nd
-from .likelihood import PRELOAD_MAX_L, PushData, ar1_innovations
+from .likelihood import HEIGHT_CUT_SD, PRELOAD_MAX_L, PushData, ar1_innovations
 
 CATALOG = EFFECT_NAMES  # every effect of the contract's catalog is a candidate
 
@@ -195,6 +195,13 @@ class ForwardModel:
         ``length_m``; forces only. The length follows the preloads in a parameter vector:
         (log EI0, p, preloads, L, effect coordinates). Every model of a diagnosis fits it, so a
         likelihood ratio compares like with like.
+    height_sd_m : float
+        Each push with forces has a contact-height error [m] with this prior sd (0: the heights are
+        exact): the force is applied at h + dh, in its force solves and its frames alike. The errors
+        follow the length: (log EI0, p, preloads, L, height errors, effect coordinates); the fits
+        penalise them by their normal prior (a penalised likelihood) and bound them at 4 sd, as the
+        fit's prior is cut (:func:`bayesrod.fit`'s ``height_sd_m``). A held-out push is predicted at
+        its recorded height (its error's prior mean): nothing else tells its error.
     """
 
     data: list[PushData]
@@ -202,6 +209,7 @@ class ForwardModel:
     n_nodes: int = MAX_NODES
     preload: bool = False
     length_bounds_m: tuple[float, float] | None = None
+    height_sd_m: float = 0.0
     n_force: int = field(init=False)
     n_points: int = field(init=False)
 
@@ -241,6 +249,15 @@ class ForwardModel:
                     f"length_bounds_m: expected bounds above the highest contact ({h_max:g} m), got [{lo:g}, {hi:g}] m"
                 )
             self.length_bounds_m = (lo, hi)
+        sd = self.height_sd_m
+        if isinstance(sd, bool) or not isinstance(sd, (int, float)) or not (np.isfinite(sd) and sd >= 0):
+            raise ValueError(f"height_sd_m: expected a contact-height sd >= 0 in metres, got {sd!r}")
+        h_min = min(self.data[k].height_m for k in self.force_pushes) if self.force_pushes else np.inf
+        if HEIGHT_CUT_SD * sd >= h_min:
+            raise ValueError(
+                f"height_sd_m: expected {HEIGHT_CUT_SD:g} sd below the lowest contact ({h_min:g} m), got sd {sd:g} m"
+            )
+        self.height_sd_m = float(sd)
 
     @property
     def n_preloads(self) -> int:
@@ -253,9 +270,20 @@ class ForwardModel:
         return 2 + self.n_preloads if self.length_bounds_m is not None else None
 
     @property
-    def n_base(self) -> int:
-        """Parameters before the effect coordinates: log EI0, p, the preloads and the length (if fitted)."""
+    def n_heights(self) -> int:
+        """Contact-height error coordinates of a parameter vector (one per push with forces, or none)."""
+        return len(self.force_pushes) if self.height_sd_m > 0 else 0
+
+    @property
+    def height_index(self) -> int:
+        """Index of the first contact-height error [m] in a parameter vector (after the length)."""
         return 2 + self.n_preloads + (self.length_bounds_m is not None)
+
+    @property
+    def n_base(self) -> int:
+        """Parameters before the effect coordinates: log EI0, p, the preloads, the length (if fitted)
+        and the contact-height errors (if any)."""
+        return self.height_index + self.n_heights
 
     @property
     def start_length(self) -> float | None:
@@ -268,9 +296,27 @@ class ForwardModel:
         i = self.length_index
         return X[:, i].copy() if i is not None else np.full(X.shape[0], float(self.length_m))
 
+    def push_columns(self, unit: int) -> list[int]:
+        """Columns of a parameter vector that belong to the ``unit``-th push with forces alone: its
+        preload and its contact-height error (where the model has them)."""
+        out = [2 + unit] if self.preload else []
+        if self.n_heights:
+            out.append(self.height_index + unit)
+        return out
+
+    def heights(self, X: NDArray) -> NDArray:
+        """Contact height [m] of each push with forces for each parameter set of ``X`` (K, n_par): (K, J),
+        the recorded heights plus the sets' height errors (if any)."""
+        X = np.atleast_2d(np.asarray(X, float))
+        h = np.array([self.data[k].height_m for k in self.force_pushes], float)
+        if not self.n_heights:
+            return np.broadcast_to(h, (X.shape[0], h.size)).copy()
+        i = self.height_index
+        return h[None, :] + X[:, i : i + self.n_heights]
+
     def _like(self, data: list[PushData]) -> ForwardModel:
         """A model of other data with this one's settings (length, nodes, preload, length bounds)."""
-        return ForwardModel(data, self.length_m, self.n_nodes, self.preload, self.length_bounds_m)
+        return ForwardModel(data, self.length_m, self.n_nodes, self.preload, self.length_bounds_m, self.height_sd_m)
 
     def heldout_splits(self) -> list[tuple[str, ForwardModel, ForwardModel]]:
         """(name, training model, held-out model) of every held-out unit.
@@ -338,8 +384,8 @@ class ForwardModel:
         effs = [effects_from_coords(dict(zip(effects, X[k, nb:], strict=True)), EI0[k], Ls[k]) for k in range(K)]
         nds = [e.nondim(Ls[k], EI0[k]) for k, e in enumerate(effs)]
         eff = {key: np.array([float(n[key]) for n in nds])[:, None, None] for key in nds[0]}
-        heights = np.array([self.data[k].height_m for k in self.force_pushes])
-        eta = heights[None, :, None] / Ls[:, None, None]
+        heights = self.heights(X)  # (K, J)
+        eta = heights[:, :, None] / Ls[:, None, None]
         # each push's preload shifts its nodes and samples alike: the spline weights do not change
         shift = X[:, 2 : 2 + self.n_preloads] if self.preload else np.zeros((K, len(self.force_pushes)))
         r = force_from_displacement_nd(
@@ -363,11 +409,11 @@ class ForwardModel:
                 elif np.all(np.isfinite(f)):  # the yield onset (a kink) between nodes
                     out[kk, sl], gap, D = self._yield_branches(j, d, f, y)
                     if gap.any():
-                        direct.append((kk, d.height_m, sl, gap, D[gap] + shift[kk, j], False))
+                        direct.append((kk, heights[kk, j], sl, gap, D[gap] + shift[kk, j], False))
                 elif not (y.any() and not y[np.isfinite(f)].all()):  # slips (no yield onset): hold
                     out[kk, sl] = self._slipped(j, d, f)
                 else:  # slips and yields: solve at every sample, hold past the slip
-                    direct.append((kk, d.height_m, sl, np.ones(d.D_m.size, bool), d.D_m + shift[kk, j], True))
+                    direct.append((kk, heights[kk, j], sl, np.ones(d.D_m.size, bool), d.D_m + shift[kk, j], True))
         if direct:
             kks = np.concatenate([np.full(job[4].size, job[0]) for job in direct])
             D = np.concatenate([job[4] for job in direct])
@@ -441,18 +487,22 @@ class ForwardModel:
         eff = effects_from_coords(dict(zip(effects, x[self.n_base :], strict=True)), EI0, L)
         # a push's preload shifts its frames' contact displacements as it shifts its forces'
         pre = dict(zip(self.force_pushes, x[2 : 2 + self.n_preloads], strict=True)) if self.preload else {}
+        hs = dict(
+            zip(self.force_pushes, self.heights(x)[0], strict=True)
+        )  # a push's height error moves its frames' contact too
         xs, cs = [], []
         for k, d in enumerate(self.data):
             if d.x_m.size:
-                a, c = self._shape(d, EI0, float(x[1]), eff, float(pre.get(k, 0.0)))
+                a, c = self._shape(d, EI0, float(x[1]), eff, float(pre.get(k, 0.0)), float(hs.get(k, d.height_m)))
                 xs.append(a)
                 cs.append(c)
         return np.concatenate(xs), np.concatenate(cs)
 
-    def _shape(self, d: PushData, EI0: float, p: float, eff: Effects, preload_m: float = 0.0):
+    def _shape(self, d: PushData, EI0: float, p: float, eff: Effects, preload_m: float = 0.0, height_m=None):
         L = self.length_m
         D = (d.frame_D_m + preload_m) / L
-        r = force_from_displacement_nd(D, d.height_m / L, p, eff.nondim(L, EI0), keep_shape=True)
+        h = d.height_m if height_m is None else height_m
+        r = force_from_displacement_nd(D, h / L, p, eff.nondim(L, EI0), keep_shape=True)
         sig = np.linspace(0.0, 1.0, 961)
         xz = centerline_at(r["grid"], sig)  # (2, 961, M)
         dx, dz = np.gradient(xz[0], sig, axis=0), np.gradient(xz[1], sig, axis=0)
@@ -488,7 +538,8 @@ class MapFit:
     loglik: float
     rho_force: float = 0.0
     jac_pred: NDArray | None = None  # (n_obs, n_par): d prediction / dx, raw units
-    length_fitted: bool = False  # x holds the stem length [m] just before the effect coordinates
+    length_fitted: bool = False  # x holds the stem length [m] after the preloads
+    n_heights: int = 0  # x holds this many contact-height errors [m] just before the effect coordinates
 
     @property
     def coords(self) -> dict[str, float]:
@@ -497,12 +548,18 @@ class MapFit:
     @property
     def preloads_m(self) -> NDArray:
         """The preload of each push with forces [m] (empty without the preload nuisance)."""
-        return np.asarray(self.x[2 : self.x.size - len(self.effects) - self.length_fitted], float)
+        return np.asarray(self.x[2 : self.x.size - len(self.effects) - self.n_heights - self.length_fitted], float)
 
     @property
     def length_m(self) -> float | None:
         """The fitted stem length [m] (None: the length was held at the model's)."""
-        return float(self.x[self.x.size - len(self.effects) - 1]) if self.length_fitted else None
+        return float(self.x[self.x.size - len(self.effects) - self.n_heights - 1]) if self.length_fitted else None
+
+    @property
+    def height_errors_m(self) -> NDArray:
+        """The contact-height error of each push with forces [m] (empty without the nuisance)."""
+        end = self.x.size - len(self.effects)
+        return np.asarray(self.x[end - self.n_heights : end], float)
 
     @property
     def marginal_sigma_force(self) -> float:
@@ -518,6 +575,8 @@ class MapFit:
             out["preload_m"] = [float(v) for v in self.preloads_m]
         if self.length_fitted:
             out["length_m"] = self.length_m
+        if self.n_heights:
+            out["height_error_m"] = [float(v) for v in self.height_errors_m]
         return out
 
 
@@ -645,8 +704,10 @@ def null_heldout_gain(
     loho = len(m.force_pushes) >= 2
     for u, (train_f, train_p, held_f) in enumerate(masks):
         first = _first_of(train_f, m.force_push)
-        # as in Diagnoser.heldout: the held-out push's own preload is fitted to it, after the refit
+        # as in Diagnoser.heldout: the held-out push's own preload is fitted to it, after the refit, and
+        # its height error is not fitted (held at the current value in both models: the same shift)
         own = 2 + u if (m.preload and loho) else None
+        fixed = [m.height_index + u] if (m.n_heights and loho) else []
 
         def w(v, first=first, train_f=train_f, train_p=train_p):
             f = _whiten_rows(v[:nf][train_f], first, cur.rho_force) / cur.sigma_force
@@ -654,10 +715,10 @@ def null_heldout_gain(
 
         y = w(np.concatenate([eps_f, eps_p]))
         for J, acc, blo, bhi in ((J0, 0, lo, hi), (J1, 1, lo1, hi1)):
-            keep = np.arange(J.shape[1]) != (own if own is not None else -1)
+            keep = ~np.isin(np.arange(J.shape[1]), [own, *fixed] if own is not None else fixed)
             coef = _box_lstsq(w(J[:, keep]), y, blo[keep], bhi[keep])
             e = eps_f[held_f] - J[:nf][held_f][:, keep] @ coef
-            if own is not None:  # the push's preload column fitted to what is left, as _held_preload fits it:
+            if own is not None:  # the push's preload column fitted to what is left, as _held_x fits it:
                 # least squares on the AR(1)-whitened residuals, within its box
                 col = J[:nf][held_f][:, own]
                 cw, ew = _whiten_rows(col, None, cur.rho_force), _whiten_rows(e, None, cur.rho_force)
@@ -803,7 +864,9 @@ class Diagnoser:
             # is flat along the step that would remove the misfit (a plain fit then never left its grid start:
             # 10 nats below its optimum on a clean simulated twig)
             noise = (float(np.sqrt(np.mean(rf**2))), 0.0, noise[2])
-        rounds = 2 if (self.m.n_points or self.force_noise == "ar1") else 1  # iid forces: uniform weights
+        # iid forces alone: uniform weights, one round; shapes, AR(1) forces or the height errors' prior rows
+        # weigh by the noise, which the second round re-profiles
+        rounds = 2 if (self.m.n_points or self.force_noise == "ar1" or self.m.n_heights) else 1
         cache: dict = {}
 
         for rnd in range(rounds):
@@ -811,13 +874,13 @@ class Diagnoser:
 
             def fun(v, noise=noise):
                 a, b = self.raw_residuals(v, effects)
-                return self.weighted(a, b, noise)
+                return np.concatenate([self.weighted(a, b, noise), self._prior_rows(v)])
 
             def jac(v, noise=noise):
                 a, b, J = self.pred_jac(v, effects, lo, hi)
                 cache.update(x=v.copy(), J=J)
                 nf = self.m.n_force
-                return -self.weighted(J[:nf], J[nf:], noise)
+                return np.vstack([-self.weighted(J[:nf], J[nf:], noise), self._prior_jac(v.size)])
 
             res = least_squares(fun, x, jac=jac, bounds=(lo, hi), x_scale="jac", max_nfev=budget, ftol=1e-6, xtol=1e-6)
             x = res.x
@@ -827,18 +890,48 @@ class Diagnoser:
         nf = self.m.n_force
         jw = self.weighted(J[:nf], J[nf:], noise)
         sf, rho, ss = noise
-        ll = self.loglik(rf, rs, noise)
-        return MapFit(effects, x, sf, ss, rf, rs, jw, ll, rho, J, length_fitted=self.m.length_bounds_m is not None)
+        ll = self.loglik(rf, rs, noise) - 0.5 * float(np.sum(self._prior_rows(x) ** 2))
+        return MapFit(
+            effects,
+            x,
+            sf,
+            ss,
+            rf,
+            rs,
+            jw,
+            ll,
+            rho,
+            J,
+            length_fitted=self.m.length_bounds_m is not None,
+            n_heights=self.m.n_heights,
+        )
+
+    def _prior_rows(self, x: NDArray) -> NDArray:
+        """The contact-height errors' normal prior as least-squares rows: dh / sd (none without them)."""
+        i, n = self.m.height_index, self.m.n_heights
+        return np.asarray(x[i : i + n], float) / self.m.height_sd_m if n else np.zeros(0)
+
+    def _prior_jac(self, n_par: int) -> NDArray:
+        """d :meth:`_prior_rows` / dx: (n_heights, n_par)."""
+        i, n = self.m.height_index, self.m.n_heights
+        J = np.zeros((n, n_par))
+        J[np.arange(n), i + np.arange(n)] = 1.0 / self.m.height_sd_m if n else 0.0
+        return J
 
     def bounds(self, effects: tuple[str, ...]) -> tuple[NDArray, NDArray]:
         """Lower and upper bounds (n_par,) of a parameter vector with ``effects``: log EI0 free, p in
-        [0, P_MAX], each preload in [0, PRELOAD_MAX_L L], the length within its bounds, each effect's
-        coordinate within its own (``_COORD``)."""
-        n_pre = self.m.n_preloads
+        [0, P_MAX], each preload in [0, PRELOAD_MAX_L L], the length within its bounds, each contact-height
+        error within 4 prior sd, each effect's coordinate within its own (``_COORD``)."""
+        n_pre, n_h = self.m.n_preloads, self.m.n_heights
         lb = list(self.m.length_bounds_m or ())
-        lo = np.array([-np.inf, 0.0] + [0.0] * n_pre + lb[:1] + [self._bound(e, 2) for e in effects])
+        cut = HEIGHT_CUT_SD * self.m.height_sd_m
+        lo = np.array([-np.inf, 0.0] + [0.0] * n_pre + lb[:1] + [-cut] * n_h + [self._bound(e, 2) for e in effects])
         hi = np.array(
-            [np.inf, P_MAX] + [PRELOAD_MAX_L * self.m.length_m] * n_pre + lb[1:] + [self._bound(e, 3) for e in effects]
+            [np.inf, P_MAX]
+            + [PRELOAD_MAX_L * self.m.length_m] * n_pre
+            + lb[1:]
+            + [cut] * n_h
+            + [self._bound(e, 3) for e in effects]
         )
         return lo, hi
 
@@ -856,16 +949,42 @@ class Diagnoser:
         push's first force sample, and the pair is chosen again with those preloads.
         """
         shift = np.zeros(len(self.m.force_pushes))
-        for _ in range(2 if self.m.preload else 1):
-            g, p_grid = self._unit_forces(p_grid, shift)
+        dh = np.zeros(self.m.n_heights)
+        for _ in range(2 if (self.m.preload or self.m.n_heights) else 1):
+            g, p_grid = self._unit_forces(p_grid, shift, dh=dh if dh.size else None)
             a, rss = _scale_fit(g, self.m.F_obs)
             k = int(np.argmin(rss))
             if not np.isfinite(rss[k]):
                 raise ValueError("diagnose: expected forces that rise with displacement, got none the model can fit")
             if self.m.preload:
                 shift = self._preload_start(float(a[k]), p_grid, k)
+            if self.m.n_heights:
+                dh = self._height_start(float(a[k]), float(p_grid[k]), shift, dh)
         length = [self.m.start_length] if self.m.length_bounds_m is not None else []
-        return np.concatenate([[np.log(a[k]), float(p_grid[k])], shift if self.m.preload else [], length])
+        return np.concatenate([[np.log(a[k]), float(p_grid[k])], shift if self.m.preload else [], length, dh])
+
+    def _height_start(self, EI0: float, p: float, shift: NDArray, dh: NDArray) -> NDArray:
+        """Per push: the contact-height error [m] of one Gauss-Newton step from ``dh`` at the plain model
+        (EI0, p) and preloads ``shift``, within its 4-sd box.
+
+        A misrecorded height scales a push's forces as a stiffer or softer stem does (by about 3 dh / h):
+        started at the recorded heights, the fit can settle with the pushes' different scales absorbed in p
+        and the preloads instead (a simulated twig with errors of +6, -5, +4 mm and preloads: a fit 190
+        nats below the one started near the truth).
+        """
+        step = self.m.height_sd_m
+        cut = HEIGHT_CUT_SD * step
+        g0 = self._unit_forces(np.array([p]), shift, dh=dh)[0][0] * EI0
+        gp = self._unit_forces(np.array([p]), shift, dh=dh + step)[0][0] * EI0
+        gm = self._unit_forces(np.array([p]), shift, dh=dh - step)[0][0] * EI0
+        out = dh.copy()
+        for j in range(len(self.m.force_pushes)):
+            sel = self.m.force_push == self.m.force_pushes[j]
+            d = (gp[sel] - gm[sel]) / (2 * step)
+            r = self.m.F_obs[sel] - g0[sel]
+            if float(d @ d) > 0:
+                out[j] = float(np.clip(dh[j] + (d @ r) / (d @ d), -cut, cut))
+        return out
 
     def _preload_start(self, EI0: float, p_grid: NDArray, k: int) -> NDArray:
         """Per push: the displacement [m] at which the plain model (EI0, p_grid[k]) reaches the push's
@@ -890,17 +1009,20 @@ class Diagnoser:
         length_m: float | None = None,
         c_base: float = 0.0,
         n_f: int = 160,
+        dh: NDArray | None = None,
     ) -> tuple[NDArray, NDArray]:
         """Forces per unit EI0 (P, n_force) over a p grid, from the likelihood's force tables (``n_f``
         solves per curve); ``shift``: each force push's displacements moved by this much [m] (its
         preload); ``length_m``: the stem length (default: the model's); ``c_base``: a base spring's
-        EI0 / (k_b L) (0: the plain, clamped rod). At fixed ``c_base`` the forces are linear in EI0."""
+        EI0 / (k_b L) (0: the plain, clamped rod); ``dh``: each force push's contact-height error [m] (default:
+        none). At fixed ``c_base`` the forces are linear in EI0."""
         from .likelihood import ForceCurves
 
         p_grid = np.linspace(0.0, P_MAX, 61) if p_grid is None else np.asarray(p_grid, float)
         L = self.m.length_m if length_m is None else float(length_m)
         shift = np.zeros(len(self.m.force_pushes)) if shift is None else np.asarray(shift, float)
-        etas = np.array([self.m.data[k].height_m / L for k in self.m.force_pushes])
+        dh = np.zeros(len(self.m.force_pushes)) if dh is None else np.asarray(dh, float)
+        etas = np.array([(self.m.data[k].height_m + e) / L for k, e in zip(self.m.force_pushes, dh, strict=True)])
         curves = ForceCurves.batch(etas, p_grid, n_f, {"c_base": float(c_base)} if c_base > 0 else None)
         g = (
             np.concatenate(
@@ -963,7 +1085,8 @@ class Diagnoser:
         if self.m.length_bounds_m is not None:
             length = plain.length_m if plain is not None else self.m.start_length
         g, p_grid = self._unit_forces(np.linspace(0.0, P_MAX, 31), pre if pre.size else None, length)
-        held = np.concatenate([pre, [length] if length is not None else []])  # between p and log M_y
+        dh = plain.height_errors_m if plain is not None else np.zeros(self.m.n_heights)
+        held = np.concatenate([pre, [length] if length is not None else [], dh])  # between p and log M_y
         F = self.m.F_obs
         h = np.array([self.m.data[k].height_m for k in self.m.force_push])
         m_max = float(np.max(F * h))
@@ -1074,13 +1197,13 @@ class Diagnoser:
         errs, per = [], []
         loho = len(self.m.force_pushes) >= 2
         jobs = [
-            (train, self.force_noise, fit.effects, self._without_preload(fit.x, u) if loho else fit.x, max_nfev)
+            (train, self.force_noise, fit.effects, self._without_push(fit.x, u) if loho else fit.x, max_nfev)
             for u, (_, train, _) in enumerate(splits)
         ]
         for (name, _, held), refit in zip(splits, _map(pool, _refit, jobs), strict=True):
-            x_held = refit.x
-            if loho and self.m.preload:  # the held-out push's own preload: fitted to it, all else held
-                x_held = _held_preload(held, refit, fit.effects)
+            x_held = refit.x  # one push: the training part's own preload and height error hold
+            if loho:  # the held-out push's own preload fitted to it, its height at the recorded one
+                x_held = _held_x(held, refit, fit.effects)
             e = held.F_obs - _held_forces(held, x_held, fit.effects)
             errs.append(HeldoutErrors(e, refit.sigma_force, refit.rho_force))
             per.append(
@@ -1095,11 +1218,11 @@ class Diagnoser:
         rmse = float(np.sqrt(np.mean(np.concatenate([u.errors_N for u in errs]) ** 2)))
         return {"heldout_force_rmse_N": rmse, "heldout": kind, "per_push": per}, errs
 
-    def _without_preload(self, x: NDArray, unit: int) -> NDArray:
-        """``x`` without the preload of the ``unit``-th push with forces (leave-one-height-out training)."""
-        if not self.m.preload:
-            return x
-        return np.delete(x, 2 + unit)
+    def _without_push(self, x: NDArray, unit: int) -> NDArray:
+        """``x`` without the preload and the height error of the ``unit``-th push with forces
+        (leave-one-height-out training)."""
+        drop = self.m.push_columns(unit)
+        return np.delete(x, drop) if drop else x
 
     def errors(self, fit: MapFit, pool=None) -> tuple[dict, list[HeldoutErrors]]:
         out = {
@@ -1183,25 +1306,35 @@ class Diagnoser:
         return {"blocks": blocks, "unexplained_structure": any(b["structured"] for b in blocks)}
 
 
-def _held_preload(held: ForwardModel, refit: MapFit, effects: tuple[str, ...]) -> NDArray:
-    """Parameters predicting a held-out push: the refit's, with the push's own preload fitted to its forces.
+def _held_x(held: ForwardModel, refit: MapFit, effects: tuple[str, ...]) -> NDArray:
+    """Parameters predicting a held-out push (leave one height out): the refit's stem, the push's height
+    error at 0 (its prior mean: the recorded height) and, with preloads, the push's own preload fitted to
+    its forces.
 
     A preload belongs to one push and cannot be learnt from the others; the held-out error then measures
     how well the model predicts the push's shape of force against displacement, not its unknown start.
     Least squares on the AR(1)-whitened residuals (the refit's correlation), every other parameter held.
+    A height error is not fitted: it would scale the push's forces as a stiffer or softer stem does, and
+    the held-out error would no longer test the model's prediction at that height.
     """
     L = held.length_m
     n = held.n_preloads
     base, coords = refit.x[:2], refit.x[refit.x.size - len(effects) :]
     length = [refit.length_m] if refit.length_fitted else []  # the stem's length: the refit's
+    dh = np.zeros(held.n_heights)
+
+    def build(v):
+        return np.concatenate([base, v, length, dh, coords])
+
+    if not n:
+        return build(np.zeros(0))
 
     def fun(v):
-        x = np.concatenate([base, v, length, coords])
-        return _whiten_rows(held.F_obs - _held_forces(held, x, effects), held.first_sample, refit.rho_force)
+        return _whiten_rows(held.F_obs - _held_forces(held, build(v), effects), held.first_sample, refit.rho_force)
 
     v0 = np.clip([float(np.median(refit.preloads_m)) if refit.preloads_m.size else 0.0], 0.0, PRELOAD_MAX_L * L)
     res = least_squares(fun, v0, bounds=([0.0] * n, [PRELOAD_MAX_L * L] * n), max_nfev=20)
-    return np.concatenate([base, res.x, length, coords])
+    return build(res.x)
 
 
 def _held_forces(held: ForwardModel, x: NDArray, effects: tuple[str, ...]) -> NDArray:
