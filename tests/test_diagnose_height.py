@@ -64,9 +64,7 @@ def test_a_height_error_moves_the_frames_of_its_push_as_it_moves_its_forces():
     m = ForwardModel(data, Ls, height_sd_m=SD)
     dh = np.array([0.004, -0.003])
     x = np.concatenate([[np.log(EI0), P], dh])
-    moved = ForwardModel(
-        [dataclasses.replace(d, height_m=d.height_m + e) for d, e in zip(data, dh, strict=True)], Ls
-    )
+    moved = ForwardModel([dataclasses.replace(d, height_m=d.height_m + e) for d, e in zip(data, dh, strict=True)], Ls)
     xs, cs = m.shapes(x, ())
     xs0, cs0 = moved.shapes(x[:2], ())
     np.testing.assert_allclose(xs, xs0, rtol=0, atol=1e-12)
