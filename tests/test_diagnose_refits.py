@@ -595,6 +595,67 @@ def test_the_bootstrap_with_preloads_matches_dense_bounded_refits_and_a_whitened
         assert null_heldout_gain(Diagnoser(m), cur, new, obs, n_draws=n_draws, seed=seed) == pytest.approx(want)
 
 
+def test_the_bootstrap_with_height_errors_keeps_their_prior_and_holds_the_held_out_push_at_its_height():
+    """Forces only, a contact-height error per push under a N(0, sd^2) prior: the dense reference refits the
+    training pushes by GLS plus the training errors' prior rows ((dh_cur + step) / sd), the held-out push's
+    error column left out (its error is not fitted: it is predicted at its current value in both models);
+    the bootstrap's p-values match at observed gains between consecutive draws' gains. Without the prior
+    rows the p-values differ (the refits then fit the errors freely)."""
+
+    from scipy import linalg
+
+    from bayesrod.inference.diagnose import MapFit, null_heldout_gain
+    from bayesrod.inference.likelihood import PushData
+
+    n, rho, sig, sd, n_draws, seed = 30, 0.8, 0.02, 0.003, 200, 11
+    D = np.linspace(0.001, 0.05, n)
+    e0 = np.zeros(0)
+    pushes = [PushData(f"h{k}", 0.4 + 0.1 * k, D, np.zeros(n), e0, e0.astype(int), e0, e0, None) for k in range(3)]
+    m = ForwardModel(pushes, 0.8, height_sd_m=sd)
+    push = m.force_push
+    u = D[np.arange(3 * n) % n] / D[-1]
+    h_cols = [(push == k) * (1.0 + u) * 10.0 for k in range(3)]  # dF/d(height error), on its own push only
+    J = np.column_stack([u, u**2, *h_cols])
+    x = np.array([0.0, 0.5, 0.002, -0.001, 0.003])
+    rng = np.random.default_rng(3)
+    rf = rng.normal(0, 0.02, 3 * n)
+    cur = MapFit((), x, sig, 1.0, rf, e0, J, 0.0, rho, J, n_heights=3)
+    delta = 0.01 * np.cos(3 * np.pi * u)  # not nearly collinear with u and u^2: the p box does not bind
+    new = MapFit(("force_offset",), np.r_[x, 0.0], sig, 1.0, rf - delta, e0, J, 0.0, rho, J, n_heights=3)
+
+    g = np.random.default_rng(seed)  # the bootstrap's draws
+    eta = g.standard_normal((3 * n, n_draws)) * sig
+    eps = np.empty_like(eta)
+    for t in range(3 * n):
+        eps[t] = eta[t] / np.sqrt(1 - rho**2) if t % n == 0 else rho * eps[t - 1] + eta[t]
+    C = sig**2 / (1 - rho**2) * linalg.toeplitz(rho ** np.arange(n))
+    Ci = np.linalg.inv(linalg.block_diag(C, C))
+    X1 = np.column_stack([J, delta])
+    sq = {True: np.zeros((2, n_draws)), False: np.zeros((2, n_draws))}
+    for k in range(3):
+        train, held = push != k, push == k
+        for i, X in enumerate((J, X1)):
+            cols = [c for c in range(X.shape[1]) if c != 2 + k]
+            A, y = X[train][:, cols], eps[train]
+            dh = [j for j, c in enumerate(cols) if 2 <= c <= 4]  # the training pushes' errors
+            for prior in (True, False):
+                H = A.T @ Ci @ A
+                b = A.T @ Ci @ y
+                if prior:
+                    H[dh, dh] += 1.0 / sd**2
+                    b[dh] -= (x[[cols[j] for j in dh]] / sd**2)[:, None]
+                best = np.linalg.solve(H, b)
+                sq[prior][i] += np.sum((eps[held] - X[held][:, cols] @ best) ** 2, axis=0)
+    gains = {k: 1 - np.sqrt(v[1] / v[0]) for k, v in sq.items()}
+    differs = False
+    for obs in _between_draws(gains[True]):
+        want = (1 + np.sum(gains[True] >= obs)) / (n_draws + 1)
+        got = null_heldout_gain(Diagnoser(m), cur, new, obs, n_draws=n_draws, seed=seed)
+        assert got == pytest.approx(want)
+        differs |= abs((1 + np.sum(gains[False] >= obs)) / (n_draws + 1) - want) > 0.02
+    assert differs  # the prior rows change the answer: this checks them
+
+
 def _between_draws(gains: np.ndarray, at=(0.1, 0.5, 0.9)) -> list[float]:
     """Observed gains halfway between two consecutive distinct draws' gains near the quantiles ``at``.
 

@@ -716,7 +716,15 @@ def null_heldout_gain(
         y = w(np.concatenate([eps_f, eps_p]))
         for J, acc, blo, bhi in ((J0, 0, lo, hi), (J1, 1, lo1, hi1)):
             keep = ~np.isin(np.arange(J.shape[1]), [own, *fixed] if own is not None else fixed)
-            coef = _box_lstsq(w(J[:, keep]), y, blo[keep], bhi[keep])
+            A, Y = w(J[:, keep]), y
+            if m.n_heights:  # the training pushes' height errors keep their prior, as in the true refits:
+                # rows (dh_cur + step) / sd, pulled towards 0
+                cols = [c for c in range(m.height_index, m.height_index + m.n_heights) if keep[c]]
+                P = np.zeros((len(cols), int(keep.sum())))
+                P[np.arange(len(cols)), [int(np.sum(keep[:c])) for c in cols]] = 1.0 / m.height_sd_m
+                prior_y = -cur.x[cols] / m.height_sd_m
+                A, Y = np.vstack([A, P]), np.vstack([y, np.repeat(prior_y[:, None], y.shape[1], axis=1)])
+            coef = _box_lstsq(A, Y, blo[keep], bhi[keep])
             e = eps_f[held_f] - J[:nf][held_f][:, keep] @ coef
             if own is not None:  # the push's preload column fitted to what is left, as _held_x fits it:
                 # least squares on the AR(1)-whitened residuals, within its box
