@@ -69,6 +69,33 @@ TARGETS: dict[str, tuple[str, list[str], list[str] | None]] = {
         None,
     ),
     "design": ("bayesrod/inference/design.py", ["tests/test_design.py"], None),
+    "elastica": (
+        "bayesrod/physics/elastica.py",
+        [  # the forward solver against Bisshopp-Drucker, small deflection and the reference solver, without
+            # the two 20 s sweeps (test_forces_agree_with_reference_up_to_slip): a lower bound
+            *(
+                f"tests/test_elastica.py::{t}"
+                for t in (
+                    "test_bisshopp_drucker",
+                    "test_bisshopp_drucker_force_to_shape",
+                    "test_small_deflection_uniform",
+                    "test_small_deflection_taper",
+                    "test_force_to_contact_agrees_with_reference",
+                    "test_slip_reported_not_invented",
+                    "test_force_increases_monotonically_along_branch",
+                    "test_EI0_is_a_pure_scale_and_length_scales",
+                    "test_batching_matches_single_solves",
+                    "test_shape_grid_matches_reference",
+                    "test_impossible_inputs_raise_value_error",
+                    "test_root_search_finds_roots_next_to_the_branch_end",
+                    "test_plain_fast_step_matches_the_general_step",
+                    "test_plain_step_per_element_matches_the_general_step",
+                )
+            ),
+            "tests/test_effects.py",
+        ],
+        None,
+    ),
     "direct": (
         "bayesrod/inference/direct.py",
         [  # the estimator's pieces against hand computations (test_direct.py's fits take 20-60 s each)
