@@ -548,15 +548,11 @@ def test_the_bootstrap_with_preloads_matches_dense_bounded_refits_and_a_whitened
     from scipy import linalg
 
     from bayesrod.inference.diagnose import MapFit, null_heldout_gain
-    from bayesrod.inference.likelihood import PushData
 
     n, rho, sig, n_draws, seed = 30, 0.8, 0.02, 200, 9
-    D = np.linspace(0.001, 0.05, n)
-    e0 = np.zeros(0)
-    pushes = [PushData(f"h{k}", 0.4 + 0.1 * k, D, np.zeros(n), e0, e0.astype(int), e0, e0, None) for k in range(3)]
-    m = ForwardModel(pushes, 0.8, preload=True)
+    m, D, e0 = _three_linear_pushes(n, preload=True)
     push = m.force_push
-    u = D[np.arange(3 * n) % n] / D[-1]
+    u = D[np.arange(3 * n) % n]
     pre_cols = [(push == k) * (1.0 + u) * 3.0 for k in range(3)]  # dF/d(preload), on its own push only
     J = np.column_stack([u, u**2, *pre_cols])
     x = np.array([0.0, 0.002, 0.0005, 0.0, 0.01])  # p and two preloads at or near their lower bound 0
@@ -566,12 +562,7 @@ def test_the_bootstrap_with_preloads_matches_dense_bounded_refits_and_a_whitened
     delta = 0.01 * u**3
     new = MapFit(("base_compliance",), np.r_[x, 0.0], sig, 1.0, rf - delta, e0, J, 0.0, rho, J)
 
-    g = np.random.default_rng(seed)  # the bootstrap's draws
-    eta = g.standard_normal((3 * n, n_draws)) * sig
-    eps = np.empty_like(eta)
-    for t in range(3 * n):
-        eps[t] = eta[t] / np.sqrt(1 - rho**2) if t % n == 0 else rho * eps[t - 1] + eta[t]
-    C = sig**2 / (1 - rho**2) * linalg.toeplitz(rho ** np.arange(n))
+    eps, C = _bootstrap_ar1_draws(seed, n, sig, rho, n_draws)
     Ci2 = np.linalg.inv(linalg.block_diag(C, C))
     Ci1 = np.linalg.inv(C)
     X1 = np.column_stack([J, delta])
@@ -605,15 +596,11 @@ def test_the_bootstrap_with_height_errors_keeps_their_prior_and_holds_the_held_o
     from scipy import linalg
 
     from bayesrod.inference.diagnose import MapFit, null_heldout_gain
-    from bayesrod.inference.likelihood import PushData
 
     n, rho, sig, sd, n_draws, seed = 30, 0.8, 0.02, 0.003, 200, 11
-    D = np.linspace(0.001, 0.05, n)
-    e0 = np.zeros(0)
-    pushes = [PushData(f"h{k}", 0.4 + 0.1 * k, D, np.zeros(n), e0, e0.astype(int), e0, e0, None) for k in range(3)]
-    m = ForwardModel(pushes, 0.8, height_sd_m=sd)
+    m, D, e0 = _three_linear_pushes(n, height_sd_m=sd)
     push = m.force_push
-    u = D[np.arange(3 * n) % n] / D[-1]
+    u = D[np.arange(3 * n) % n]
     h_cols = [(push == k) * (1.0 + u) * 10.0 for k in range(3)]  # dF/d(height error), on its own push only
     J = np.column_stack([u, u**2, *h_cols])
     x = np.array([0.0, 0.5, 0.002, -0.001, 0.003])
@@ -623,12 +610,7 @@ def test_the_bootstrap_with_height_errors_keeps_their_prior_and_holds_the_held_o
     delta = 0.01 * np.cos(3 * np.pi * u)  # not nearly collinear with u and u^2: the p box does not bind
     new = MapFit(("force_offset",), np.r_[x, 0.0], sig, 1.0, rf - delta, e0, J, 0.0, rho, J, n_heights=3)
 
-    g = np.random.default_rng(seed)  # the bootstrap's draws
-    eta = g.standard_normal((3 * n, n_draws)) * sig
-    eps = np.empty_like(eta)
-    for t in range(3 * n):
-        eps[t] = eta[t] / np.sqrt(1 - rho**2) if t % n == 0 else rho * eps[t - 1] + eta[t]
-    C = sig**2 / (1 - rho**2) * linalg.toeplitz(rho ** np.arange(n))
+    eps, C = _bootstrap_ar1_draws(seed, n, sig, rho, n_draws)
     Ci = np.linalg.inv(linalg.block_diag(C, C))
     X1 = np.column_stack([J, delta])
     sq = {True: np.zeros((2, n_draws)), False: np.zeros((2, n_draws))}
@@ -654,6 +636,19 @@ def test_the_bootstrap_with_height_errors_keeps_their_prior_and_holds_the_held_o
         assert got == pytest.approx(want)
         differs |= abs((1 + np.sum(gains[False] >= obs)) / (n_draws + 1) - want) > 0.02
     assert differs  # the prior rows change the answer: this checks them
+
+
+def _bootstrap_ar1_draws(seed: int, n: int, sig: float, rho: float, n_draws: int):
+    """The bootstrap's force draws for three pushes of ``n`` samples, from its seed, written out: (3 n, n_draws)
+    AR(1) noise per push (innovation sd ``sig``), and one push's dense covariance (n, n)."""
+    from scipy import linalg
+
+    g = np.random.default_rng(seed)
+    eta = g.standard_normal((3 * n, n_draws)) * sig
+    eps = np.empty_like(eta)
+    for t in range(3 * n):
+        eps[t] = eta[t] / np.sqrt(1 - rho**2) if t % n == 0 else rho * eps[t - 1] + eta[t]
+    return eps, sig**2 / (1 - rho**2) * linalg.toeplitz(rho ** np.arange(n))
 
 
 def _between_draws(gains: np.ndarray, at=(0.1, 0.5, 0.9)) -> list[float]:
@@ -696,15 +691,16 @@ def _lower_bounded_gls(A: np.ndarray, Y: np.ndarray, Ci: np.ndarray, lower: np.n
     return best
 
 
-def _three_linear_pushes(n: int):
+def _three_linear_pushes(n: int, **model):
     """A model of three pushes of ``n`` force samples each (heights 0.4-0.6 m, L 0.8 m) for linear stand-ins:
-    (model, the samples' displacement scaled to [0.02, 1], an empty array)."""
+    (model, the samples' displacement scaled to [0.02, 1], an empty array); ``model``: ForwardModel's
+    settings (preload, height_sd_m)."""
     from bayesrod.inference.likelihood import PushData
 
     D = np.linspace(0.001, 0.05, n) / 0.05
     e = np.zeros(0)
     pushes = [PushData(f"h{k}", 0.4 + 0.1 * k, D, np.zeros(n), e, e.astype(int), e, e, None) for k in range(3)]
-    return ForwardModel(pushes, 0.8), D, e
+    return ForwardModel(pushes, 0.8, **model), D, e
 
 
 def _loho_gain(fit, J0: np.ndarray, X1: np.ndarray, y: np.ndarray, push: np.ndarray) -> float:
