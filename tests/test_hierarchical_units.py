@@ -274,3 +274,73 @@ def test_sampler_draws_the_posterior_its_density_defines():
         if name == "mu":
             assert abs(err[0.95] - err[0.05]) < 0.12, err  # the 90% interval's width
     assert 1.0 <= fit["rhat_max"] < 1.05 and fit["ess_bulk_min"] > 300
+
+
+# ------------------------------------------------- edges the mutation run found untested (compare)
+def test_log_prob_of_a_batch_marks_only_the_walkers_whose_covariance_is_not_positive():
+    sp = [SpecimenPosterior(k, "x", 0.8, np.full((10, 1), v)) for k, v in (("a", 1.0), ("b", 2.0))]
+    post = HierarchicalPosterior(sp, PRIOR_LOG_E)
+    post.S = post.S - 0.5  # S_j = -0.5: C = tau^2 - 0.5 is positive only for tau above 0.71
+    lp = post.log_prob(np.array([[1.5, np.log(2.0)], [1.5, np.log(0.1)], [1.5, np.log(3.0)]]))
+    assert np.isfinite(lp[[0, 2]]).all() and lp[1] == -np.inf
+
+
+def test_sampler_is_reproducible_from_its_seed_and_sizes_its_ensembles_by_dimension():
+    rng = np.random.default_rng(8)
+    sp = _specimens(rng, [(f"s{k}", "abcd"[k % 4], [0.5 + 0.1 * k, 0.4], 0.8) for k in range(8)])
+    a = sample_species(sp, seed=4, n_steps=40, min_steps=40)
+    b = sample_species(sp, seed=4, n_steps=40, min_steps=40)
+    np.testing.assert_array_equal(a["mu"], b["mu"])
+    c = sample_species(sp, seed=5, n_steps=40, min_steps=40)
+    assert not np.array_equal(a["mu"], c["mu"])
+    # 4 species x 2 parameters + 2 scales = 10 dimensions: 4 x 10 = 40 walkers per ensemble (at least 32)
+    assert a["mu"].shape == (4 * 40 * (20 // 5), 4, 2) and a["tau"].shape == (4 * 40 * 4, 2)
+
+
+def test_sampler_runs_to_its_budget_in_chunks_when_a_target_cannot_be_met():
+    """An ESS target no run can meet: the sampler stops at exactly ``n_steps`` (min_steps, then chunks,
+    the last one cut to the budget), whatever R-hat and the autocorrelation time say."""
+    sp = [
+        SpecimenPosterior(f"s{k}", "x", 0.8, (m + np.random.default_rng(k).normal(0, 0.05, 200))[:, None])
+        for k, m in enumerate([21.6, 22.3, 21.9])
+    ]
+    fit = sample_species(sp, seed=1, prior=PRIOR_LOG_E, n_steps=260, min_steps=100, chunk=70, target_ess=1e12)
+    assert fit["n_steps"] == 260
+    assert fit["rhat_max"] < 1.1  # the other targets are met: only the ESS keeps it going
+    assert fit["mu"].shape[0] == 4 * 32 * (130 // 5)
+
+
+def test_sampler_defaults_are_the_documented_stopping_rule():
+    """docs/compare.md: 1000 steps, then chunks of 500 until R-hat <= 1.01, 1000 effective draws and 50
+    autocorrelation times, at most 3000 steps; seed 0."""
+    import inspect
+
+    d = {k: v.default for k, v in inspect.signature(sample_species).parameters.items()}
+    assert (d["seed"], d["n_steps"], d["min_steps"], d["chunk"]) == (0, 3000, 1000, 500)
+    assert (d["target_ess"], d["target_rhat"], d["progress"], d["prior"]) == (1000.0, 1.01, False, None)
+
+
+def test_contrasts_of_equal_draws_and_of_a_p_at_zero_in_many_draws():
+    n = 1000
+    rng = np.random.default_rng(9)
+    same = np.column_stack([rng.normal(0.5, 0.1, n), rng.normal(0.4, 0.05, n)])
+    fit = {"species": ["a", "b"], "mu": np.stack([same, same], axis=1)}
+    sp = [SpecimenPosterior("a", "a", 0.8, np.zeros((2, 2))), SpecimenPosterior("b", "b", 0.8, np.zeros((2, 2)))]
+    # identical draws: a is never greater (ties are not "greater")
+    assert [c["prob_a_greater"] for c in contrasts(fit, sp, 0.4)] == [0.0, 0.0, 0.0]
+    assert (
+        modulus_contrasts({"species": ["a", "b"], "mu": np.stack([same, same], axis=1)[:, :, :1]})[0]["prob_a_greater"]
+        == 0.0
+    )
+    # b's p exactly 0 in 10% of the draws: those ratios are undefined (left out), not infinite
+    mu = np.stack([same, same.copy()], axis=1)
+    mu[: n // 10, 1, 1] = 0.0
+    p = contrasts({"species": ["a", "b"], "mu": mu}, sp)[1]
+    ok = mu[:, 1, 1] != 0
+    assert p["ratio_q95"] == pytest.approx(np.quantile(mu[ok, 0, 1] / mu[ok, 1, 1], 0.95), rel=1e-12)
+    # both species' p below 0 in most draws: each clipped to 0 for k_theta (b's too)
+    neg = np.stack([same, same], axis=1)
+    neg[:, 0, 1] = rng.normal(-0.3, 0.05, n)
+    neg[:, 1, 1] = rng.normal(-0.1, 0.05, n)
+    kt = contrasts({"species": ["a", "b"], "mu": neg}, sp, 0.4)[2]
+    assert kt["ratio_q05"] == pytest.approx(1.0) and kt["ratio_q95"] == pytest.approx(1.0)
