@@ -370,6 +370,8 @@ def test_two_stage_fit_on_an_elastica_specimen_recovers_its_taper():
     frames = engaged_frames(spec)
     assert [f.push_id for f in frames] == ["low"] * 5 + ["high"] * 5
     r = two_stage_fit(spec, n_bins=12)
+    # the estimator finds the engaged frames itself when not given them
+    np.testing.assert_allclose(direct_estimate(spec, n_bins=12).EI, r.direct.EI, rtol=1e-12)
     # measured: p 0.4962 (se 0.0044), EI0 2.4928, R^2 0.9998, 11 bins, 0.005 mm and 0.0013 N
     assert r.p == pytest.approx(p, abs=0.01) and r.EI0 == pytest.approx(EI0, rel=0.005)
     assert 0.001 < r.p_se < 0.01
@@ -450,7 +452,8 @@ def test_direct_estimate_edges(monkeypatch):
             np.zeros(s.size),
         ),
     )
-    de = direct_estimate(None, n_bins=1, s_min_m=0.0, frames=[frame(0.3, 0.1), frame(1.0), frame(2.0)])
+    assert 3 * 0.25 == 0.75  # exactly 3 sd in floating point
+    de = direct_estimate(None, n_bins=1, s_min_m=0.0, frames=[frame(0.75, 0.25), frame(1.0), frame(2.0)])
     assert de.n[0] == 2
     de = direct_estimate(None, n_bins=1, s_min_m=0.0, frames=[frame(0.35, 0.1), frame(1.0), frame(2.0)])
     assert de.n[0] == 3
@@ -500,7 +503,7 @@ def test_fit_EI0_from_one_frame_at_exactly_three_sd_excluded():
     assert fit_EI0([one], p, L) == pytest.approx(EI0, rel=2e-3)
     at3 = dataclasses.replace(one, force_N=0.03, force_sd_N=0.01, x_m=one.x_m + 0.3)
     assert fit_EI0([one, at3], p, L) == pytest.approx(fit_EI0([one], p, L), rel=1e-9)
-    above = dataclasses.replace(one, force_N=0.041, force_sd_N=0.01, x_m=one.x_m + 0.3)
+    above = dataclasses.replace(one, force_N=0.035, force_sd_N=0.01, x_m=one.x_m + 0.3)  # 3.5 sd: used
     assert abs(fit_EI0([one, above], p, L) / fit_EI0([one], p, L) - 1) > 1e-3
 
 
