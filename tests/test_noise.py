@@ -63,7 +63,9 @@ def test_the_ar1_fit_fits_and_widens_the_intervals(fits):
     assert d["model_check"]["verdict"] == "ok"
     assert all(abs(p["innovation_lag1"]) < 0.3 for p in d["model_check"]["pushes"])
     rho = d["parameters"]["rho_force"]
-    assert rho["q05"] <= 0.9 <= rho["q95"] and rho["q95"] - rho["q05"] < 0.2  # the simulated correlation
+    # the simulated correlation, inside an interval that is not vacuous: measured [0.72, 0.96] (width 0.24 here,
+    # 0.23 at 6000 steps); the biased snooker move of emcee 3.1.6 cut its upper tail (0.20, docs/inference.md)
+    assert rho["q05"] <= 0.9 <= rho["q95"] and rho["q95"] - rho["q05"] < 0.3
     w = {m: f.summary().loc["EI0", "q95"] - f.summary().loc["EI0", "q05"] for m, f in fits.items()}
     assert w["ar1"] > 1.8 * w["iid"]  # the plain fit's interval is too narrow by the correlation
     q = fits["ar1"].summary().loc["EI0"]
