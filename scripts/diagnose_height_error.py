@@ -17,6 +17,7 @@ import time
 import numpy as np
 
 import bayesrod
+from bayesrod.dataset.simulate import ar1_noise
 from bayesrod.inference.diagnose import ForwardModel, diagnose
 from bayesrod.inference.likelihood import prepare_data
 from bayesrod.physics import force_from_displacement
@@ -30,10 +31,7 @@ def dataset(errors_m, sigma=0.004, rho=0.9, n=60, seed=0) -> bayesrod.Dataset:
     D, F = [], []
     for h, dh in zip(HEIGHTS, errors_m, strict=True):
         d = np.linspace(0.0, 0.15 * h / 0.4, n)
-        e = np.zeros(n)
-        for i in range(n):
-            e[i] = (rho * e[i - 1] if i else 0.0) + rng.normal(0, sigma * np.sqrt(1 - rho**2))
-        F.append(force_from_displacement(d, h + dh, EI0, P, L).force_N + e)
+        F.append(force_from_displacement(d, h + dh, EI0, P, L).force_N + ar1_noise(rng, sigma, rho, n))
         D.append(d)
     return bayesrod.Dataset.from_arrays(length_m=L, height_m=list(HEIGHTS), displacement_m=D, force_N=F)
 

@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import sys
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -113,18 +114,16 @@ def reference_dataset(ds, case: dict):
     return replace(ds, pushes=tuple(pushes)), worst, n_fallback
 
 
-#: --cap-l: every push stops at this fraction of the stem length (None: at the slip, the simulator's default)
-CAP_L: float | None = None
-
-
-def replicate(seed: int) -> dict:
+def replicate(seed: int, cap_l: float | None = None) -> dict:
+    """One replicate; ``cap_l``: every push stops at this fraction of the stem length (None: at the slip, the
+    simulator's default)."""
     case = draw_case(seed)
     noise = NoiseModel(force_sd_N=case["sigma_force_N"], shape_sd_m=0.0015, shape_sd_reported_m=0.0015)
     effects = {case["effect"]: case["effect_value"]} if case["effect"] else {}
     stem = {k: case[k] for k in ("EI0", "p", "length_m", "heights_m")} | {"specimen": f"sbcg-{seed}"}
     extra = {} if case["shapes"] else {"n_frames_engaged": 2}
-    if CAP_L is not None:  # a stop at a fixed fraction of L tells nothing about the stem; a stop at the slip does
-        extra["max_contact_displacement_m"] = CAP_L * case["length_m"]
+    if cap_l is not None:  # a stop at a fixed fraction of L tells nothing about the stem; a stop at the slip does
+        extra["max_contact_displacement_m"] = cap_l * case["length_m"]
     row = {"seed": seed, "length_m": case["length_m"], "n_heights": len(case["heights_m"])}
     row |= {"shapes": case["shapes"], "effect": case["effect"] or "none"}
     try:
@@ -231,16 +230,16 @@ def main(argv=None) -> None:
         help="replicates to run: all, or only the one-height forces-only ones",
     )
     args = ap.parse_args(argv)
-    global CAP_L
-    CAP_L = args.cap_l
     args.out.mkdir(parents=True, exist_ok=True)
     csv = args.out / "sbc_geometry.csv"
     seeds = range(args.first_seed, args.first_seed + args.replicates)
     if args.only == "one-height-forces":
-        seeds = [s for s in seeds if len(draw_case(s)["heights_m"]) == 1 and not draw_case(s)["shapes"]]
+        cases = {s: draw_case(s) for s in seeds}
+        seeds = [s for s, c in cases.items() if len(c["heights_m"]) == 1 and not c["shapes"]]
     from bayesrod.dataset.io import read_rows
 
-    for row in run_pending(csv, FIELDS, list(seeds), replicate, done_key=lambda r: int(r["seed"]), workers=args.jobs):
+    fn = partial(replicate, cap_l=args.cap_l)
+    for row in run_pending(csv, FIELDS, list(seeds), fn, done_key=lambda r: int(r["seed"]), workers=args.jobs):
         cov = " ".join(f"{k}:{row.get(f'{k}_covered', '-')}" for k in PARAMS)
         print(f"seed {row['seed']} ({row['effect']}, {row['n_heights']} h, shapes {row['shapes']}): {cov}", flush=True)
     print(summarise(read_rows(csv), args.out))

@@ -20,7 +20,10 @@ import numpy as np
 import bayesrod
 import bayesrod.inference.moves as moves
 
-BIASED = staticmethod(lambda: [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)])
+
+def emcee_moves() -> list:
+    """The samplers' mix before 2026-11-25: emcee's own (biased) DESnookerMove."""
+    return [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
 
 
 def main(argv=None) -> None:
@@ -40,7 +43,7 @@ def main(argv=None) -> None:
     for seed in (int(v) for v in args.seeds.split(",")):
         ds = bayesrod.simulate(args.preset, seed=seed, noise_rho=args.noise_rho, heights_m=heights)
         out = {}
-        for name, mv in (("biased", BIASED.__func__), ("corrected", corrected)):
+        for name, mv in (("biased", emcee_moves), ("corrected", corrected)):
             moves.default_moves = mv
             try:
                 post = bayesrod.fit(

@@ -139,8 +139,7 @@ def test_direct_estimate_pools_frames_as_its_definition_says():
     np.testing.assert_allclose(de.se, seb, rtol=1e-10)
     np.testing.assert_allclose(de.rel_se, relb, rtol=1e-10)
     assert np.isfinite(de.EI).sum() >= 6  # the check is not vacuous
-    # the Birge ratio inflates some bins and not others: both branches are exercised
-    # (checked through the hand computation: its se differs from the unscaled one somewhere)
+    # (both branches of the Birge ratio: test_birge_ratio_inflates_only_when_the_scatter_exceeds_the_errors)
     s, c, sd, h = (np.array(v) for v in zip(*samples, strict=True))
     np.testing.assert_allclose(de.samples["s_m"], s)
     np.testing.assert_allclose(de.samples["EI"], 1.0 / c, rtol=1e-10)
