@@ -6,7 +6,7 @@ Each replicate simulates the twig preset (three heights, forces only used) with
 AR(1) force noise of lag-1 correlation rho (marginal sd as the preset's), fits
 it twice with the users' bayesrod.fit (force_noise iid and ar1, default prior,
 seed = replicate), and records whether each 90% interval covers the truth, the
-interval widths, the fitted rho and the model_check verdict (``--noise ar1``: the
+interval widths, the fitted rho, the model_check verdict, R-hat and steps run (``--noise ar1``: the
 AR(1) fit only). Resumable: rows already in --out are skipped. Prints the summary
 table, and how coverage and width split by the replicate's fitted rho.
 """
@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 FIELDS = ["seed", "noise"] + [f"{n}_{k}" for n in ("EI0", "p") for k in ("median", "q05", "q95", "covered")]
-FIELDS += ["rho_median", "rho_q05", "rho_q95", "check", "seconds"]
+FIELDS += ["rho_median", "rho_q05", "rho_q95", "check", "seconds", "rhat_max", "steps"]
 
 
 def one(job) -> list[dict]:
@@ -50,6 +50,8 @@ def one(job) -> list[dict]:
             "rho_q05": r["q05"] if r else "",
             "rho_q95": r["q95"] if r else "",
             "seconds": round(time.perf_counter() - t0, 1),
+            "rhat_max": round(s["convergence"]["rhat_max"], 4),
+            "steps": s["sampler"]["steps"],
         }
         rows.append(row)
     return rows

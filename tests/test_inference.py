@@ -276,3 +276,22 @@ def test_bad_effects_leave_no_run_behind(tmp_path, capsys, twig_noisy):
     assert main(["fit", str(twig_noisy), "--out", str(out), "--effects", "self_weight"]) == 2
     assert "self_weight cannot be fitted yet" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_checkpoint_of_an_ar1_run_in_the_old_noise_coordinates_is_refused(tmp_path):
+    """Before 2026-11-26 an AR(1) noise was sampled by its marginal sd: such chains cannot be resumed."""
+    import h5py
+
+    from bayesrod.api.fitting import _RESUME_KEYS, _check_checkpoint
+
+    config = {k: None for k in _RESUME_KEYS} | {"force_noise": "ar1", "noise_coordinates": "innovation_sd"}
+    old = {k: v for k, v in config.items() if k != "noise_coordinates"}
+    path = tmp_path / "chains.h5"
+    with h5py.File(path, "w") as f:
+        f.attrs["bayesrod_config"] = json.dumps(old)
+    with pytest.raises(ValueError, match="noise_coordinates"):
+        _check_checkpoint(path, config)
+    iid = config | {"force_noise": "iid", "noise_coordinates": "marginal_sd"}
+    with h5py.File(path, "w") as f:
+        f.attrs["bayesrod_config"] = json.dumps({k: v for k, v in iid.items() if k != "noise_coordinates"})
+    _check_checkpoint(path, iid)  # an iid run's checkpoint still resumes

@@ -150,3 +150,36 @@ def test_table_log_likelihood_is_the_explicit_gaussian_density_of_its_residuals(
         want = norm.logpdf(res["force"][w], 0.0, params["sigma_force_N"][w]).sum()
         want += lik.shape_weight * norm.logpdf(res["shape"][w], 0.0, params["shape_sd_scale"][w] * lik.sd_obs).sum()
         assert got[w] == pytest.approx(want, rel=1e-12, abs=1e-8)
+
+
+def test_ar1_noise_is_sampled_by_its_innovation_sd_with_the_prior_kept_on_the_marginal_sd():
+    """The sampling coordinate of an AR(1) noise is log(sigma sqrt(1 - rho^2)); the density emcee sees is
+    the prior on (sigma, rho) times the likelihood times sigma, the Jacobian of sigma in that coordinate."""
+    from scipy.stats import halfnorm
+
+    from bayesrod.inference.likelihood import LogPosterior, build_likelihood
+    from bayesrod.inference.priors import load_prior
+
+    spec = bayesrod.simulate("twig", seed=4, noise_rho=0.9, heights_m=[0.5], config_overrides={"n_frames_engaged": 2})
+    pr = load_prior("default")
+    post = LogPosterior(build_likelihood(spec, pr, use_shapes=False, force_noise="ar1"), pr)
+    assert post.names[:4] == ["EI0", "p", "sigma_force_N", "rho_force"]
+    nat = {"EI0": np.array([2.5, 2.7]), "p": np.array([0.4, 0.5]), "sigma_force_N": np.array([0.08, 0.3])}
+    nat["rho_force"] = np.array([0.5, 0.97])
+    theta = post.to_sample(nat)
+    np.testing.assert_allclose(theta[:, 2], np.log(nat["sigma_force_N"] * np.sqrt(1 - nat["rho_force"] ** 2)))
+    back = post.to_natural(theta)
+    for k, v in nat.items():
+        np.testing.assert_allclose(back[k], v, rtol=1e-12)
+    scale = pr.get("sigma_force_N").args[0]
+    lo, hi = pr.get("rho_force").args
+    want = (
+        pr.get("EI0").logpdf_sample(np.log(nat["EI0"]))
+        + pr.get("p").logpdf_sample(nat["p"])
+        + halfnorm.logpdf(nat["sigma_force_N"], scale=scale)
+        + np.log(nat["sigma_force_N"])
+        - 0.5 * np.log1p(-(nat["rho_force"] ** 2))
+        - np.log(np.arcsin(hi) - np.arcsin(lo))
+        + post.likelihood.log_likelihood(nat)
+    )
+    np.testing.assert_allclose(post.log_prob(theta), want, rtol=1e-12)

@@ -63,6 +63,7 @@ _RESUME_KEYS = (
     "length",
     "height_sd_m",
     "force_offsets",
+    "noise_coordinates",
 )
 #: what a checkpoint written before an option existed meant by it
 _RESUME_DEFAULTS = {
@@ -71,6 +72,8 @@ _RESUME_DEFAULTS = {
     "length": "known",
     "height_sd_m": 0.0,
     "force_offsets": False,
+    # before 2026-11-26 an AR(1) noise was sampled by its marginal sd; its chains cannot be resumed
+    "noise_coordinates": "marginal_sd",
 }
 
 
@@ -771,6 +774,8 @@ def fit(
         "height_sd_m": height_sd_m,
         "force_offsets": bool(force_offsets),
         "diameter": diameter,
+        # the sampling coordinates of the force noise (ParameterSpace): a checkpoint stores chains in them
+        "noise_coordinates": "innovation_sd" if force_noise == "ar1" else "marginal_sd",
         "bayesrod": __version__,
     }
     # the likelihood first: bad effects or data without engaged samples fail before anything is written

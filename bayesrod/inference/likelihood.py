@@ -1056,7 +1056,7 @@ class PosteriorBase(ParameterSpace):
     _p_bounds: tuple
 
     def log_prior(self, theta) -> NDArray:
-        theta = np.atleast_2d(theta)
+        theta = self.prior_coordinates(np.atleast_2d(theta))  # unit Jacobian (ParameterSpace)
         return sum(pr.logpdf_sample(theta[:, i]) for i, pr in enumerate(self.priors))
 
     def _in_support(self, natural: dict) -> NDArray:

@@ -117,7 +117,16 @@ class ParamPrior:
 
 class ParameterSpace:
     """Named parameters with their priors (``names``, ``priors``): maps between natural units and the
-    sampling space (log for positive parameters), shared by the posteriors emcee sees."""
+    sampling space, shared by the posteriors emcee sees.
+
+    Each parameter is sampled through its prior's own transform (log for positive parameters), with
+    one exception: an AR(1) force noise (``sigma_force_N`` with ``rho_force``, or their per-condition
+    copies) is sampled as the log of its innovation sd, log(sigma sqrt(1 - rho^2)), beside rho. The
+    marginal sd sigma is poorly determined as rho nears 1 while the innovation sd is not, so in
+    (log sigma, rho) the posterior is a curved ridge the ensemble moves cross slowly. The map
+    (log innovation sd, rho) -> (log sigma, rho) is a shear of unit Jacobian: the prior stays on sigma,
+    the target is unchanged (docs/inference.md, "Correlated force noise").
+    """
 
     names: list
     priors: list
@@ -126,14 +135,38 @@ class ParameterSpace:
     def ndim(self) -> int:
         return len(self.names)
 
+    def noise_pairs(self) -> list[tuple[int, int]]:
+        """(sd column, correlation column) of each AR(1) force noise sampled by its innovation sd."""
+        idx = {n: i for i, n in enumerate(self.names)}
+        pairs = []
+        for n, i in idx.items():
+            if n == "rho_force" or n.startswith("rho_force__"):
+                s = idx.get("sigma_force_N" + n[len("rho_force") :])
+                if s is not None and self.priors[s].log_space and not self.priors[i].log_space:
+                    pairs.append((s, i))
+        return pairs
+
+    def prior_coordinates(self, theta) -> NDArray:
+        """``theta`` (..., ndim) in the sampling space mapped to each prior's own transform (the log of
+        the marginal noise sd in place of the innovation sd); a shear of unit Jacobian."""
+        out = np.array(theta, float, copy=True)
+        for s, r in self.noise_pairs():
+            rho = np.clip(out[..., r], -1.0 + 1e-12, 1.0 - 1e-12)
+            out[..., s] = out[..., s] - 0.5 * np.log1p(-(rho**2))
+        return out
+
     def to_natural(self, theta) -> dict:
-        theta = np.atleast_2d(theta)
+        theta = self.prior_coordinates(np.atleast_2d(theta))
         return {n: pr.from_sample(theta[:, i]) for i, (n, pr) in enumerate(zip(self.names, self.priors, strict=True))}
 
     def to_sample(self, natural: dict) -> NDArray:
-        return np.stack(
+        out = np.stack(
             [pr.to_sample(np.atleast_1d(natural[n])) for n, pr in zip(self.names, self.priors, strict=True)], axis=-1
         )
+        for s, r in self.noise_pairs():
+            rho = np.clip(out[..., r], -1.0 + 1e-12, 1.0 - 1e-12)
+            out[..., s] = out[..., s] + 0.5 * np.log1p(-(rho**2))
+        return out
 
 
 def _parse_param(name: str, spec: dict, source: str) -> ParamPrior:

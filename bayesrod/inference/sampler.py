@@ -233,7 +233,7 @@ def run_ensembles(
             if s.backend is not None and hasattr(s.backend, "flush"):
                 s.backend.flush()
         res = _collect(samplers)
-        diag = diagnostics(res.chain, post.names)
+        diag = diagnostics(post.prior_coordinates(res.chain), post.names)  # the marginal noise sd's R-hat
         enough = (
             min(diag["ess_bulk"][n] for n in post.names[:2]) >= target_ess
             and max(diag["rhat"].values()) <= target_rhat
