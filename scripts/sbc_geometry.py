@@ -114,9 +114,9 @@ def reference_dataset(ds, case: dict):
     return replace(ds, pushes=tuple(pushes)), worst, n_fallback
 
 
-def replicate(seed: int, cap_l: float | None = None) -> dict:
+def replicate(seed: int, cap_l: float | None = None, slip: bool = False) -> dict:
     """One replicate; ``cap_l``: every push stops at this fraction of the stem length (None: at the slip, the
-    simulator's default)."""
+    simulator's default); ``slip``: the fit uses where each push slipped (``bayesrod.fit(slip=True)``)."""
     case = draw_case(seed)
     noise = NoiseModel(force_sd_N=case["sigma_force_N"], shape_sd_m=0.0015, shape_sd_reported_m=0.0015)
     effects = {case["effect"]: case["effect_value"]} if case["effect"] else {}
@@ -138,6 +138,7 @@ def replicate(seed: int, cap_l: float | None = None) -> dict:
             n_rank=N_RANK,
             effects=(case["effect"],) if case["effect"] else (),
             max_steps=8000,
+            slip=slip,
         )
     except Exception as e:  # a failed replicate is recorded (a row without numbers), never dropped
         print(f"seed {seed}: {type(e).__name__}: {e}", file=sys.stderr)
@@ -223,6 +224,7 @@ def main(argv=None) -> None:
         help="stop every push at this fraction of the stem length instead of at the slip (e.g. 0.3: below every "
         "slip of the prior's one-height cases, 0.33-0.98 L)",
     )
+    ap.add_argument("--slip", action="store_true", help="fit with the slip term (bayesrod.fit(slip=True))")
     ap.add_argument(
         "--only",
         choices=["all", "one-height-forces"],
@@ -238,7 +240,7 @@ def main(argv=None) -> None:
         seeds = [s for s, c in cases.items() if len(c["heights_m"]) == 1 and not c["shapes"]]
     from bayesrod.dataset.io import read_rows
 
-    fn = partial(replicate, cap_l=args.cap_l)
+    fn = partial(replicate, cap_l=args.cap_l, slip=args.slip)
     for row in run_pending(csv, FIELDS, list(seeds), fn, done_key=lambda r: int(r["seed"]), workers=args.jobs):
         cov = " ".join(f"{k}:{row.get(f'{k}_covered', '-')}" for k in PARAMS)
         print(f"seed {row['seed']} ({row['effect']}, {row['n_heights']} h, shapes {row['shapes']}): {cov}", flush=True)

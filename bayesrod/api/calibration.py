@@ -60,8 +60,10 @@ def fit_for_calibration(
     n_rank: int = 99,
     effects=(),
     max_steps: int = 6000,
+    **fit_options,
 ) -> dict:
-    """Fit (in memory, ``effects`` fitted) and return thinned draws and 5/50/95% quantiles per parameter."""
+    """Fit (in memory, ``effects`` fitted) and return thinned draws and 5/50/95% quantiles per parameter;
+    ``fit_options`` go to :func:`bayesrod.fit` (e.g. ``slip=True``)."""
     post = fit(
         dataset,
         prior=prior_name,
@@ -71,6 +73,7 @@ def fit_for_calibration(
         use_shapes=use_shapes,
         target_ess=target_ess,
         max_steps=max_steps,
+        **fit_options,
     )
     rng = np.random.default_rng(seed)
     n = post.samples["EI0"].size

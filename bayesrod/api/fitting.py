@@ -64,6 +64,7 @@ _RESUME_KEYS = (
     "height_sd_m",
     "force_offsets",
     "noise_coordinates",
+    "slip",
 )
 #: what a checkpoint written before an option existed meant by it
 _RESUME_DEFAULTS = {
@@ -74,6 +75,8 @@ _RESUME_DEFAULTS = {
     "force_offsets": False,
     # before 2026-11-26 an AR(1) noise was sampled by its marginal sd; its chains cannot be resumed
     "noise_coordinates": "marginal_sd",
+    # before 2026-11-26 the likelihood had no slip term
+    "slip": False,
 }
 
 
@@ -88,6 +91,7 @@ def _likelihood_options(config: Mapping) -> dict:
         "height_sd_m": config.get("height_sd_m", 0.0),
         "force_offsets": config.get("force_offsets", False),
         "diameter": config.get("diameter", "off"),
+        "slip": config.get("slip", False),
     }
 
 
@@ -674,6 +678,7 @@ def fit(
     height_sd_m: float = 0.0,
     force_offsets: bool = False,
     diameter: str = "auto",
+    slip: bool = False,
 ) -> Posterior:
     """Posterior of EI0, p, the noise and the fitted effects for one dataset (emcee).
 
@@ -720,6 +725,11 @@ def fit(
         that E(s) = E0 (1 - s/L)^(4 (p - p_geom)) may vary (summary ``youngs_modulus.uniform_modulus`` tests
         it); ``"off"`` ignores the diameters; ``"auto"`` (default) is ``"shared"`` with diameters, else off.
         With diameters the summary reports Young's modulus E0 = 64 EI0 / (pi d0^4).
+    slip : bool
+        Use where each push slipped off the probe (default False): the stem held the probe to its largest
+        engaged displacement, and where the force fell while the robot went on it slipped within that
+        step; the model's slip displacement (the branch end) must lie there (docs/inference.md, "The slip").
+        Off with an unknown length, height errors or yield.
     checkpoint : path or None
         An HDF5 file the chains are checkpointed to; an interrupted fit called again with the same
         arguments and checkpoint resumes from it. None (default): nothing is written.
@@ -776,6 +786,7 @@ def fit(
         "diameter": diameter,
         # the sampling coordinates of the force noise (ParameterSpace): a checkpoint stores chains in them
         "noise_coordinates": "innovation_sd" if force_noise == "ar1" else "marginal_sd",
+        "slip": bool(slip),
         "bayesrod": __version__,
     }
     # the likelihood first: bad effects or data without engaged samples fail before anything is written

@@ -283,6 +283,11 @@ def build_parser() -> argparse.ArgumentParser:
         "geometry and bending share p; free = the diameter's own taper (tests uniform modulus); off = ignored; "
         "auto (default) = shared when the dataset has diameters. With diameters the summary reports Young's modulus",
     )
+    ft.add_argument(
+        "--slip",
+        action="store_true",
+        help="use where each push slipped off the probe: the model's slip must lie there (docs/inference.md)",
+    )
     ft.add_argument("--max-steps", type=int, default=8000, help="sampling budget per ensemble (default 8000)")
     ft.add_argument(
         "--target-ess", type=float, default=1000.0, help="stop once EI0 and p have this bulk ESS (default 1000)"
@@ -420,6 +425,7 @@ FLAGS = {
     "height_sd_m": "--height-sd",
     "force_offsets": "--force-offsets",
     "diameter": "--diameter",
+    "slip": "--slip",
     "noise_rho": "--noise-rho",
     "target_ess": "--target-ess",
     "time_unit": "--time-unit",
@@ -829,6 +835,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
         height_sd_m=args.height_sd,
         force_offsets=args.force_offsets,
         diameter=args.diameter,
+        slip=args.slip,
     )
     _print_fit(post.to_dict(), out, args)
     return 0

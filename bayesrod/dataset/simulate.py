@@ -203,8 +203,9 @@ def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> Simulat
     D_branch, F_branch = _loading_branch(cfg, h)
     D_end = D_branch[-1]
     cap = cfg.max_contact_displacement_m
-    if cap is not None and cap < D_end:
-        D_end = float(cap)  # the push stops before the slip; the robot then withdraws (force back to zero)
+    capped = cap is not None and cap < D_end
+    if capped:
+        D_end = float(cap)  # the push stops before the slip; the robot then withdraws
     # Robot position over the branch, to place samples at a uniform robot advance: the force is smooth in
     # D (monotone cubic through the exact samples, kinks at yield kept), the wire deflection grows like
     # F^(1/3) near first contact, so robot(D) is built on a fine grid from the exact wire law. Only the
@@ -237,6 +238,11 @@ def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> Simulat
     contact[engaged] = D
     force = force + ar1_noise(rng, cfg.noise.force_sd_N, cfg.noise.force_rho, robot.size)
     time = robot / ROBOT_SPEED
+    if capped:
+        # the record of a push that stops short ends where the robot turns back (a dataset's push is one
+        # loading ramp, docs/format.md): no samples after it, which would read as a slip at the cap. The
+        # noise is drawn for them all the same, so the random stream (and every later draw) is unchanged
+        robot, force, wire, contact, time, engaged = (a[engaged] for a in (robot, force, wire, contact, time, engaged))
     # Frames: a camera clock of its own on the same time base.
     t_slip = robot[engaged][-1] / ROBOT_SPEED
     nf = cfg.n_frames_engaged

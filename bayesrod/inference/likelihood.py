@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import special
 from scipy.interpolate import PchipInterpolator
 
 from ..dataset.engagement import detect_engagement
@@ -116,6 +117,13 @@ class PushData:
     x_m: NDArray  # (k,)
     z_m: NDArray  # (k,)
     sd_m: NDArray | None  # (k,) or None
+    #: the largest engaged contact displacement [m]: the stem held the probe at least this far
+    engaged_to_m: float = float("nan")
+    #: where a slip was seen (the force fell while the robot went on), the contact displacement by which
+    #: the stem had slipped [m]; nan when the push ended engaged or the robot withdrew
+    slipped_by_m: float = float("nan")
+    #: the resolution of the slip's position [m]: the robot's last step before it
+    slip_step_m: float = float("nan")
 
 
 def prepare_data(spec: Specimen, use_forces: bool = True, use_shapes: bool = True) -> list[PushData]:
@@ -147,6 +155,7 @@ def prepare_data(spec: Specimen, use_forces: bool = True, use_shapes: bool = Tru
                 zs.append(fr.z_m[keep])
                 sds.append(fr.sd_m[keep] if fr.sd_m is not None else None)
         has_sd = bool(sds) and all(s is not None for s in sds)
+        slip = _slip_window(push.force, eng) if use_forces and D.size else {}
         out.append(
             PushData(
                 push.id,
@@ -158,8 +167,29 @@ def prepare_data(spec: Specimen, use_forces: bool = True, use_shapes: bool = Tru
                 np.concatenate(xs) if xs else np.zeros(0),
                 np.concatenate(zs) if zs else np.zeros(0),
                 np.concatenate(sds) if has_sd else None,
+                **slip,
             )
         )
+    return out
+
+
+def _slip_window(force, eng) -> dict:
+    """Where a push's slip lies, from its engagement (docs/inference.md, "The slip").
+
+    The stem held the probe to the largest engaged contact displacement D_max. If the force then
+    fell while the robot kept advancing (its position past the one at D_max), the slip happened
+    before the contact had moved one more robot step: by D_max + (robot at the first disengaged
+    sample - robot at D_max), the wire's deflection taken as unchanged over that step.
+    """
+    idx = np.flatnonzero(eng.mask)
+    D = force.contact_x_m[idx]
+    R = force.robot_x_m
+    k = int(idx[np.argmax(D)])
+    step = float(R[k] - R[k - 1]) if k >= 1 and R[k] > R[k - 1] else float("nan")
+    out = {"engaged_to_m": float(np.max(D)), "slip_step_m": step}
+    j = eng.slip_index
+    if j is not None and k == j - 1 and R[j] > R[k]:
+        out["slipped_by_m"] = float(D.max() + (R[j] - R[k]))
     return out
 
 
@@ -349,6 +379,7 @@ class RodLikelihood:
         force_offsets: bool = False,
         diameter: str = "off",
         diameter_priors: dict | None = None,
+        slip: bool = False,
     ):
         if "self_weight" in effects:
             raise ValueError(
@@ -398,6 +429,7 @@ class RodLikelihood:
         self.data = prepare_data(spec, use_forces, use_shapes)
         self.n_force = int(sum(d.F_N.size for d in self.data))
         self.n_points = int(sum(d.x_m.size for d in self.data))
+        self._init_slip(bool(slip))
         if self.n_force == 0 and self.n_points == 0:
             raise ValueError(f"{spec.specimen}: expected engaged force samples or centerline points, got none")
         lo, hi = p_range
@@ -444,6 +476,36 @@ class RodLikelihood:
         self._build_tables()
         if self.geometry:
             self._build_geometry_tables()
+
+    def _init_slip(self, slip: bool) -> None:
+        """The slip term's data (docs/inference.md, "The slip"): per push with forces, the window
+        (``slip_lo_m``, ``slip_hi_m``] its slip lies in (hi = inf where none was seen) and the softening
+        ``slip_scale_m``. Off with an unknown length or height errors (the slip table is not on their
+        axes) and with yield (the plastic branch moves the slip; not tabled)."""
+        forced = [d for d in self.data if d.D_m.size]
+        self.slip = slip and bool(forced) and not self.geometry and "yield" not in self.effects
+        if not self.slip:
+            return
+        lo = np.array([d.engaged_to_m for d in forced])
+        hi = np.array([d.slipped_by_m for d in forced])
+        step = np.array([d.slip_step_m for d in forced])
+        self.slip_lo_m = lo
+        self.slip_hi_m = np.where(np.isfinite(hi), hi, np.inf)
+        self.slip_scale_m = np.fmax(SLIP_SOFT_STEPS * np.nan_to_num(step, nan=0.0), SLIP_SOFT_REL * lo)
+
+    def slip_loglik(self, p: NDArray, u: NDArray | None, preload_m: NDArray | None = None) -> NDArray:
+        """log P(the slip lies in each push's window | p, effect), (W,): per push
+        log Phi((D_s - lo) / tau) + log Phi((hi - D_s) / tau), D_s the model's slip displacement (the
+        branch end, tabled in p and the effect; a preload (W, J) [m] moves the window)."""
+        D_s = self.L * self._interp(self.slip_table, p, u)  # (W, J)
+        shift = 0.0 if preload_m is None else np.asarray(preload_m, float)
+        tau = self.slip_scale_m
+        out = special.log_ndtr((D_s - (self.slip_lo_m + shift)) / tau)
+        seen = np.isfinite(self.slip_hi_m)
+        if seen.any():
+            hi = np.where(seen, self.slip_hi_m, 0.0) + shift
+            out = out + np.where(seen, special.log_ndtr((hi - D_s) / tau), 0.0)
+        return np.sum(out, axis=1)
 
     def _init_diameters(self, spec: Specimen, diameter: str, priors: dict) -> None:
         """The width term's data and parameter names (docs/inference.md, "Young's modulus")."""
@@ -529,14 +591,14 @@ class RodLikelihood:
         if self.axis is None:
             curves = ForceCurves.batch(etas, self.p_grid)
             self._build_tables_at(None, curves)
-            for k in ("f_table", "x_table", "cos_table"):
+            for k in ("f_table", "x_table", "cos_table", "slip_table"):
                 setattr(self, k, getattr(self, k)[None])
             return
         nodes = [self.axis.nondim(u) for u in self.axis.grid]
         (key,) = nodes[0]
         vals = np.repeat([float(e[key]) for e in nodes], J)
         curves = ForceCurves.batch(np.tile(etas, len(nodes)), self.p_grid, effects_nd={key: vals})
-        stacks = {"f_table": [], "x_table": [], "cos_table": []}
+        stacks = {"f_table": [], "x_table": [], "cos_table": [], "slip_table": []}
         for i, eff in enumerate(nodes):
             self._build_tables_at(eff, curves[i * J : (i + 1) * J])
             for k in stacks:
@@ -548,10 +610,12 @@ class RodLikelihood:
         L, pg = self.L, self.p_grid
         self._preload_tables = []
         fF, fobs, fh, xs, cs, xobs, zobs, sd, pid, fid = [], [], [], [], [], [], [], [], [], []
+        ends = []
         for d, curves in zip(self.data, all_curves, strict=True):
             eta = d.height_m / L
             if d.D_m.size:
                 fF.append(curves.force(d.D_m / L))
+                ends.append(curves.d_end)
                 if self.preload:
                     # a dense table in d for this push: the force at D + preload, linear in d between nodes
                     top = float(d.D_m.max()) / L + PRELOAD_MAX_L
@@ -572,6 +636,8 @@ class RodLikelihood:
         P = pg.size
         self.f_table = np.concatenate(fF, axis=1) if fF else np.zeros((P, 0))  # (P, N); stacked to (E, P, N)
         self.F_obs = np.concatenate(fobs) if fobs else np.zeros(0)
+        # the nondimensional slip displacement (the branch end) of each push with forces, (P, J)
+        self.slip_table = np.stack(ends, axis=1) if ends else np.zeros((P, 0))
         # the first force sample of each push: an AR(1) noise chain restarts there
         self.F_push = np.concatenate([np.full(f.size, k) for k, f in enumerate(fobs)]) if fobs else np.zeros(0, int)
         self.F_first = _chain_starts(self.F_push)
@@ -733,10 +799,10 @@ class RodLikelihood:
     def predict_nd_force(self, p: NDArray, u: NDArray | None = None) -> NDArray:
         """Nondimensional force at every engaged sample, (W, N).
 
-        The slip is not used as a hard constraint: past a p's branch end the force goes on along
-        the curve's end tangent (:meth:`ForceCurves.force`). A hard "slipped means zero" rule would say only "not
-        yet slipped" for engaged samples and bias p; the end of the branch is also where the model
-        is most sensitive to what it leaves out (friction, the probe's shape).
+        Past a p's branch end the force goes on along the curve's end tangent
+        (:meth:`ForceCurves.force`), so the forces stay smooth in p. Where the slip lies is a separate
+        term of the likelihood (:meth:`slip_loglik`): a rule "slipped means zero" alone would say only
+        "not yet slipped" for engaged samples and bias p toward late slips when a push stops at its slip.
         """
         return self._interp(self.f_table, p, u)
 
@@ -796,6 +862,7 @@ class RodLikelihood:
         new.F_obs, new.F_push, new.F_height = self.F_obs[mask], self.F_push[mask], self.F_height[mask]
         new.F_first = _chain_starts(new.F_push)
         new.n_force = int(mask.sum())
+        new.slip = False  # where the slip lies is data at the push's end: held out with it (conservative)
         return new
 
     def without_effect_axis(self) -> RodLikelihood:
@@ -805,7 +872,7 @@ class RodLikelihood:
         if self.axis is not None:
             if self.axis.grid[0] != 0.0:
                 raise ValueError(f"effect {self.axis.name}: expected a table axis starting at the neutral value 0")
-            for k in ("f_table", "x_table", "cos_table"):
+            for k in ("f_table", "x_table", "cos_table", "slip_table"):
                 setattr(new, k, getattr(self, k)[:1])
             new.axis = None
         new.effects = tuple(e for e in self.effects if e not in TABLE_EFFECTS)
@@ -815,6 +882,11 @@ class RodLikelihood:
         """Sum of Gaussian log densities; parameter arrays of shape (W,), result (W,)."""
         res = self.residuals(params)
         ll = np.zeros(np.atleast_1d(params["p"]).shape)
+        if self.slip:
+            pre = None
+            if self.preload and all(n in params for n in self.preload_names):
+                pre = self._per_push(params, self.preload_names, ll.size)
+            ll += self.slip_loglik(params["p"], self.effect_coordinate(params), pre)
         if "force" in res:
             s = np.atleast_1d(params["sigma_force_N"])[:, None]
             if self.force_noise == "ar1":
@@ -851,6 +923,10 @@ class RodLikelihood:
 
 
 FORCE_NOISE_MODELS = ("iid", "ar1")
+#: the slip term's softening (docs/inference.md, "The slip"): the larger of half the robot's last step
+#: before the slip and 0.5% of the largest engaged displacement (the tables' and the detection's error)
+SLIP_SOFT_STEPS = 0.5
+SLIP_SOFT_REL = 0.005
 #: the width term (docs/inference.md, "Young's modulus"): off; d(s) = d0 (1 - s/L)^p (a stem of uniform
 #: modulus: geometry and bending share p); or d(s) = d0 (1 - s/L)^p_geom with p_geom free (E(s) may vary)
 DIAMETER_MODELS = ("off", "shared", "free")
@@ -1140,6 +1216,7 @@ def build_likelihood(
     height_sd_m: float = 0.0,
     force_offsets: bool = False,
     diameter: str = "off",
+    slip: bool = False,
 ) -> RodLikelihood:
     """The likelihood for ``effects``; a tabled effect gets its axis from the prior and a plain EI0 estimate.
 
@@ -1154,7 +1231,8 @@ def build_likelihood(
     (``scripts/table_accuracy.py``, docs/validation.md). The tables take about twice as long to build.
     With shapes, rest curvature and base tilt get 49 nodes (:data:`SHAPE_EFFECT_NODES`): the centerline
     above the contact, nearly level late in a push, moves steeply with either, and 25 nodes moved the
-    estimate by up to 0.50 sd (49: at most 0.015 sd).
+    estimate by up to 0.50 sd (49: at most 0.015 sd). ``slip`` adds the term for where each push's slip
+    lies (:meth:`RodLikelihood.slip_loglik`; docs/inference.md, "The slip").
     """
     tabled = [e for e in effects if e in TABLE_EFFECTS]
     if n_effect is None:
@@ -1189,6 +1267,7 @@ def build_likelihood(
         force_offsets=force_offsets,
         diameter=diameter,
         diameter_priors=diameter_priors(prior) if diameter != "off" else None,
+        slip=slip,
     )
 
 
