@@ -66,3 +66,16 @@ def test_the_slip_term_adds_to_the_likelihood_and_stays_out_of_held_out_refits(o
         on.restricted(keep).log_likelihood(params), off.restricted(keep).log_likelihood(params), rtol=1e-12
     )
     assert not build_likelihood(one_height, pr, ("yield",), use_shapes=False, slip=True).slip
+
+
+def test_the_summary_reports_the_data_slip_window_beside_the_model_slip(one_height):
+    from bayesrod.api.fitting import _slip_report
+
+    lik = build_likelihood(one_height, load_prior("default"), use_shapes=False, slip=True)
+    p = np.random.default_rng(0).normal(0.43, 0.02, 500)
+    (row,) = _slip_report(lik, {"EI0": np.full(500, 2.6), "p": p})
+    assert row["push"] == lik.data[0].id and row["slipped_by_m"] == lik.slip_hi_m[0]
+    assert row["engaged_to_m"] == lik.slip_lo_m[0]
+    D = lik.slip_displacement_m({"p": p})[:, 0]
+    assert row["model_slip_m"]["median"] == pytest.approx(np.median(D), rel=1e-3)
+    assert row["engaged_to_m"] < row["model_slip_m"]["median"] < row["slipped_by_m"]

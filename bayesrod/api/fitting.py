@@ -659,6 +659,23 @@ def _check_checkpoint(checkpoint: Path, config: dict) -> None:
         f.attrs["bayesrod_config"] = key
 
 
+def _slip_report(lik, samples: Mapping) -> list[dict]:
+    """Per push with forces: where the data put its slip and where the posterior's model puts it
+    (summary.json ``data.slip``, docs/format.md)."""
+    thin = {k: np.asarray(v)[:: max(1, np.asarray(v).size // 2000)] for k, v in samples.items()}
+    model = lik.slip_displacement_m(thin)  # (draws, J)
+    forced = [d for d in lik.data if d.D_m.size]
+    return [
+        {
+            "push": d.id,
+            "engaged_to_m": float(d.engaged_to_m),
+            "slipped_by_m": float(d.slipped_by_m) if np.isfinite(d.slipped_by_m) else None,
+            "model_slip_m": credible_interval(model[:, j]),
+        }
+        for j, d in enumerate(forced)
+    ]
+
+
 def fit(
     dataset,
     prior=None,
@@ -870,6 +887,8 @@ def fit(
         },
         "assumptions": _assumptions(spec, lik),
     }
+    if lik.slip:
+        extra["data"]["slip"] = _slip_report(lik, samples)
     if truth:
         extra["truth"] = truth
     if two_stage:

@@ -493,6 +493,10 @@ class RodLikelihood:
         self.slip_hi_m = np.where(np.isfinite(hi), hi, np.inf)
         self.slip_scale_m = np.fmax(SLIP_SOFT_STEPS * np.nan_to_num(step, nan=0.0), SLIP_SOFT_REL * lo)
 
+    def slip_displacement_m(self, params: dict) -> NDArray:
+        """The model's slip displacement of each push with forces [m], (W, J): its loading branch's end."""
+        return self.L * self._interp(self.slip_table, np.atleast_1d(params["p"]), self.effect_coordinate(params))
+
     def slip_loglik(self, p: NDArray, u: NDArray | None, preload_m: NDArray | None = None) -> NDArray:
         """log P(the slip lies in each push's window | p, effect), (W,): per push
         log Phi((D_s - lo) / tau) + log Phi((hi - D_s) / tau), D_s the model's slip displacement (the
