@@ -114,9 +114,11 @@ def reference_dataset(ds, case: dict):
     return replace(ds, pushes=tuple(pushes)), worst, n_fallback
 
 
-def replicate(seed: int, cap_l: float | None = None, slip: bool = False) -> dict:
+def replicate(seed: int, cap_l: float | None = None, slip: bool = False, step_l: float | None = None) -> dict:
     """One replicate; ``cap_l``: every push stops at this fraction of the stem length (None: at the slip, the
-    simulator's default); ``slip``: the fit uses where each push slipped (``bayesrod.fit(slip=True)``)."""
+    simulator's default); ``slip``: the fit uses where each push slipped (``bayesrod.fit(slip=True)``);
+    ``step_l``: the robot's step between samples as a fraction of L (None: the simulator's default, 60
+    samples spread over each push knowing where it will slip, a design that depends on the stem)."""
     case = draw_case(seed)
     noise = NoiseModel(force_sd_N=case["sigma_force_N"], shape_sd_m=0.0015, shape_sd_reported_m=0.0015)
     effects = {case["effect"]: case["effect_value"]} if case["effect"] else {}
@@ -124,6 +126,8 @@ def replicate(seed: int, cap_l: float | None = None, slip: bool = False) -> dict
     extra = {} if case["shapes"] else {"n_frames_engaged": 2}
     if cap_l is not None:  # a stop at a fixed fraction of L tells nothing about the stem; a stop at the slip does
         extra["max_contact_displacement_m"] = cap_l * case["length_m"]
+    if step_l is not None:
+        extra["robot_step_m"] = step_l * case["length_m"]
     row = {"seed": seed, "length_m": case["length_m"], "n_heights": len(case["heights_m"])}
     row |= {"shapes": case["shapes"], "effect": case["effect"] or "none"}
     try:
@@ -226,6 +230,13 @@ def main(argv=None) -> None:
     )
     ap.add_argument("--slip", action="store_true", help="fit with the slip term (bayesrod.fit(slip=True))")
     ap.add_argument(
+        "--step-l",
+        type=float,
+        default=None,
+        help="the robot's step between force samples as a fraction of L (e.g. 0.01; default: 60 samples per push "
+        "spread knowing where it slips)",
+    )
+    ap.add_argument(
         "--only",
         choices=["all", "one-height-forces"],
         default="all",
@@ -240,7 +251,7 @@ def main(argv=None) -> None:
         seeds = [s for s, c in cases.items() if len(c["heights_m"]) == 1 and not c["shapes"]]
     from bayesrod.dataset.io import read_rows
 
-    fn = partial(replicate, cap_l=args.cap_l, slip=args.slip)
+    fn = partial(replicate, cap_l=args.cap_l, slip=args.slip, step_l=args.step_l)
     for row in run_pending(csv, FIELDS, list(seeds), fn, done_key=lambda r: int(r["seed"]), workers=args.jobs):
         cov = " ".join(f"{k}:{row.get(f'{k}_covered', '-')}" for k in PARAMS)
         print(f"seed {row['seed']} ({row['effect']}, {row['n_heights']} h, shapes {row['shapes']}): {cov}", flush=True)

@@ -79,3 +79,18 @@ def test_the_summary_reports_the_data_slip_window_beside_the_model_slip(one_heig
     D = lik.slip_displacement_m({"p": p})[:, 0]
     assert row["model_slip_m"]["median"] == pytest.approx(np.median(D), rel=1e-3)
     assert row["engaged_to_m"] < row["model_slip_m"]["median"] < row["slipped_by_m"]
+
+
+def test_a_rig_with_a_fixed_robot_step_samples_until_the_slip_and_the_window_holds_it():
+    """robot_step_m: the samples sit at multiples of the step whatever the stem; as many engage as reach the slip."""
+    ds = bayesrod.simulate(
+        "twig", seed=4, heights_m=[0.5], config_overrides={"n_frames_engaged": 2, "robot_step_m": 0.012}
+    )
+    cfg, (sim,) = ds.simulation
+    np.testing.assert_allclose(np.diff(sim.robot_x_m), 0.012, rtol=1e-4)  # engaged: D + wire, off by the placement table
+    D_slip = _loading_branch(cfg, 0.5)[0][-1]
+    (d,) = prepare_data(ds, use_shapes=False)
+    assert sim.engaged.sum() == np.sum(sim.robot_x_m <= sim.robot_x_m[sim.engaged][-1])
+    assert d.engaged_to_m < D_slip <= d.slipped_by_m and d.slipped_by_m - d.engaged_to_m == pytest.approx(0.012)
+    with pytest.raises(ValueError, match="robot_step_m"):
+        bayesrod.simulate("twig", seed=4, heights_m=[0.5], config_overrides={"robot_step_m": 0.5})

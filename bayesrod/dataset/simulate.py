@@ -75,6 +75,10 @@ class SimConfig:
     force_range_N: tuple[float, float] = (0.05, 8.0)
     # the robot stops after this contact displacement if the stem has not slipped (None: push until the slip)
     max_contact_displacement_m: float | None = None
+    # the robot's step between force samples [m]; None (default): n_force_engaged samples spread over the
+    # loading branch, a spacing chosen knowing where the stem will slip. A fixed step is what a rig does
+    # (the number of engaged samples then depends on the stem): the design the slip term models
+    robot_step_m: float | None = None
     # the rendered stem's diameter d(s) = d0 (1 - s/L)^q (frames only): d0 [m] (None: 1 cm for a twig, 4 mm
     # for a grass) and q (None: q = p, a uniform modulus; q != p is a modulus E(s) ~ (1 - s/L)^(4 (p - q)))
     base_diameter_m: float | None = None
@@ -215,8 +219,17 @@ def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> Simulat
     robot_dense = D_dense + wire_deflection(F_dense)
     # Uniform robot advance in time; exact contact displacement at each sample.
     x_slip = robot_dense[-1]
-    n_e = cfg.n_force_engaged
-    step = x_slip / (n_e - 0.5)
+    if cfg.robot_step_m is not None:
+        step = float(cfg.robot_step_m)
+        n_e = int(np.floor(x_slip / step)) + 1  # every sample up to the slip (or the cap)
+        if n_e < 4:
+            raise ValueError(
+                f"robot_step_m: expected a step giving at least 4 engaged samples at h = {h:g} m (the branch "
+                f"ends at a robot advance of {x_slip:.4g} m), got {step:g} m"
+            )
+    else:
+        n_e = cfg.n_force_engaged
+        step = x_slip / (n_e - 0.5)
     robot = np.arange(n_e + cfg.n_force_after) * step
     engaged = robot <= x_slip
     D = np.interp(robot[engaged], robot_dense, D_dense)
