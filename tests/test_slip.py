@@ -87,7 +87,7 @@ def test_a_rig_with_a_fixed_robot_step_samples_until_the_slip_and_the_window_hol
         "twig", seed=4, heights_m=[0.5], config_overrides={"n_frames_engaged": 2, "robot_step_m": 0.012}
     )
     cfg, (sim,) = ds.simulation
-    np.testing.assert_allclose(np.diff(sim.robot_x_m), 0.012, rtol=1e-4)  # engaged: D + wire, off by the placement table
+    np.testing.assert_allclose(np.diff(sim.robot_x_m), 0.012, rtol=1e-4)  # D + wire: off by its table
     D_slip = _loading_branch(cfg, 0.5)[0][-1]
     (d,) = prepare_data(ds, use_shapes=False)
     assert sim.engaged.sum() == np.sum(sim.robot_x_m <= sim.robot_x_m[sim.engaged][-1])
