@@ -11,13 +11,16 @@ Each replicate draws, from its seed:
   its value drawn from the same prior's effect block; the effect is switched on in the simulation
   *and fitted*.
 
-The pushes are placed by bayesrod's simulator, then every recorded force and every frame's centerline
-is solved again by ``bayesrod.physics.reference`` (adaptive DOP853 + brentq, not the fast path the fit
-uses) and the simulator's noise is added back to the reference values. The fit is ``bayesrod.fit`` with
-the same prior. For EI0, p, the force noise and the effect it records the rank of the truth among 99
-thinned posterior draws and whether the 90% interval covers it. Writes ``sbc_geometry.csv`` (resumable:
-rows already there are not recomputed) and ``sbc_geometry.md`` (coverage per parameter and per case,
-with the binomial range of 90% coverage and a chi-square test of the rank histogram) into --out.
+The pushes are placed by bayesrod's simulator with a fixed robot step of 0.01 L (``--step-l``; the
+simulator's default spreads 60 samples knowing where each push slips, so the robot positions alone give
+the slip away, a design no likelihood models: docs/validation.md), then every recorded force and every
+frame's centerline is solved again by ``bayesrod.physics.reference`` (adaptive DOP853 + brentq, not the
+fast path the fit uses) and the simulator's noise is added back to the reference values. The fit is
+``bayesrod.fit`` with the same prior. For EI0, p, the force noise and the effect it records the rank of
+the truth among 99 thinned posterior draws and whether the 90% interval covers it. Writes
+``sbc_geometry.csv`` (resumable: rows already there are not recomputed) and ``sbc_geometry.md`` (coverage
+per parameter and per case, with the binomial range of 90% coverage and a chi-square test of the rank
+histogram) into --out.
 """
 
 from __future__ import annotations
@@ -232,9 +235,9 @@ def main(argv=None) -> None:
     ap.add_argument(
         "--step-l",
         type=float,
-        default=None,
-        help="the robot's step between force samples as a fraction of L (e.g. 0.01; default: 60 samples per push "
-        "spread knowing where it slips)",
+        default=0.01,
+        help="the robot's step between force samples as a fraction of L (default 0.01, as a rig pushes); 0: the "
+        "simulator's default design, 60 samples per push spread knowing where it slips (the CSVs before 2026-11-26)",
     )
     ap.add_argument(
         "--only",
@@ -251,7 +254,7 @@ def main(argv=None) -> None:
         seeds = [s for s, c in cases.items() if len(c["heights_m"]) == 1 and not c["shapes"]]
     from bayesrod.dataset.io import read_rows
 
-    fn = partial(replicate, cap_l=args.cap_l, slip=args.slip, step_l=args.step_l)
+    fn = partial(replicate, cap_l=args.cap_l, slip=args.slip, step_l=args.step_l or None)
     for row in run_pending(csv, FIELDS, list(seeds), fn, done_key=lambda r: int(r["seed"]), workers=args.jobs):
         cov = " ".join(f"{k}:{row.get(f'{k}_covered', '-')}" for k in PARAMS)
         print(f"seed {row['seed']} ({row['effect']}, {row['n_heights']} h, shapes {row['shapes']}): {cov}", flush=True)
