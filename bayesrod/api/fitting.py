@@ -664,7 +664,6 @@ def _slip_report(lik, samples: Mapping) -> list[dict]:
     (summary.json ``data.slip``, docs/format.md)."""
     thin = {k: np.asarray(v)[:: max(1, np.asarray(v).size // 2000)] for k, v in samples.items()}
     model = lik.slip_displacement_m(thin)  # (draws, J)
-    forced = [d for d in lik.data if d.D_m.size]
     return [
         {
             "push": d.id,
@@ -672,7 +671,7 @@ def _slip_report(lik, samples: Mapping) -> list[dict]:
             "slipped_by_m": float(d.slipped_by_m) if np.isfinite(d.slipped_by_m) else None,
             "model_slip_m": credible_interval(model[:, j]),
         }
-        for j, d in enumerate(forced)
+        for j, d in enumerate(lik.force_data)
     ]
 
 

@@ -46,7 +46,7 @@ from scipy.optimize import least_squares, lsq_linear
 from ..physics import Effects
 from ..physics.effects import EFFECT_NAMES
 from ..physics.elastica import centerline_at, force_from_displacement_nd
-from .likelihood import HEIGHT_CUT_SD, PRELOAD_MAX_L, PushData, ar1_innovations
+from .likelihood import HEIGHT_CUT_SD, PRELOAD_MAX_L, ForceCurves, PushData, ar1_innovations
 
 CATALOG = EFFECT_NAMES  # every effect of the contract's catalog is a candidate
 
@@ -980,8 +980,6 @@ class Diagnoser:
         and the preloads instead (a simulated twig with errors of +6, -5, +4 mm and preloads: a fit 190
         nats below the one started near the truth).
         """
-        from .likelihood import ForceCurves
-
         step = self.m.height_sd_m
         cut = HEIGHT_CUT_SD * step
         L, J = self.m.length_m, len(self.m.force_pushes)
@@ -1001,8 +999,6 @@ class Diagnoser:
     def _preload_start(self, EI0: float, p_grid: NDArray, k: int) -> NDArray:
         """Per push: the displacement [m] at which the plain model (EI0, p_grid[k]) reaches the push's
         first force sample, read off the p grid's force curves (the ones :meth:`_unit_forces` built)."""
-        from .likelihood import ForceCurves
-
         L = self.m.length_m
         grid = np.linspace(0.0, PRELOAD_MAX_L, 201)
         out = []
@@ -1028,8 +1024,6 @@ class Diagnoser:
         preload); ``length_m``: the stem length (default: the model's); ``c_base``: a base spring's
         EI0 / (k_b L) (0: the plain, clamped rod); ``dh``: each force push's contact-height error [m] (default:
         none). At fixed ``c_base`` the forces are linear in EI0."""
-        from .likelihood import ForceCurves
-
         p_grid = np.linspace(0.0, P_MAX, 61) if p_grid is None else np.asarray(p_grid, float)
         L = self.m.length_m if length_m is None else float(length_m)
         shift = np.zeros(len(self.m.force_pushes)) if shift is None else np.asarray(shift, float)

@@ -185,11 +185,12 @@ def _slip_window(force, eng) -> dict:
     D = force.contact_x_m[idx]
     R = force.robot_x_m
     k = int(idx[np.argmax(D)])
+    D_max = float(D.max())
     step = float(R[k] - R[k - 1]) if k >= 1 and R[k] > R[k - 1] else float("nan")
-    out = {"engaged_to_m": float(np.max(D)), "slip_step_m": step}
+    out = {"engaged_to_m": D_max, "slip_step_m": step}
     j = eng.slip_index
     if j is not None and k == j - 1 and R[j] > R[k]:
-        out["slipped_by_m"] = float(D.max() + (R[j] - R[k]))
+        out["slipped_by_m"] = D_max + float(R[j] - R[k])
     return out
 
 
@@ -446,9 +447,9 @@ class RodLikelihood:
         if self.n_points:
             names.append("shape_sd_scale" if self.shape_has_sd else "sigma_shape_m")
         # per push: the contact displacement already made when recording began (docs/inference.md, preload)
-        self.preload_names = [preload_name(d.id) for d in self.data if d.D_m.size] if self.preload else []
+        self.preload_names = [preload_name(d.id) for d in self.force_data] if self.preload else []
         names += self.preload_names
-        forced = [d for d in self.data if d.D_m.size]
+        forced = self.force_data
         self.length_names = ["length_m"] if length_prior is not None else []
         self.height_names = [height_error_name(d.id) for d in forced] if self.height_sd_m > 0 else []
         self.offset_names = [force_offset_name(d.id) for d in forced] if self.force_offsets else []
@@ -477,12 +478,17 @@ class RodLikelihood:
         if self.geometry:
             self._build_geometry_tables()
 
+    @property
+    def force_data(self) -> list[PushData]:
+        """The pushes with engaged force samples, in the order of the force tables' push index."""
+        return [d for d in self.data if d.D_m.size]
+
     def _init_slip(self, slip: bool) -> None:
         """The slip term's data (docs/inference.md, "The slip"): per push with forces, the window
         (``slip_lo_m``, ``slip_hi_m``] its slip lies in (hi = inf where none was seen) and the softening
         ``slip_scale_m``. Off with an unknown length or height errors (the slip table is not on their
         axes) and with yield (the plastic branch moves the slip; not tabled)."""
-        forced = [d for d in self.data if d.D_m.size]
+        forced = self.force_data
         self.slip = slip and bool(forced) and not self.geometry and "yield" not in self.effects
         if not self.slip:
             return
@@ -493,23 +499,24 @@ class RodLikelihood:
         self.slip_hi_m = np.where(np.isfinite(hi), hi, np.inf)
         self.slip_scale_m = np.fmax(SLIP_SOFT_STEPS * np.nan_to_num(step, nan=0.0), SLIP_SOFT_REL * lo)
 
+    def _slip_m(self, p: NDArray, u: NDArray | None) -> NDArray:
+        """The model's slip displacement [m] of each push with forces at p (W,) and effect coordinate u:
+        (W, J), its loading branch's end."""
+        return self.L * self._interp(self.slip_table, np.atleast_1d(p), u)
+
     def slip_displacement_m(self, params: dict) -> NDArray:
-        """The model's slip displacement of each push with forces [m], (W, J): its loading branch's end."""
-        return self.L * self._interp(self.slip_table, np.atleast_1d(params["p"]), self.effect_coordinate(params))
+        """The model's slip displacement of each push with forces [m], (W, J), at parameter arrays (W,)."""
+        return self._slip_m(params["p"], self.effect_coordinate(params))
 
     def slip_loglik(self, p: NDArray, u: NDArray | None, preload_m: NDArray | None = None) -> NDArray:
         """log P(the slip lies in each push's window | p, effect), (W,): per push
         log Phi((D_s - lo) / tau) + log Phi((hi - D_s) / tau), D_s the model's slip displacement (the
-        branch end, tabled in p and the effect; a preload (W, J) [m] moves the window)."""
-        D_s = self.L * self._interp(self.slip_table, p, u)  # (W, J)
+        branch end, tabled in p and the effect; a preload (W, J) [m] moves the window). Where no slip
+        was seen hi is inf and its factor is 1."""
+        D_s = self._slip_m(p, u)  # (W, J)
         shift = 0.0 if preload_m is None else np.asarray(preload_m, float)
-        tau = self.slip_scale_m
-        out = special.log_ndtr((D_s - (self.slip_lo_m + shift)) / tau)
-        seen = np.isfinite(self.slip_hi_m)
-        if seen.any():
-            hi = np.where(seen, self.slip_hi_m, 0.0) + shift
-            out = out + np.where(seen, special.log_ndtr((hi - D_s) / tau), 0.0)
-        return np.sum(out, axis=1)
+        lo, hi, tau = self.slip_lo_m + shift, self.slip_hi_m + shift, self.slip_scale_m
+        return np.sum(special.log_ndtr((D_s - lo) / tau) + special.log_ndtr((hi - D_s) / tau), axis=1)
 
     def _init_diameters(self, spec: Specimen, diameter: str, priors: dict) -> None:
         """The width term's data and parameter names (docs/inference.md, "Young's modulus")."""
@@ -668,7 +675,7 @@ class RodLikelihood:
             self.L_grid = np.array([self.L])
         sd = self.height_sd_m
         self.dh_grid = HEIGHT_CUT_SD * sd * np.array([-1.0, 0.0, 1.0]) if sd > 0 else np.zeros(1)
-        forced = [d for d in self.data if d.D_m.size]
+        forced = self.force_data
         etas = np.array([(d.height_m + b) / a for d in forced for a in self.L_grid for b in self.dh_grid])
         curves = ForceCurves.batch(etas, self.p_grid, n_f=GEOMETRY_N_F)
         A, B = self.L_grid.size, self.dh_grid.size

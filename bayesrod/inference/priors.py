@@ -146,27 +146,27 @@ class ParameterSpace:
                     pairs.append((s, i))
         return pairs
 
-    def prior_coordinates(self, theta) -> NDArray:
-        """``theta`` (..., ndim) in the sampling space mapped to each prior's own transform (the log of
-        the marginal noise sd in place of the innovation sd); a shear of unit Jacobian."""
+    def _shear(self, theta, sign: float) -> NDArray:
+        """A copy of ``theta`` (..., ndim) with each noise pair's log sd moved by
+        sign x log sqrt(1 - rho^2): -1 from the marginal to the innovation sd, +1 back."""
         out = np.array(theta, float, copy=True)
         for s, r in self.noise_pairs():
             rho = np.clip(out[..., r], -1.0 + 1e-12, 1.0 - 1e-12)
-            out[..., s] = out[..., s] - 0.5 * np.log1p(-(rho**2))
+            out[..., s] = out[..., s] - sign * 0.5 * np.log1p(-(rho**2))
         return out
+
+    def prior_coordinates(self, theta) -> NDArray:
+        """``theta`` (..., ndim) in the sampling space mapped to each prior's own transform (the log of
+        the marginal noise sd in place of the innovation sd); a shear of unit Jacobian."""
+        return self._shear(theta, +1.0)
 
     def to_natural(self, theta) -> dict:
         theta = self.prior_coordinates(np.atleast_2d(theta))
         return {n: pr.from_sample(theta[:, i]) for i, (n, pr) in enumerate(zip(self.names, self.priors, strict=True))}
 
     def to_sample(self, natural: dict) -> NDArray:
-        out = np.stack(
-            [pr.to_sample(np.atleast_1d(natural[n])) for n, pr in zip(self.names, self.priors, strict=True)], axis=-1
-        )
-        for s, r in self.noise_pairs():
-            rho = np.clip(out[..., r], -1.0 + 1e-12, 1.0 - 1e-12)
-            out[..., s] = out[..., s] + 0.5 * np.log1p(-(rho**2))
-        return out
+        each = [pr.to_sample(np.atleast_1d(natural[n])) for n, pr in zip(self.names, self.priors, strict=True)]
+        return self._shear(np.stack(each, axis=-1), -1.0)
 
 
 def _parse_param(name: str, spec: dict, source: str) -> ParamPrior:
