@@ -94,3 +94,22 @@ def test_a_rig_with_a_fixed_robot_step_samples_until_the_slip_and_the_window_hol
     assert d.engaged_to_m < D_slip <= d.slipped_by_m and d.slipped_by_m - d.engaged_to_m == pytest.approx(0.012)
     with pytest.raises(ValueError, match="robot_step_m"):
         bayesrod.simulate("twig", seed=4, heights_m=[0.5], config_overrides={"robot_step_m": 0.5})
+
+
+def test_fit_with_slip_writes_the_window_and_the_model_slip_and_only_then(one_height, tmp_path):
+    """Through the public fit: summary.json ``data.slip`` holds the data's window and the posterior's slip,
+    config.json records ``slip``; a fit without the term writes neither."""
+    import json
+
+    kw = {"use_shapes": False, "progress": False, "seed": 3, "max_steps": 400, "target_ess": 50}
+    post = bayesrod.fit(one_height, slip=True, **kw)
+    out = post.save(tmp_path / "run", figures=False)
+    summary = json.loads((out / "summary.json").read_text())
+    assert json.loads((out / "config.json").read_text())["slip"] is True
+    (row,) = summary["data"]["slip"]
+    (d,) = prepare_data(one_height, use_shapes=False)
+    assert row["push"] == d.id and row["engaged_to_m"] == d.engaged_to_m and row["slipped_by_m"] == d.slipped_by_m
+    m = row["model_slip_m"]
+    assert m["q05"] < m["median"] < m["q95"] and d.engaged_to_m - 0.01 < m["median"] < d.slipped_by_m + 0.01
+    plain = bayesrod.fit(one_height, **kw).to_dict()
+    assert "slip" not in plain["data"]
