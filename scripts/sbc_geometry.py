@@ -6,8 +6,10 @@ Each replicate draws, from its seed:
 
 * the stem: EI0, p and the force noise from scripts/sbc_prior.json (as scripts/sbc.py);
 * the geometry: L uniform in [0.5, 1.5] m, one, two or three contact heights with h/L in [0.35, 0.8];
-* the data: forces only, or forces and centerlines (alternating);
-* one model effect or none, cycling through none, base_compliance, rest_curvature and force_offset,
+* the data: forces only, or forces and centerlines (alternating with each cycle of the effects, so each
+  effect is seen both ways);
+* one model effect or none, cycling through none, base_compliance, rest_curvature, force_offset, base_tilt
+  and contact_friction (yield is not: the reference solver has none),
   its value drawn from the same prior's effect block; the effect is switched on in the simulation
   *and fitted*.
 
@@ -46,7 +48,7 @@ from bayesrod.physics import force_from_displacement  # noqa: E402
 from bayesrod.physics import reference as R  # noqa: E402
 
 PRIOR = str(Path(__file__).with_name("sbc_prior.json"))
-EFFECTS = (None, "base_compliance", "rest_curvature", "force_offset")
+EFFECTS = (None, "base_compliance", "rest_curvature", "force_offset", "base_tilt", "contact_friction")
 PARAMS = ("EI0", "p", "sigma_force_N", "effect")
 FIELDS = (
     ["seed", "length_m", "n_heights", "shapes", "effect", "rhat_max", "max_ref_vs_fast_N", "n_fast_fallback"]
@@ -71,7 +73,8 @@ def draw_case(seed: int) -> dict:
         "sigma_force_N": float(pr.get("sigma_force_N").draw(rng, 1)[0]),
         "length_m": L,
         "heights_m": tuple(float(e * L) for e in eta),
-        "shapes": bool(seed % 2),
+        # forces only and with centerlines alternate per cycle of effects, so each effect gets both
+        "shapes": bool((seed // len(EFFECTS)) % 2),
         "effect": effect,
     }
     if effect is not None:
