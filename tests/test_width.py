@@ -384,3 +384,41 @@ def test_contrast_scale_recovers_the_contrast_of_blurred_profiles():
     ]
     assert contrast_scale(profiles, w / 2) == pytest.approx(0.8, abs=0.01)
     assert contrast_scale(profiles[:4], w[:4] / 2) == 1.0  # too few profiles to read a shape from
+
+
+def test_contrast_scale_ignores_profiles_that_clutter_crosses():
+    """A stem tapering from 3.3 to 2 px along 60 stations (contrast 1.06 of the assumed colour, blur sd 0.8
+    px); clutter crosses every sixth window (a thin object of a colour further from the background, in front
+    of the stem, and the mask merged with it reads wider): those profiles are the widest by mask and, used,
+    set the scale 1.2 or more, as on the rendered grass (docs/validation.md)."""
+    from bayesrod.vision.width import _blurred_box, _clean_profiles, contrast_scale
+
+    rng = np.random.default_rng(1)
+    t = np.arange(-6, 6, 0.25)
+    w = np.linspace(3.3, 2.0, 60)
+    c = rng.uniform(-0.5, 0.5, 60)
+    profiles = [
+        (t, 1.06 * _blurred_box(t - ci, wi, 0.8) + rng.normal(0, 0.03, t.size)) for wi, ci in zip(w, c, strict=True)
+    ]
+    half = w / 2
+    hit = np.arange(60) % 6 == 3
+    for i in np.flatnonzero(hit):
+        clutter = 0.7 * _blurred_box(t - c[i], 1.5, 0.8)  # peak coverage 1.5-1.7, as read on the grass
+        profiles[i] = (t, profiles[i][1] + clutter)
+    beside = np.arange(60) % 6 == 0  # and an object of the stem's colour just beside it: a sudden wide "stem"
+    for i in np.flatnonzero(beside):
+        profiles[i] = (t, profiles[i][1] + 1.06 * _blurred_box(t - c[i] - 4.0, 2.5, 0.8))
+    half_seen = np.where(hit, half + 1.5, np.where(beside, half + 3.0, half))  # the mask merged with the clutter
+    np.testing.assert_array_equal(_clean_profiles(profiles), ~(hit | beside))
+    assert contrast_scale(profiles, half_seen) == pytest.approx(1.06, abs=0.03)
+    # with every profile used (the selection before 2026-11-26) the thin bright objects alone set the scale far
+    # too high
+    from bayesrod.vision import width as W
+
+    keep = W._clean_profiles
+    try:
+        W._clean_profiles = lambda p: np.ones(len(p), bool)
+        plain = [p for p, b in zip(profiles, beside, strict=True) if not b]
+        assert contrast_scale(plain, half_seen[~beside]) > 1.15
+    finally:
+        W._clean_profiles = keep
