@@ -58,7 +58,7 @@ FIELDS = (
 N_RANK = 99
 
 
-def draw_case(seed: int) -> dict:
+def draw_case(seed: int, effects: tuple = EFFECTS) -> dict:
     rng = np.random.default_rng(50_000 + seed)
     pr = load_prior(PRIOR)
     L = float(rng.uniform(0.5, 1.5))
@@ -66,7 +66,7 @@ def draw_case(seed: int) -> dict:
     eta = np.sort(rng.uniform(0.35, 0.8, n_h))
     while n_h > 1 and np.min(np.diff(eta)) < 0.05:  # distinct heights
         eta = np.sort(rng.uniform(0.35, 0.8, n_h))
-    effect = EFFECTS[seed % len(EFFECTS)]
+    effect = effects[seed % len(effects)]
     case = {
         "EI0": float(pr.get("EI0").draw(rng, 1)[0]),
         "p": float(pr.get("p").draw(rng, 1)[0]),
@@ -74,7 +74,7 @@ def draw_case(seed: int) -> dict:
         "length_m": L,
         "heights_m": tuple(float(e * L) for e in eta),
         # forces only and with centerlines alternate per cycle of effects, so each effect gets both
-        "shapes": bool((seed // len(EFFECTS)) % 2),
+        "shapes": bool((seed // len(effects)) % 2),
         "effect": effect,
     }
     if effect is not None:
@@ -120,12 +120,14 @@ def reference_dataset(ds, case: dict):
     return replace(ds, pushes=tuple(pushes)), worst, n_fallback
 
 
-def replicate(seed: int, cap_l: float | None = None, slip: bool = False, step_l: float | None = None) -> dict:
+def replicate(
+    seed: int, cap_l: float | None = None, slip: bool = False, step_l: float | None = None, effects: tuple = EFFECTS
+) -> dict:
     """One replicate; ``cap_l``: every push stops at this fraction of the stem length (None: at the slip, the
     simulator's default); ``slip``: the fit uses where each push slipped (``bayesrod.fit(slip=True)``);
     ``step_l``: the robot's step between samples as a fraction of L (None: the simulator's default, 60
     samples spread over each push knowing where it will slip, a design that depends on the stem)."""
-    case = draw_case(seed)
+    case = draw_case(seed, effects)
     noise = NoiseModel(force_sd_N=case["sigma_force_N"], shape_sd_m=0.0015, shape_sd_reported_m=0.0015)
     effects = {case["effect"]: case["effect_value"]} if case["effect"] else {}
     stem = {k: case[k] for k in ("EI0", "p", "length_m", "heights_m")} | {"specimen": f"sbcg-{seed}"}
@@ -243,6 +245,12 @@ def main(argv=None) -> None:
         "simulator's default design, 60 samples per push spread knowing where it slips (the CSVs before 2026-11-26)",
     )
     ap.add_argument(
+        "--effects",
+        default=",".join(EFFECTS[1:]),
+        help="the effects the replicates cycle through after 'none' (comma separated; default all of "
+        f"{', '.join(EFFECTS[1:])}); contact_friction's likelihood tables take tens of minutes per replicate",
+    )
+    ap.add_argument(
         "--only",
         choices=["all", "one-height-forces"],
         default="all",
@@ -252,12 +260,16 @@ def main(argv=None) -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     csv = args.out / "sbc_geometry.csv"
     seeds = range(args.first_seed, args.first_seed + args.replicates)
+    effects = (None, *[e for e in args.effects.split(",") if e])
+    bad = [e for e in effects[1:] if e not in EFFECTS]
+    if bad:
+        ap.error(f"--effects: expected names among {', '.join(EFFECTS[1:])}, got {', '.join(bad)}")
     if args.only == "one-height-forces":
-        cases = {s: draw_case(s) for s in seeds}
+        cases = {s: draw_case(s, effects) for s in seeds}
         seeds = [s for s, c in cases.items() if len(c["heights_m"]) == 1 and not c["shapes"]]
     from bayesrod.dataset.io import read_rows
 
-    fn = partial(replicate, cap_l=args.cap_l, slip=args.slip, step_l=args.step_l or None)
+    fn = partial(replicate, cap_l=args.cap_l, slip=args.slip, step_l=args.step_l or None, effects=effects)
     for row in run_pending(csv, FIELDS, list(seeds), fn, done_key=lambda r: int(r["seed"]), workers=args.jobs):
         cov = " ".join(f"{k}:{row.get(f'{k}_covered', '-')}" for k in PARAMS)
         print(f"seed {row['seed']} ({row['effect']}, {row['n_heights']} h, shapes {row['shapes']}): {cov}", flush=True)
