@@ -125,12 +125,14 @@ def main(argv=None) -> None:
     ap.add_argument("--reps", type=int, default=10)
     ap.add_argument("--graded-reps", type=int, default=5)
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--stems", default="twig,grass", help="presets to render, comma separated (default twig,grass)")
     a = ap.parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     csv = out / "diameter_study.csv"
-    jobs = [(s, k, False) for k in range(a.reps) for s in ("twig", "grass")]
-    jobs += [(s, 100 + k, True) for k in range(a.graded_reps) for s in ("twig", "grass")]
+    stems = [s for s in a.stems.split(",") if s]
+    jobs = [(s, k, False) for k in range(a.reps) for s in stems]
+    jobs += [(s, 100 + k, True) for k in range(a.graded_reps) for s in stems]
 
     def done_key(r):
         return r["stem"], int(float(r["seed"])), bool(int(float(r["graded"])))
