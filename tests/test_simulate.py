@@ -155,7 +155,8 @@ def test_seed_determinism_and_out_refused(tmp_path):
 
 def test_frames_render_and_validate(tmp_path):
     ds = make_dataset(tmp_path / "f", "grass", seed=4, frames=True, n_frames_engaged=3, n_frames_after=1)
-    assert [p for p in validate_dataset(ds) if p.severity == "error"] == []
+    ds.save(tmp_path / "fold")
+    assert [p for p in validate_dataset(tmp_path / "fold") if p.severity == "error"] == []
     spec = read_dataset(ds)
     import cv2
 
@@ -164,3 +165,29 @@ def test_frames_render_and_validate(tmp_path):
     depth = cv2.imread(str(rec.depth), cv2.IMREAD_UNCHANGED)
     assert rgb.dtype == np.uint8 and rgb.shape == (480, 640, 3)
     assert depth.dtype == np.uint16 and (depth == 0).mean() > 0.02  # missing depth exists
+
+
+def test_a_fixed_step_push_whose_branch_folds_near_its_end_stays_a_forward_record(tmp_path):
+    """A stiff base spring at high p (scripts/sbc_geometry.py, seed 1): the placement table smooths over a
+    fold at the branch's end, so the last nominal sample had to step back 17 mm behind the one before it
+    and the robot went backwards in time (the dataset check refused it). Such samples are past the slip."""
+    from bayesrod import simulate
+    from bayesrod.dataset.simulate import NoiseModel
+
+    L = 1.4434205437073184  # the case exactly as scripts/sbc_geometry.py draws it (rounded, it does not fold)
+    stem = {"EI0": 1.204674544531278, "p": 1.0342550349236301, "length_m": L, "heights_m": (0.5069502412767372,)}
+    noise = NoiseModel(force_sd_N=0.01855241488948748, shape_sd_m=0.0015, shape_sd_reported_m=0.0015)
+    ds = simulate(
+        stem | {"specimen": "fold"},
+        seed=1,
+        noise_model=noise,
+        effects={"base_compliance": 1.3955766867559811},
+        config_overrides={"n_frames_engaged": 2, "robot_step_m": 0.01 * L},
+    )
+    _, (sim,) = ds.simulation
+    assert np.all(np.diff(sim.time_s) > 0) and np.all(np.diff(sim.robot_x_m) > 0)
+    assert np.all(np.diff(sim.contact_x_m[sim.engaged]) > 0)
+    n = int(sim.engaged.sum())
+    assert n >= 4 and np.array_equal(sim.engaged, np.arange(sim.engaged.size) < n)  # engaged up to the slip only
+    ds.save(tmp_path / "fold")
+    assert [p for p in validate_dataset(tmp_path / "fold") if p.severity == "error"] == []

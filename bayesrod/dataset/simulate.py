@@ -241,6 +241,15 @@ def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> Simulat
         eng = force_from_displacement(D, h, EI0, p, L, eff)
     if eng.slipped.any():
         raise RuntimeError(f"simulate: {int(eng.slipped.sum())} engaged samples past the slip at h = {h:g} m")
+    back = np.flatnonzero(np.diff(D) <= 0.0)
+    if back.size:
+        # a sample stepped back behind the one before it lay past the end of the loading branch the placement
+        # table smooths over (a fold near the end): the stem slipped before the robot got there, so it and
+        # every later sample are past the slip (they had the robot move backwards in time)
+        keep = int(back[0]) + 1
+        engaged[np.flatnonzero(engaged)[keep:]] = False
+        D = D[:keep]
+        eng = force_from_displacement(D, h, EI0, p, L, eff)
     dx = wire_deflection(eng.true_force_N)
     robot[engaged] = D + dx  # exact robot position for the exact D (negligibly off uniform)
     force = np.full(robot.size, eff.force_offset)
