@@ -155,8 +155,7 @@ def test_seed_determinism_and_out_refused(tmp_path):
 
 def test_frames_render_and_validate(tmp_path):
     ds = make_dataset(tmp_path / "f", "grass", seed=4, frames=True, n_frames_engaged=3, n_frames_after=1)
-    ds.save(tmp_path / "fold")
-    assert [p for p in validate_dataset(tmp_path / "fold") if p.severity == "error"] == []
+    assert [p for p in validate_dataset(ds) if p.severity == "error"] == []
     spec = read_dataset(ds)
     import cv2
 
