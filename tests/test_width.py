@@ -371,17 +371,30 @@ def test_diameter_model_errors_name_the_field():
         youngs_modulus({"EI0": np.ones(3), "p": np.ones(3)})
 
 
+def _box_profiles(w, contrast, blur, noise, rng):
+    """Coverage profiles (t, a) of boxes of widths ``w`` [px] at random sub-pixel centres c, seen through a
+    Gaussian blur of sd ``blur`` at ``contrast`` times the assumed stem colour, with pixel noise: (t, c, list)."""
+    from bayesrod.vision.width import _blurred_box
+
+    t = np.arange(-6, 6, 0.25)
+    c = rng.uniform(-0.5, 0.5, w.size)
+    return (
+        t,
+        c,
+        [
+            (t, contrast * _blurred_box(t - ci, wi, blur) + rng.normal(0, noise, t.size))
+            for wi, ci in zip(w, c, strict=True)
+        ],
+    )
+
+
 def test_contrast_scale_recovers_the_contrast_of_blurred_profiles():
     """Coverage profiles of boxes 1.5-5 px wide, blurred (sd 1.1 px), at 0.8 of the assumed contrast."""
-    from bayesrod.vision.width import _blurred_box, contrast_scale
+    from bayesrod.vision.width import contrast_scale
 
     rng = np.random.default_rng(0)
-    t = np.arange(-6, 6, 0.25)
     w = rng.uniform(1.5, 5.0, 30)
-    c = rng.uniform(-0.5, 0.5, 30)
-    profiles = [
-        (t, 0.8 * _blurred_box(t - ci, wi, 1.1) + rng.normal(0, 0.02, t.size)) for wi, ci in zip(w, c, strict=True)
-    ]
+    _, _, profiles = _box_profiles(w, 0.8, 1.1, 0.02, rng)
     assert contrast_scale(profiles, w / 2) == pytest.approx(0.8, abs=0.01)
     assert contrast_scale(profiles[:4], w[:4] / 2) == 1.0  # too few profiles to read a shape from
 
@@ -393,13 +406,8 @@ def test_contrast_scale_ignores_profiles_that_clutter_crosses():
     set the scale 1.2 or more, as on the rendered grass (docs/validation.md)."""
     from bayesrod.vision.width import _blurred_box, _clean_profiles, contrast_scale
 
-    rng = np.random.default_rng(1)
-    t = np.arange(-6, 6, 0.25)
     w = np.linspace(3.3, 2.0, 60)
-    c = rng.uniform(-0.5, 0.5, 60)
-    profiles = [
-        (t, 1.06 * _blurred_box(t - ci, wi, 0.8) + rng.normal(0, 0.03, t.size)) for wi, ci in zip(w, c, strict=True)
-    ]
+    t, c, profiles = _box_profiles(w, 1.06, 0.8, 0.03, np.random.default_rng(1))
     half = w / 2
     hit = np.arange(60) % 6 == 3
     for i in np.flatnonzero(hit):
