@@ -129,7 +129,7 @@ def replicate(
     samples spread over each push knowing where it will slip, a design that depends on the stem)."""
     case = draw_case(seed, effects)
     noise = NoiseModel(force_sd_N=case["sigma_force_N"], shape_sd_m=0.0015, shape_sd_reported_m=0.0015)
-    effects = {case["effect"]: case["effect_value"]} if case["effect"] else {}
+    switched = {case["effect"]: case["effect_value"]} if case["effect"] else {}
     stem = {k: case[k] for k in ("EI0", "p", "length_m", "heights_m")} | {"specimen": f"sbcg-{seed}"}
     extra = {} if case["shapes"] else {"n_frames_engaged": 2}
     if cap_l is not None:  # a stop at a fixed fraction of L tells nothing about the stem; a stop at the slip does
@@ -139,7 +139,7 @@ def replicate(
     row = {"seed": seed, "length_m": case["length_m"], "n_heights": len(case["heights_m"])}
     row |= {"shapes": case["shapes"], "effect": case["effect"] or "none"}
     try:
-        ds = simulate(stem, seed=seed, noise_model=noise, effects=effects, config_overrides=extra)
+        ds = simulate(stem, seed=seed, noise_model=noise, effects=switched, config_overrides=extra)
         ds, worst, n_fallback = reference_dataset(ds, case)
         res = fit_for_calibration(
             ds,
