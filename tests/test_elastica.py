@@ -228,3 +228,23 @@ def test_plain_step_per_element_matches_the_general_step(p):
         fast = E._step_plain_each(Y, s, h, f, P, a)
         np.testing.assert_allclose(fast, E._step_general(Y, s, h, f, P, a), rtol=1e-11, atol=1e-14)
         np.testing.assert_array_equal(E._step(Y, s, h, f, P, a), fast)
+
+
+def test_centerline_at_heights_matches_a_fine_resampling():
+    """The Newton-on-Hermite reading of x(z) against the obvious one: resample the same Hermite centerline
+    at 20001 arc lengths and interpolate linearly in height (error ~1e-9 there); also above the top."""
+    from bayesrod.physics.elastica import centerline_at, centerline_x_at_heights
+
+    p = np.linspace(0.0, 1.5, 7)[:, None]
+    r = contact_from_force_nd(np.linspace(0.2, 2.5, 6)[None, :], 0.56, p, keep_shape=True)
+    grid = r["grid"].reshape(r["grid"].shape[0], 3, -1)[..., r["found"].ravel()]
+    z = np.linspace(0.0, 1.0, 301)  # up to the rest height: bent stems end below it
+    x, cos_phi = centerline_x_at_heights(grid, z)
+    sig = np.linspace(0.0, 1.0, 20001)
+    xz = centerline_at(grid, sig)
+    tilt = np.gradient(xz[1], sig, axis=0) / np.hypot(np.gradient(xz[0], sig, axis=0), np.gradient(xz[1], sig, axis=0))
+    for j in range(grid.shape[-1]):
+        top = np.maximum.accumulate(xz[1, :, j])
+        np.testing.assert_allclose(x[j], np.interp(z, top, xz[0, :, j]), rtol=0, atol=1e-8)
+        np.testing.assert_allclose(cos_phi[j], np.interp(z, top, tilt[:, j]), rtol=0, atol=1e-6)
+    assert (z[None, :] > grid[:, 1].max(axis=0)[:, None]).any()  # some heights lie above a bent stem's top

@@ -45,6 +45,7 @@ __all__ = [
     "DEFAULT_STEPS",
     "secant_k_theta",
     "centerline_at",
+    "centerline_x_at_heights",
 ]
 
 DEFAULT_STEPS = 48
@@ -997,6 +998,62 @@ def secant_k_theta(
     rest = contact_from_force(np.zeros_like(sol.force_N), height_m, EI0, p, length_m, effects, n_steps=n_steps)
     theta = sol.contact_angle_rad - rest.contact_angle_rad
     return np.where(sol.found, sol.force_N * np.asarray(height_m, float) / theta, np.nan)
+
+
+def centerline_x_at_heights(grid: ArrayLike, zeta: ArrayLike) -> tuple[NDArray, NDArray]:
+    """Horizontal position and cos(tangent angle) where each centerline first reaches each height.
+
+    The centerline between grid nodes is the cubic Hermite of :func:`centerline_at`; the arc length at
+    which it reaches ``zeta`` is found in the bracketing interval by Newton's method on that cubic
+    (started from linear interpolation), so no resampling is needed. Heights are taken on the running
+    maximum of zeta (a stem that curls over is read where it first gets there); above the highest point
+    the tip is returned. Reference: resample with :func:`centerline_at` on a fine grid and interpolate
+    linearly in height (tests/test_elastica.py).
+
+    Parameters
+    ----------
+    grid : array, shape (n + 1, 3, C)
+        March grids (xi, zeta, phi at the nodes) of C centerlines, nondimensional (/L).
+    zeta : array, shape (k,)
+        Query heights z/L.
+
+    Returns
+    -------
+    x, cos_phi : arrays, shape (C, k)
+        xi at each height, and the cosine of the tangent angle from vertical there.
+    """
+    g = np.asarray(grid, float)
+    z = np.asarray(zeta, float)
+    n = g.shape[0] - 1
+    h = 1.0 / n
+    xi, ze, ph = g[:, 0].T, g[:, 1].T, g[:, 2].T  # (C, n + 1)
+    top = np.maximum.accumulate(ze, axis=1)
+    idx = np.clip(np.sum(top[:, :, None] <= z[None, None, :], axis=1) - 1, 0, n - 1)  # (C, k)
+
+    def at(a, shift=0):
+        return np.take_along_axis(a, idx + shift, axis=1)
+
+    z0, z1, x0, x1 = at(ze), at(ze, 1), at(xi), at(xi, 1)
+    s0, s1, c0, c1 = np.sin(at(ph)) * h, np.sin(at(ph, 1)) * h, np.cos(at(ph)) * h, np.cos(at(ph, 1)) * h
+    span = z1 - z0
+    t = np.clip((z[None, :] - z0) / np.where(span > 0, span, 1.0), 0.0, 1.0)
+
+    def herm(t, p0, d0, p1, d1):
+        t2, t3 = t * t, t * t * t
+        val = (2 * t3 - 3 * t2 + 1) * p0 + (t3 - 2 * t2 + t) * d0 + (-2 * t3 + 3 * t2) * p1 + (t3 - t2) * d1
+        der = (6 * t2 - 6 * t) * p0 + (3 * t2 - 4 * t + 1) * d0 + (-6 * t2 + 6 * t) * p1 + (3 * t2 - 2 * t) * d1
+        return val, der
+
+    for _ in range(4):
+        val, der = herm(t, z0, c0, z1, c1)
+        t = np.clip(t - (val - z[None, :]) / np.where(np.abs(der) > 1e-12, der, 1e-12), 0.0, 1.0)
+    x, dx = herm(t, x0, s0, x1, s1)
+    _, dz = herm(t, z0, c0, z1, c1)
+    cos_phi = dz / np.maximum(np.hypot(dx, dz), 1e-12)
+    above = z[None, :] >= top[:, -1:]  # above the highest point: the tip, as the reference reads it
+    x = np.where(above, xi[:, -1:], x)
+    cos_phi = np.where(above, np.cos(ph[:, -1:]), cos_phi)
+    return x, cos_phi
 
 
 def centerline_at(grid: ArrayLike, sig: ArrayLike) -> NDArray:
