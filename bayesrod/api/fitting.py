@@ -722,7 +722,8 @@ def fit(
         ``rho_force`` sampled beside ``sigma_force_N`` (docs/inference.md).
     preload : bool
         Fit each push's preload: the contact displacement already made when recording began (m, prior
-        uniform on [0, 0.1 L]); forces only (docs/inference.md).
+        uniform on [0, 0.1 L]); with centerlines the preload moves the push's frames along the branch as it
+        moves its forces (docs/inference.md).
     length : {"auto", "known", "unknown"}
         The stem length L: ``"unknown"`` samples it (``length_m``) under the prior file's ``length_m`` entry,
         else uniform on [L/1.5, 1.5 L] of the dataset's length (above the highest contact); ``"auto"``

@@ -254,7 +254,8 @@ def build_parser() -> argparse.ArgumentParser:
     ft.add_argument(
         "--preload",
         action="store_true",
-        help="fit each push's preload (the displacement already made when recording began); forces only",
+        help="fit each push's preload (the displacement already made when recording began; it moves the push's "
+        "frames too)",
     )
     ft.add_argument(
         "--length",
@@ -355,7 +356,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--preload",
         choices=["auto", "yes", "no"],
         default="auto",
-        help="fit each push's preload (forces only; auto: when a push starts loaded)",
+        help="fit each push's preload (auto: when a push starts loaded)",
     )
     dg.add_argument(
         "--length",

@@ -410,3 +410,36 @@ def write_simulated(
             entry["frames"] = f"{sp.id}/frames"
         doc["pushes"].append(entry)
     write_json(out / "specimen.json", doc)
+
+
+def started_loaded(ds, preloads_m) -> object:
+    """The dataset as a rig that began recording ``preloads_m[j]`` [m] into push j would have written it.
+
+    Each push keeps its samples from where the contact displacement reaches the preload on, with the
+    displacements counted from there (the preload is lost to the record, as on a rig), and the frames
+    taken from that moment on. For studies of the preload nuisance (docs/inference.md, "Preloads"); the
+    truth is set by the simulator, independently of the fit's tables.
+
+    Parameters
+    ----------
+    ds : Dataset
+    preloads_m : sequence of float, shape (n_pushes,)
+        Contact displacement already made when recording began, per push [m] (0: the push as it is).
+    """
+    from .model import ForceSeries
+
+    if len(preloads_m) != len(ds.pushes):
+        raise ValueError(f"preloads_m: expected one per push ({len(ds.pushes)}), got {len(preloads_m)}")
+    pushes = []
+    for push, delta in zip(ds.pushes, preloads_m, strict=True):
+        f = push.force
+        keep = f.contact_x_m >= delta
+        if not keep.any():
+            raise ValueError(f"preloads_m: expected a preload inside push {push.id}, got {delta} m past its end")
+        wire = None if f.wire_elongation_m is None else f.wire_elongation_m[keep]
+        force = ForceSeries(
+            f.time_s[keep], f.force_N[keep], f.robot_x_m[keep] - delta, wire, f.contact_x_m[keep] - delta
+        )
+        frames = None if push.shapes is None else tuple(s for s in push.shapes if s.time_s >= f.time_s[keep][0])
+        pushes.append(replace(push, force=force, shapes=frames))
+    return replace(ds, pushes=tuple(pushes))

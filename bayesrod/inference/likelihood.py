@@ -30,7 +30,7 @@ Miller & Dunson 2019), measured from the residuals at the posterior mode by
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,7 +39,7 @@ from scipy.interpolate import PchipInterpolator
 
 from ..dataset.engagement import detect_engagement
 from ..dataset.model import Specimen
-from ..physics.elastica import centerline_at, contact_from_force_nd
+from ..physics.elastica import centerline_x_at_heights, contact_from_force_nd
 from ..physics.lumped import stem_diameter
 from .priors import ParameterSpace
 
@@ -414,11 +414,6 @@ class RodLikelihood:
             raise ValueError(
                 f"preload: expected no tabled effect beside it (one extra table axis at a time), got {effect_axis.name}"
             )
-        if self.preload and use_shapes and any(p.shapes for p in spec.pushes):
-            raise ValueError(
-                "preload: expected a force-only fit (centerlines not used): the fit's shape tables do not "
-                "move with a preload yet (diagnose models a preload with centerlines)"
-            )
         self.spec = spec
         self.L = float(spec.length_m)
         self.effects = tuple(effects)
@@ -620,6 +615,7 @@ class RodLikelihood:
     def _build_tables_at(self, eff_nd: dict | None, all_curves: list) -> None:
         L, pg = self.L, self.p_grid
         self._preload_tables = []
+        self._preload_shapes = []
         fF, fobs, fh, xs, cs, xobs, zobs, sd, pid, fid = [], [], [], [], [], [], [], [], [], []
         ends = []
         for d, curves in zip(self.data, all_curves, strict=True):
@@ -635,6 +631,8 @@ class RodLikelihood:
                 fobs.append(d.F_N)
                 fh.append(np.full(d.F_N.size, d.height_m))
             if d.x_m.size:
+                if self.preload and d.D_m.size:
+                    self._preload_shapes.append(self._preload_shape_table(d, eta, curves, len(fobs) - 1))
                 xp, cp = self._shape_table(d, eta, curves)
                 xs.append(xp)
                 cs.append(cp)
@@ -723,29 +721,58 @@ class RodLikelihood:
         f_t = np.concatenate([curves.force(d_nd, continued=False), np.array(f_end)], axis=1)  # (P, M + 2)
         P, M = f_t.shape[0], d_nd.size
         r = contact_from_force_nd(f_t, eta, pg[:, None], curves.effects_nd, keep_shape=True)
-        sig = np.linspace(0.0, 1.0, 961)  # 0.5 mm spacing on a 0.47 m stem: x(z) error < 1 um
-        xz = centerline_at(r["grid"], sig)  # (2, 961, P, M)
-        dx = np.gradient(xz[0], sig, axis=0)
-        dz = np.gradient(xz[1], sig, axis=0)
-        cos_phi = dz / np.maximum(np.hypot(dx, dz), 1e-12)
+        grid = r["grid"]  # (n + 1, 3, P, M + 2)
         xp = np.empty((P, d.x_m.size))
         cp = np.empty((P, d.x_m.size))
-
-        def at(k, col, z):
-            zeta = np.maximum.accumulate(xz[1, :, k, col])
-            return np.interp(z, zeta, xz[0, :, k, col]) * L, np.interp(z, zeta, cos_phi[:, k, col])
-
         for m in range(M):
             sel = d.frame_index == m
             z = d.z_m[sel] / L
-            for k in range(P):
-                xp[k, sel], cp[k, sel] = at(k, m, z)
-                past = d_nd[m] - d_end[k]
-                if past > 0.0 and step[k] > 0.0:
-                    (x1, c1), (x0, c0) = at(k, M, z), at(k, M + 1, z)
-                    xp[k, sel] += past / step[k] * (x1 - x0)
-                    cp[k, sel] += past / step[k] * (c1 - c0)
+            x, c = centerline_x_at_heights(grid[:, :, :, m], z)  # (P, k_m): exact Hermite, no resampling
+            xp[:, sel], cp[:, sel] = x * L, c
+            past = d_nd[m] - d_end
+            go_on = (past > 0.0) & (step > 0.0)
+            if go_on.any():
+                x1, c1 = centerline_x_at_heights(grid[:, :, go_on, M], z)
+                x0, c0 = centerline_x_at_heights(grid[:, :, go_on, M + 1], z)
+                r_ = (past[go_on] / step[go_on])[:, None]
+                xp[np.ix_(go_on, sel)] += r_ * (x1 - x0) * L
+                cp[np.ix_(go_on, sel)] += r_ * (c1 - c0)
         return xp, cp
+
+    def _preload_shape_table(self, d: PushData, eta: float, curves: ForceCurves, column: int) -> dict:
+        """A preloaded push's shapes for any preload (:meth:`predict_shape_x_preloaded`).
+
+        A preload moves every frame of the push further along the branch by one unknown displacement.
+        The table holds x [m] and cos(tangent angle) at every observed point of the push with its frames
+        moved by each of :data:`PRELOAD_SHAPE_NODES` preloads spread evenly over the prior's [0, PRELOAD_MAX_L L],
+        (G, P, k) each, from :meth:`_shape_table` (so past the slip as it continues them). Linear in the
+        preload between nodes: a point's x at fixed height has kinks in the displacement (where the stem's
+        top passes below it, at the slip) that a higher-order rule spreads over neighbouring nodes.
+        """
+        grid = np.linspace(0.0, PRELOAD_MAX_L * self.L, PRELOAD_SHAPE_NODES)
+        P, M, K = self.p_grid.size, d.frame_D_m.size, d.x_m.size
+        per = max(1, PRELOAD_SHAPE_COLUMNS // (P * M))  # preload nodes solved together (one batched march)
+        xs, cs = [], []
+        for start in range(0, grid.size, per):
+            g = grid[start : start + per]
+            n = g.size
+            tiled = replace(
+                d,
+                frame_D_m=(d.frame_D_m[None, :] + g[:, None]).ravel(),
+                frame_index=(d.frame_index[None, :] + M * np.arange(n)[:, None]).ravel(),
+                x_m=np.tile(d.x_m, n),
+                z_m=np.tile(d.z_m, n),
+                sd_m=None,
+            )
+            x, c = self._shape_table(tiled, eta, curves)  # (P, n K)
+            xs.append(x.reshape(P, n, K).transpose(1, 0, 2))
+            cs.append(c.reshape(P, n, K).transpose(1, 0, 2))
+        return {
+            "step_m": grid[1] - grid[0],
+            "x": np.concatenate(xs),
+            "cos": np.concatenate(cs),
+            "column": column,  # the push's index among the pushes with forces (its preload)
+        }
 
     # -------------------------------------------------------------- evaluation
     def _weights(self, p: NDArray, u: NDArray | None):
@@ -807,6 +834,36 @@ class RodLikelihood:
             out.append(np.einsum("wa,wan->wn", wp, g0 + t[:, None, :] * (g1 - g0)))
         return np.concatenate(out, axis=1)
 
+    def predict_shape_x_preloaded(self, p: NDArray, preload_m: NDArray) -> tuple[NDArray, NDArray]:
+        """Centerline x [m] and cos(tangent angle) at every observed point with each push's frames moved
+        by its preload along the branch, (W, k) each.
+
+        ``p`` (W,), ``preload_m`` (W, J) [m] (one per push with forces). Linear in the preload between
+        the nodes of :meth:`_preload_shape_table`, 4-point Lagrange in p. A push with frames but no
+        forces has no preload: its points come from the plain shape table.
+        """
+        p = np.atleast_1d(np.asarray(p, float))
+        W = p.size
+        pre = np.asarray(preload_m, float).reshape(W, -1)
+        ip, wp = _lagrange4(self.p_grid, p)  # (W, 4)
+        x_all, c_all = (a.copy() for a in self.predict_shape_x(p))
+        sizes = [d.x_m.size for d in self.data if d.x_m.size]
+        starts = np.concatenate([[0], np.cumsum(sizes)])
+        tables = iter(self._preload_shapes)
+        for j, d in enumerate(d for d in self.data if d.x_m.size):
+            if not d.D_m.size:
+                continue
+            t = next(tables)
+            G = t["x"].shape[0]
+            v = np.clip(pre[:, t["column"]] / t["step_m"], 0.0, G - 1.000001)
+            g = np.floor(v).astype(int)
+            w = np.stack([1.0 - (v - g), v - g], axis=1)[:, :, None] * wp[:, None, :]  # (W, 2, 4)
+            rows = (g[:, None, None] + np.arange(2)[None, :, None], ip[:, None, :])  # (W, 2, 4) each
+            sl = slice(starts[j], starts[j + 1])
+            for out, tab in ((x_all, t["x"]), (c_all, t["cos"])):
+                out[:, sl] = np.matmul(w.reshape(W, 1, 8), tab[rows].reshape(W, 8, -1))[:, 0, :]
+        return x_all, c_all
+
     def predict_nd_force(self, p: NDArray, u: NDArray | None = None) -> NDArray:
         """Nondimensional force at every engaged sample, (W, N).
 
@@ -850,7 +907,10 @@ class RodLikelihood:
                 F = F + self._per_push(params, self.offset_names, p.size)[:, self.F_push]
             out["force"] = self.F_obs[None, :] - F
         if self.n_points:
-            x, c = self.predict_shape_x(p, u, weights)
+            if self.preload and all(n in params for n in self.preload_names):
+                x, c = self.predict_shape_x_preloaded(p, self._per_push(params, self.preload_names, p.size))
+            else:
+                x, c = self.predict_shape_x(p, u, weights)
             out["shape"] = (self.x_obs[None, :] - x) * c
         return out
 
@@ -947,6 +1007,11 @@ DIAMETER_SCALE_MIN = 8
 PRELOAD_MAX_L = 0.1
 #: nodes of the per-push force table in d that a preload needs (linear interpolation between them)
 PRELOAD_GRID = 2001
+#: preload nodes of a preloaded push's shape table over [0, PRELOAD_MAX_L L], linear between them
+#: (docs/performance.md, "A preload with centerlines")
+PRELOAD_SHAPE_NODES = 41
+#: p nodes x frames solved in one batched march when building those tables (memory: ~15 kB each)
+PRELOAD_SHAPE_COLUMNS = 6000
 
 
 #: nuisances of a real push (docs/priors.md): nodes of the log-uniform stem-length table axis; the
