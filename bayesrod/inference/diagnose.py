@@ -45,7 +45,7 @@ from scipy.optimize import least_squares, lsq_linear
 
 from ..physics import Effects
 from ..physics.effects import EFFECT_NAMES
-from ..physics.elastica import centerline_at, force_from_displacement_nd
+from ..physics.elastica import centerline_x_at_heights, force_from_displacement_nd
 from .likelihood import HEIGHT_CUT_SD, PRELOAD_MAX_L, ForceCurves, PushData, ar1_innovations
 
 CATALOG = EFFECT_NAMES  # every effect of the contract's catalog is a candidate
@@ -502,20 +502,14 @@ class ForwardModel:
         D = (d.frame_D_m + preload_m) / L
         h = d.height_m if height_m is None else height_m
         r = force_from_displacement_nd(D, h / L, p, eff.nondim(L, EI0), keep_shape=True)
-        sig = np.linspace(0.0, 1.0, 961)
-        xz = centerline_at(r["grid"], sig)  # (2, 961, M)
-        dx, dz = np.gradient(xz[0], sig, axis=0), np.gradient(xz[1], sig, axis=0)
-        cos_phi = dz / np.maximum(np.hypot(dx, dz), 1e-12)
-        x = np.full(d.x_m.size, np.nan)
-        c = np.ones(d.x_m.size)
-        for m in range(d.frame_D_m.size):
-            sel = d.frame_index == m
-            if not np.all(np.isfinite(xz[:, :, m])):
-                continue  # the model slipped before this frame: no prediction (residual 0)
-            zeta = np.maximum.accumulate(xz[1, :, m])
-            x[sel] = np.interp(d.z_m[sel] / L, zeta, xz[0, :, m]) * L
-            c[sel] = np.interp(d.z_m[sel] / L, zeta, cos_phi[:, m])
-        return x, c
+        grid = r["grid"]  # (n + 1, 3, M)
+        # every point read on every frame's centerline in one call, then each point on its own frame
+        xa, ca = centerline_x_at_heights(np.nan_to_num(grid), d.z_m / L)  # (M, k)
+        pts = np.arange(d.x_m.size)
+        x, c = xa[d.frame_index, pts] * L, ca[d.frame_index, pts]
+        # the model slipped before a frame: no prediction there (residual 0)
+        slipped = ~np.all(np.isfinite(grid), axis=(0, 1))[d.frame_index]
+        return np.where(slipped, np.nan, x), np.where(slipped, 1.0, c)
 
 
 @dataclass
