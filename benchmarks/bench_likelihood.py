@@ -55,10 +55,11 @@ def naive_log_likelihood(lik: RodLikelihood, EI0: float, p: float, s_force: floa
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--force-noise", choices=["iid", "ar1"], default="iid", help="the table likelihood's noise model")
     args = ap.parse_args()
     spec = read_dataset(resources.files("bayesrod") / "data" / "default")
     t0 = time.perf_counter()
-    lik = RodLikelihood(spec)
+    lik = RodLikelihood(spec, force_noise=args.force_noise)
     post = LogPosterior(lik, load_prior("default"))
     t_tables = time.perf_counter() - t0
     calls = {"n": 0}
@@ -83,6 +84,7 @@ def main():
     per_eval_naive = statistics.median(times)
     ess_s_fast = ess / t_fit
     ess_s_naive = ess / (calls["n"] * per_eval_naive)
+    print(f"force noise: {args.force_noise}")
     print(f"data: {lik.n_force} force samples, {lik.n_points} centerline points, {len(spec.pushes)} pushes")
     print(
         f"table likelihood: tables {t_tables:.1f} s, fit {t_fit:.1f} s in total, {calls['n']} walker evaluations, "
