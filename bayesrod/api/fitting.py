@@ -807,7 +807,11 @@ def fit(
         "bayesrod": __version__,
     }
     # the likelihood first: bad effects or data without engaged samples fail before anything is written
+    t_tables = time.perf_counter()
+    if preload and use_shapes and any(p.shapes for p in spec.pushes):  # the one build that takes long
+        log.info("%s: tabling the centerlines over each push's preload (several seconds per push)", spec.specimen)
     lik = build_likelihood(spec, pr, effects, **_likelihood_options(config))
+    log.info("%s: likelihood tables built in %.1f s", spec.specimen, time.perf_counter() - t_tables)
     if lik.length_prior is not None:
         lo, hi = lik.length_prior.bounds()
         log.info("%s: stem length sampled (prior %s on [%.3g, %.3g] m)", spec.specimen, lik.length_prior.dist, lo, hi)
