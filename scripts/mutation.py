@@ -90,6 +90,7 @@ TARGETS: dict[str, tuple[str, list[str], list[str] | None]] = {
                     "test_root_search_finds_roots_next_to_the_branch_end",
                     "test_plain_fast_step_matches_the_general_step",
                     "test_plain_step_per_element_matches_the_general_step",
+                    "test_centerline_at_heights_matches_a_fine_resampling",
                 )
             ),
             "tests/test_effects.py",
