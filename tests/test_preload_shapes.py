@@ -75,3 +75,19 @@ def test_a_preloaded_push_with_centerlines_is_fitted_end_to_end():
     assert s.loc["EI0", "q95"] / s.loc["EI0", "q05"] < 1.01  # centerlines and forces pin it
     assert s["r_hat"].max() < 1.05
     assert post.to_dict()["model_check"]["verdict"] == "ok"
+
+
+def test_a_simulated_dataset_changed_after_simulation_saves_what_it_holds(tmp_path):
+    """SimulatedDataset.save wrote the simulation again, so a dataset cut with started_loaded (or any
+    dataclasses.replace of its pushes) was saved uncut: a preload the fit then could not find."""
+    ds = bayesrod.simulate("twig", seed=3, config_overrides={"n_frames_engaged": 2})
+    cut = started_loaded(ds, DELTAS)
+    back = bayesrod.load(cut.save(tmp_path / "cut"))
+    for a, b in zip(back.pushes, cut.pushes, strict=True):
+        np.testing.assert_allclose(a.force.force_N, b.force.force_N)
+        np.testing.assert_allclose(a.force.contact_x_m, b.force.contact_x_m, atol=1e-9)
+        assert len(a.shapes) == len(b.shapes)
+    assert back.pushes[0].force.force_N[0] > 1.0  # it starts loaded
+    with pytest.raises(ValueError, match="^frames: expected the dataset as simulated"):
+        cut.save(tmp_path / "frames", frames=True)
+    assert (ds.save(tmp_path / "as-simulated") / "h450" / "truth_shapes.csv").is_file()  # unchanged: as before

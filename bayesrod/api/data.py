@@ -42,6 +42,8 @@ class SimulatedDataset(Dataset):
     """A simulated dataset in memory; :meth:`save` also writes the noise-free shapes and, if asked, RGB-D frames."""
 
     simulation: tuple = field(default=(), compare=False, repr=False)
+    #: the pushes as simulated: a copy whose pushes were replaced since is saved as what it holds
+    built_pushes: tuple = field(default=(), compare=False, repr=False)
 
     def save(self, path, *, overwrite: bool = False, frames: bool = False, arm: str = "leading") -> Path:
         """Write the dataset directory ``path`` atomically (docs/format.md).
@@ -55,6 +57,14 @@ class SimulatedDataset(Dataset):
         if arm not in ("leading", "trailing"):
             raise ValueError(f"arm: expected leading or trailing, got {arm!r}")
         cfg, pushes = self.simulation
+        if self.pushes is not self.built_pushes or self.length_m != cfg.length_m:
+            # changed since it was simulated (dataclasses.replace): write what it holds now, as any dataset
+            if frames:
+                raise ValueError(
+                    "frames: expected the dataset as simulated (frames are rendered from the simulation), got "
+                    "one whose pushes or length were changed since"
+                )
+            return Dataset.save(self, path, overwrite=overwrite)
         camera = None
         if frames:
             from ..vision.render import default_camera
@@ -170,14 +180,16 @@ def simulate(
         "noise": {"force_sd_N": cfg.noise.force_sd_N, "shape_sd_m": cfg.noise.shape_sd_m},
         "seed": cfg.seed,
     }
+    pushes = tuple(pushes)
     return SimulatedDataset(
         specimen=cfg.specimen,
         length_m=cfg.length_m,
-        pushes=tuple(pushes),
+        pushes=pushes,
         species=cfg.species,
         sensor=Sensor("wire", WIRE_LENGTH, tuple(cfg.force_range_N)),
         extra={"truth": truth},
         simulation=(cfg, tuple(sim)),
+        built_pushes=pushes,
     )
 
 
