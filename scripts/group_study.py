@@ -38,8 +38,9 @@ FIELDS += [f"D_{c}_{k}" for c in RATIOS for k in ("med", "q05", "q95", "cover")]
 FIELDS += ["prob_cut3_softer", "sharing", "rmse_joint", "rmse_separate", "apparent_drop_cut3", "rhat", "seconds"]
 
 
-def one(job) -> dict:
-    rep, kind, heights, ess = job
+def replicate_data(rep: int, kind: str, heights) -> tuple:
+    """The datasets of replicate ``rep`` (``kind`` base: the anchorage changes; stem: the stem softens),
+    its EI0 and p, and each cut's true base compliance."""
     rng = np.random.default_rng(1000 + rep)
     EI0 = 2.63 * math.exp(0.3 * rng.standard_normal())
     p = float(rng.uniform(0.3, 0.6))
@@ -52,7 +53,6 @@ def one(job) -> dict:
         conds[c] = kb if kind == "base" else math.inf
         truth_C[c] = 1.0 / kb if kind == "base" else 0.0
     change = {"cut2": 0.7, "cut3": 0.7} if kind == "stem" else None
-    t0 = time.perf_counter()
     dss = bayesrod.simulate_group(
         "twig",
         conditions=conds,
@@ -62,6 +62,13 @@ def one(job) -> dict:
         stem_change=change,
         config_overrides={"n_frames_engaged": 2, "EI0": EI0, "p": p},
     )
+    return dss, EI0, p, truth_C
+
+
+def one(job) -> dict:
+    rep, kind, heights, ess = job
+    t0 = time.perf_counter()
+    dss, EI0, p, truth_C = replicate_data(rep, kind, heights)
     g = bayesrod.fit_group(list(dss), prior="woody", progress=False, target_ess=ess, max_steps=5000, seed=rep)
     d = g.to_dict()
     row = {"rep": rep, "kind": kind, "heights": " ".join(f"{h:g}" for h in heights), "EI0": EI0, "p": p}
