@@ -185,8 +185,9 @@ def summarise(rows: list[dict], out: Path) -> str:
         "by the reference solver, prior scripts/sbc_prior.json, 99 posterior draws per replicate "
         "(scripts/sbc_geometry.py).",
         "",
-        "| parameter | cases | replicates | 90% coverage | binomial 95% range | rank chi2 p (10 bins) |",
-        "|---|---|---|---|---|---|",
+        "| parameter | cases | replicates | 90% coverage | binomial 95% range | misses: truth above / below | "
+        f"mean rank (uniform {N_RANK / 2:g}) +- se | rank chi2 p (10 bins) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
 
     def row_for(k, sel, label):
@@ -199,7 +200,13 @@ def summarise(rows: list[dict], out: Path) -> str:
         ranks = np.array([_num(r[f"{k}_rank"]) for r in vals])
         counts = np.histogram(ranks, bins=10, range=(0, N_RANK + 1))[0]
         pval = chisquare(counts).pvalue if n >= 20 else float("nan")
-        lines.append(f"| {k} | {label} | {n} | {cov:.2f} | {lo:.2f}-{hi:.2f} | {pval:.2f} |")
+        missed = [_num(r[f"{k}_rank"]) for r in vals if str(r[f"{k}_covered"]) in ("False", "0")]
+        above, below = sum(m > N_RANK / 2 for m in missed), sum(m <= N_RANK / 2 for m in missed)
+        se = np.sqrt(((N_RANK + 1) ** 2 - 1) / 12 / n)  # sd of a uniform rank on 0..N_RANK over sqrt(n)
+        lines.append(
+            f"| {k} | {label} | {n} | {cov:.2f} | {lo:.2f}-{hi:.2f} | {above} / {below} | "
+            f"{ranks.mean():.1f} +- {se:.1f} | {pval:.2f} |"
+        )
 
     for k in PARAMS:
         row_for(k, ok, "all")
@@ -215,6 +222,12 @@ def summarise(rows: list[dict], out: Path) -> str:
         sel = [r for r in ok if str(r["n_heights"]) == n_h]
         for k in ("EI0", "p"):
             row_for(k, sel, f"{n_h} height(s)")
+    for n_h in ("1", "2", "3"):  # the two splits together: where a skew of the ranks sits
+        for shapes in ("False", "True"):
+            sel = [r for r in ok if str(r["n_heights"]) == n_h and str(r["shapes"]) == shapes]
+            kind = "forces and shapes" if shapes == "True" else "forces only"
+            for k in ("EI0", "p"):
+                row_for(k, sel, f"{n_h} height(s), {kind}")
     worst = max((_num(r["max_ref_vs_fast_N"]) for r in ok), default=float("nan"))
     rh = max((_num(r["rhat_max"]) for r in ok), default=float("nan"))
     lines += ["", f"Largest |reference - fast| force over all replicates: {worst:.2e} N; largest R-hat {rh:.3f}."]
