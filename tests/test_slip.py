@@ -96,6 +96,29 @@ def test_a_rig_with_a_fixed_robot_step_samples_until_the_slip_and_the_window_hol
         bayesrod.simulate("twig", seed=4, heights_m=[0.5], config_overrides={"robot_step_m": 0.5})
 
 
+def test_a_fixed_step_rig_films_at_a_fixed_rate_whatever_the_stem():
+    """With robot_step_m the camera takes a frame every FRAME_EVERY robot steps up to the slip: the frames'
+    displacements no longer come from spreading a fixed number over the push, a spacing that told where the
+    stem would slip (the SBC's skew with centerlines)."""
+    from bayesrod.dataset.simulate import FRAME_EVERY, ROBOT_SPEED
+
+    step = 0.012
+    sims = []
+    for stiff in (2.0, 0.5):  # the softer stem slips at another robot advance (p sets it, and so do heights)
+        stem = {"EI0": 2.63 * stiff, "p": 0.43 if stiff > 1 else 0.9, "length_m": 0.8, "heights_m": [0.5]}
+        ds = bayesrod.simulate(stem, seed=4, config_overrides={"robot_step_m": step})
+        sims.append(ds.simulation[1][0])
+    counts = []
+    for sim in sims:
+        t_slip = sim.time_s[sim.engaged][-1]
+        before = sim.frame_time_s[sim.frame_time_s <= t_slip]
+        # the camera clock: frame k at robot advance (k + 0.3) x the frame step, up to the wire's shift of D
+        travel = (np.arange(before.size) + 0.3) * FRAME_EVERY * step
+        np.testing.assert_allclose(before * ROBOT_SPEED, travel, atol=0.2 * step)
+        counts.append(before.size)
+    assert counts[0] != counts[1]  # as many frames as the push lasts
+
+
 def test_fit_with_slip_writes_the_window_and_the_model_slip_and_only_then(one_height, tmp_path):
     """Through the public fit: summary.json ``data.slip`` holds the data's window and the posterior's slip,
     config.json records ``slip``; a fit without the term writes neither."""

@@ -29,6 +29,7 @@ from .model import FORMAT
 WIRE_LENGTH = 0.44  # m, the seed's wire sensor span
 WIRE_STIFFNESS = 2000.0  # N/m axial stiffness of the whole wire
 ROBOT_SPEED = 0.02  # m/s
+FRAME_EVERY = 3  # robot steps between camera frames of a fixed-step push (SimConfig.frame_step_m)
 BASE_DIAMETER = {"twig": 0.010, "grass": 0.004}  # of the rendered stems [m], by preset kind
 
 
@@ -79,6 +80,10 @@ class SimConfig:
     # loading branch, a spacing chosen knowing where the stem will slip. A fixed step is what a rig does
     # (the number of engaged samples then depends on the stem): the design the slip term models
     robot_step_m: float | None = None
+    # the robot's travel between camera frames [m]; None (default): with robot_step_m, a frame every
+    # FRAME_EVERY robot steps (a camera at a fixed rate); without it, n_frames_engaged frames spread up to the
+    # slip (again a spacing chosen knowing where the stem will slip: the frames' displacements tell it)
+    frame_step_m: float | None = None
     # the rendered stem's diameter d(s) = d0 (1 - s/L)^q (frames only): d0 [m] (None: 1 cm for a twig, 4 mm
     # for a grass) and q (None: q = p, a uniform modulus; q != p is a modulus E(s) ~ (1 - s/L)^(4 (p - q)))
     base_diameter_m: float | None = None
@@ -267,8 +272,12 @@ def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> Simulat
         robot, force, wire, contact, time, engaged = (a[engaged] for a in (robot, force, wire, contact, time, engaged))
     # Frames: a camera clock of its own on the same time base.
     t_slip = robot[engaged][-1] / ROBOT_SPEED
-    nf = cfg.n_frames_engaged
-    t_frames = (np.arange(nf) + 0.3) * t_slip / nf
+    frame_step = cfg.frame_step_m or (FRAME_EVERY * cfg.robot_step_m if cfg.robot_step_m is not None else None)
+    if frame_step is not None:  # a camera at a fixed rate: the number of frames before the slip depends on the stem
+        t_frames = np.arange(0.3, t_slip * ROBOT_SPEED / frame_step, 1.0) * frame_step / ROBOT_SPEED
+    else:
+        t_frames = (np.arange(cfg.n_frames_engaged) + 0.3) * t_slip / cfg.n_frames_engaged
+    nf = t_frames.size
     t_after = t_slip + (np.arange(1, cfg.n_frames_after + 1)) * 2 * step / ROBOT_SPEED
     t_all = np.concatenate([t_frames, t_after])
     D_frames = np.interp(t_frames * ROBOT_SPEED, robot_dense, D_dense)
