@@ -230,21 +230,41 @@ def test_plain_step_per_element_matches_the_general_step(p):
         np.testing.assert_array_equal(E._step(Y, s, h, f, P, a), fast)
 
 
-def test_centerline_at_heights_matches_a_fine_resampling():
+def _curled_arc(n=48, sweep=2.6):
+    """March grid (n + 1, 3, 1) of a circular arc of unit length turning past horizontal (sweep > pi/2): the
+    centerline rises to its top and comes down again, as a stem pushed over would."""
+    theta = np.linspace(0.0, sweep, n + 1)
+    r = 1.0 / sweep  # the radius that makes the arc's length 1
+    return np.stack([r * (1.0 - np.cos(theta)), r * np.sin(theta), theta], axis=1)[..., None]
+
+
+@pytest.mark.parametrize("case", ["elastica", "curled"])
+def test_centerline_at_heights_matches_a_fine_resampling(case):
     """The Newton-on-Hermite reading of x(z) against the obvious one: resample the same Hermite centerline
-    at 20001 arc lengths and interpolate linearly in height (error ~1e-9 there); also above the top."""
+    at 20001 arc lengths and interpolate linearly in height on its running maximum (error ~1e-9 there);
+    also below the base, above the top, and on a centerline that curls over and comes down."""
     from bayesrod.physics.elastica import centerline_at, centerline_x_at_heights
 
-    p = np.linspace(0.0, 1.5, 7)[:, None]
-    r = contact_from_force_nd(np.linspace(0.2, 2.5, 6)[None, :], 0.56, p, keep_shape=True)
-    grid = r["grid"].reshape(r["grid"].shape[0], 3, -1)[..., r["found"].ravel()]
-    z = np.linspace(0.0, 1.0, 301)  # up to the rest height: bent stems end below it
+    if case == "elastica":
+        p = np.linspace(0.0, 1.5, 7)[:, None]
+        r = contact_from_force_nd(np.linspace(0.2, 2.5, 6)[None, :], 0.56, p, keep_shape=True)
+        grid = r["grid"].reshape(r["grid"].shape[0], 3, -1)[..., r["found"].ravel()]
+    else:
+        grid = _curled_arc()
+    z = np.linspace(-0.05, 1.0, 301)  # from below the base to the rest height: bent stems end below it
     x, cos_phi = centerline_x_at_heights(grid, z)
     sig = np.linspace(0.0, 1.0, 20001)
     xz = centerline_at(grid, sig)
     tilt = np.gradient(xz[1], sig, axis=0) / np.hypot(np.gradient(xz[0], sig, axis=0), np.gradient(xz[1], sig, axis=0))
     for j in range(grid.shape[-1]):
         top = np.maximum.accumulate(xz[1, :, j])
+        inside = (z >= 0.0) & (z < top[-1])
         np.testing.assert_allclose(x[j], np.interp(z, top, xz[0, :, j]), rtol=0, atol=1e-8)
-        np.testing.assert_allclose(cos_phi[j], np.interp(z, top, tilt[:, j]), rtol=0, atol=1e-6)
+        np.testing.assert_allclose(cos_phi[j, inside], np.interp(z, top, tilt[:, j])[inside], rtol=0, atol=1e-6)
+        # below the base: the base; above the top: the tip, its exact tangent (the reference's one-sided
+        # difference there is 3e-5 off)
+        np.testing.assert_allclose(x[j, z < 0], 0.0, atol=1e-12)
+        np.testing.assert_allclose(cos_phi[j, z < 0], 1.0, atol=1e-12)
+        np.testing.assert_allclose(x[j, z >= top[-1]], grid[-1, 0, j], atol=1e-12)
+        np.testing.assert_allclose(cos_phi[j, z >= top[-1]], np.cos(grid[-1, 2, j]), atol=1e-12)
     assert (z[None, :] > grid[:, 1].max(axis=0)[:, None]).any()  # some heights lie above a bent stem's top
