@@ -268,3 +268,31 @@ def test_centerline_at_heights_matches_a_fine_resampling(case):
         np.testing.assert_allclose(x[j, z >= top[-1]], grid[-1, 0, j], atol=1e-12)
         np.testing.assert_allclose(cos_phi[j, z >= top[-1]], np.cos(grid[-1, 2, j]), atol=1e-12)
     assert (z[None, :] > grid[:, 1].max(axis=0)[:, None]).any()  # some heights lie above a bent stem's top
+
+
+@pytest.mark.parametrize(
+    "nd",
+    [{"m_yield": 0.35}, {"m_yield": 0.32, "w0": 0.32}, {"m_yield": 0.3, "mu": 0.2}],
+    ids=["plain", "self-weight", "friction"],
+)
+def test_plastic_branch_is_the_elastic_rod_on_a_base_turned_by_the_plastic_rotation(nd):
+    """Beyond yield the base moment stays at the yield moment and the base has turned by phi_plastic. The
+    same rod solved force-first with its base tilted by that angle (the base_tilt path, another piece of
+    code) must reach the target displacement with base moment m_yield; for the plain rod the force is
+    m_yield / eta exactly (the base moment of a horizontal force at height eta)."""
+    from bayesrod.physics.elastica import force_from_displacement_nd
+
+    eta, p = 0.625, 0.43
+    d = np.array([0.02, 0.14, 0.26])
+    r = force_from_displacement_nd(d, eta, p, nd)
+    y = r["yielded"] & np.isfinite(r["f"])
+    assert list(y) == [False, True, True]  # elastic first, then plastic
+    assert np.all(np.diff(r["phi_plastic"][y]) > 0)  # the base keeps turning
+    elastic = {k: v for k, v in nd.items() if k != "m_yield"}
+    d0 = float(contact_from_force_nd(0.0, eta, p, elastic)["xi_c"])
+    for f, phi, target in zip(r["f"][y], r["phi_plastic"][y], d[y], strict=True):
+        c = contact_from_force_nd(f, eta, p, {**elastic, "tilt": phi})
+        assert float(c["xi_c"]) - d0 == pytest.approx(target, abs=1e-9)
+        assert float(c["m0"]) == pytest.approx(nd["m_yield"], abs=1e-9)
+    if nd.keys() == {"m_yield"}:
+        np.testing.assert_allclose(r["f"][y], nd["m_yield"] / eta, rtol=1e-12)
