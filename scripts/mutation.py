@@ -92,6 +92,7 @@ TARGETS: dict[str, tuple[str, list[str], list[str] | None]] = {
                     "test_plain_step_per_element_matches_the_general_step",
                     "test_centerline_at_heights_matches_a_fine_resampling",
                     "test_plastic_branch_is_the_elastic_rod_on_a_base_turned_by_the_plastic_rotation",
+                    "test_dimensional_solutions_report_every_field_in_si_units_and_round_trip",
                 )
             ),
             "tests/test_effects.py",

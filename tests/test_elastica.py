@@ -296,3 +296,33 @@ def test_plastic_branch_is_the_elastic_rod_on_a_base_turned_by_the_plastic_rotat
         assert float(c["m0"]) == pytest.approx(nd["m_yield"], abs=1e-9)
     if nd.keys() == {"m_yield"}:
         np.testing.assert_allclose(r["f"][y], nd["m_yield"] / eta, rtol=1e-12)
+
+
+def test_dimensional_solutions_report_every_field_in_si_units_and_round_trip():
+    """force_from_displacement and contact_from_force on the same rod: every field of one matches the other
+    (displacement, force, contact arc length and angle, centerline), the base moment is F h (statics of a
+    horizontal force at height h), and a force the yielding base cannot carry is not 'found'."""
+    from bayesrod.physics import Effects
+    from bayesrod.physics.elastica import DEFAULT_STEPS
+
+    EI0, p, L, h = 2.63, 0.43, 0.8, 0.5
+    D = np.array([0.02, 0.08, 0.15])
+    a = force_from_displacement(D, h, EI0, p, L, keep_shape=True)
+    np.testing.assert_array_equal(a.displacement_m, D)
+    b = contact_from_force(a.true_force_N, h, EI0, p, L, keep_shape=True)
+    np.testing.assert_allclose(b.force_N, a.true_force_N, rtol=1e-15)
+    np.testing.assert_allclose(b.contact_x_m, D, atol=1e-9)
+    np.testing.assert_allclose(b.contact_s_m, a.contact_s_m, atol=1e-9)
+    np.testing.assert_allclose(b.contact_angle_rad, a.contact_angle_rad, atol=1e-9)
+    assert np.all(a.contact_angle_rad > 0) and np.all(np.diff(a.contact_angle_rad) > 0)
+    np.testing.assert_allclose(b.base_moment_Nm, a.true_force_N * h, rtol=1e-9)
+    assert a.shape_xz_m.shape == b.shape_xz_m.shape == (DEFAULT_STEPS + 1, 2, 3)
+    np.testing.assert_allclose(a.shape_xz_m, b.shape_xz_m, atol=1e-9)
+    # the centerline is in metres: its last node is the tip, at arc length L from the base
+    np.testing.assert_allclose(
+        np.sum(np.hypot(*np.diff(a.shape_xz_m, axis=0).transpose(1, 0, 2)), axis=0), L, rtol=1e-3
+    )
+    assert b.found.all()
+    c = contact_from_force(a.true_force_N, h, EI0, p, L, Effects(yield_moment=0.5 * a.true_force_N[1] * h))
+    np.testing.assert_array_equal(c.found, [True, False, False])  # beyond the yield moment: no elastic contact
+    assert force_from_displacement(D, h, EI0, p, L).shape_xz_m is None
