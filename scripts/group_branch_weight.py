@@ -11,10 +11,11 @@ the 95% quantile of EI0 from the clamp draws alone.
 """
 
 import sys
+from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 import group_study as G
 
 import bayesrod

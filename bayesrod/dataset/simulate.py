@@ -24,7 +24,7 @@ from ..physics.elastica import centerline_at, force_from_displacement_nd
 from ..physics.lumped import wire_elongation_from_dx
 from ..physics.presets import get_preset
 from .io import write_csv, write_json
-from .model import FORMAT
+from .model import FORMAT, Dataset, ForceSeries
 
 WIRE_LENGTH = 0.44  # m, the seed's wire sensor span
 WIRE_STIFFNESS = 2000.0  # N/m axial stiffness of the whole wire
@@ -421,7 +421,7 @@ def write_simulated(
     write_json(out / "specimen.json", doc)
 
 
-def started_loaded(ds, preloads_m) -> object:
+def started_loaded(ds: Dataset, preloads_m) -> Dataset:
     """The dataset as a rig that began recording ``preloads_m[j]`` [m] into push j would have written it.
 
     Each push keeps its samples from where the contact displacement reaches the preload on, with the
@@ -435,8 +435,6 @@ def started_loaded(ds, preloads_m) -> object:
     preloads_m : sequence of float, shape (n_pushes,)
         Contact displacement already made when recording began, per push [m] (0: the push as it is).
     """
-    from .model import ForceSeries
-
     if len(preloads_m) != len(ds.pushes):
         raise ValueError(f"preloads_m: expected one per push ({len(ds.pushes)}), got {len(preloads_m)}")
     pushes = []

@@ -632,7 +632,9 @@ class RodLikelihood:
                 fh.append(np.full(d.F_N.size, d.height_m))
             if d.x_m.size:
                 if self.preload and d.D_m.size:
-                    self._preload_shapes.append(self._preload_shape_table(d, eta, curves, len(fobs) - 1))
+                    first = sum(x.shape[1] for x in xs)  # the push's first point among all observed points
+                    table = self._preload_shape_table(d, eta, curves, len(fobs) - 1)
+                    self._preload_shapes.append(table | {"points": slice(first, first + d.x_m.size)})
                 xp, cp = self._shape_table(d, eta, curves)
                 xs.append(xp)
                 cs.append(cp)
@@ -847,21 +849,14 @@ class RodLikelihood:
         pre = np.asarray(preload_m, float).reshape(W, -1)
         ip, wp = _lagrange4(self.p_grid, p)  # (W, 4)
         x_all, c_all = (a.copy() for a in self.predict_shape_x(p))
-        sizes = [d.x_m.size for d in self.data if d.x_m.size]
-        starts = np.concatenate([[0], np.cumsum(sizes)])
-        tables = iter(self._preload_shapes)
-        for j, d in enumerate(d for d in self.data if d.x_m.size):
-            if not d.D_m.size:
-                continue
-            t = next(tables)
+        for t in self._preload_shapes:
             G = t["x"].shape[0]
             v = np.clip(pre[:, t["column"]] / t["step_m"], 0.0, G - 1.000001)
             g = np.floor(v).astype(int)
             w = np.stack([1.0 - (v - g), v - g], axis=1)[:, :, None] * wp[:, None, :]  # (W, 2, 4)
             rows = (g[:, None, None] + np.arange(2)[None, :, None], ip[:, None, :])  # (W, 2, 4) each
-            sl = slice(starts[j], starts[j + 1])
             for out, tab in ((x_all, t["x"]), (c_all, t["cos"])):
-                out[:, sl] = np.matmul(w.reshape(W, 1, 8), tab[rows].reshape(W, 8, -1))[:, 0, :]
+                out[:, t["points"]] = np.matmul(w.reshape(W, 1, 8), tab[rows].reshape(W, 8, -1))[:, 0, :]
         return x_all, c_all
 
     def predict_nd_force(self, p: NDArray, u: NDArray | None = None) -> NDArray:
@@ -1010,7 +1005,7 @@ PRELOAD_GRID = 2001
 #: preload nodes of a preloaded push's shape table over [0, PRELOAD_MAX_L L], linear between them
 #: (docs/performance.md, "A preload with centerlines")
 PRELOAD_SHAPE_NODES = 41
-#: p nodes x frames solved in one batched march when building those tables (memory: ~15 kB each)
+#: p nodes x frames solved in one batched march when building those tables
 PRELOAD_SHAPE_COLUMNS = 6000
 
 
@@ -1262,11 +1257,18 @@ def force_scale_fit(lik: RodLikelihood, p: float, EI0: float | None = None) -> t
     EI0 is a pure scale of the forces, so its least-squares value is sum(F g) / sum(g g) with
     g = f(p) / L^2; pass ``EI0`` to get only the residual at that value.
     """
-    g = lik.predict_nd_force(np.array([p]))[0] / lik.L**2
+    g = lik.predict_nd_force(np.array([p])) / lik.L**2
+    EI0s, rms = scale_fit_rows(g, lik.F_obs, None if EI0 is None else np.array([EI0]))
+    return float(EI0s[0]), float(rms[0])
+
+
+def scale_fit_rows(g: NDArray, F: NDArray, EI0: NDArray | None = None) -> tuple[NDArray, NDArray]:
+    """Least-squares EI0 (G,) of forces ``F`` (N,) for unit-EI0 predictions ``g`` (G, N) [N / (N m^2)], and
+    the RMS residual (G,); ``EI0`` given: only the residuals (nan EI0 where a row predicts no force)."""
     if EI0 is None:
-        gg = float(g @ g)
-        EI0 = float(g @ lik.F_obs) / gg if gg > 0 else np.nan
-    return EI0, float(np.sqrt(np.mean((lik.F_obs - EI0 * g) ** 2)))
+        gg = np.einsum("gn,gn->g", g, g)
+        EI0 = np.where(gg > 0, g @ F / np.where(gg > 0, gg, 1.0), np.nan)
+    return EI0, np.sqrt(np.mean((F[None, :] - EI0[:, None] * g) ** 2, axis=1))
 
 
 def scale_estimate(lik: RodLikelihood) -> float | None:

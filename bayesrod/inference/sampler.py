@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize
 
-from .likelihood import force_scale_fit
+from .likelihood import force_scale_fit, scale_fit_rows
 
 
 class CheckpointBackend:
@@ -95,11 +95,7 @@ def find_start(post, rng: np.random.Generator, init: dict | None = None) -> np.n
         candidates.append((float(np.clip(init["p"], lik.p_grid[1], lik.p_grid[-2])), float(init["EI0"])))
     for p, EI0_init in candidates:
         nat = {}
-        if lik.n_force and not getattr(lik, "preload", False):
-            EI0, rms = force_scale_fit(lik, p, EI0_init)
-            EI0 = max(EI0, 1e-6) if np.isfinite(EI0) else 1.0
-            nat["sigma_force_N"] = max(rms, 1e-4)
-        elif lik.n_force:  # preloads: the scale fit at zero preload is still a good start for EI0
+        if lik.n_force:  # with preloads: the scale fit at zero preload, then _profile_preloads
             EI0, rms = force_scale_fit(lik, p, EI0_init)
             EI0 = max(EI0, 1e-6) if np.isfinite(EI0) else 1.0
             nat["sigma_force_N"] = max(rms, 1e-4)
@@ -153,10 +149,9 @@ def _profile_preloads(post, theta: np.ndarray, lp: float, n_grid: int = 81, swee
             if lik.n_force:
                 pre = lik._per_push(rows, lik.preload_names, n_grid)
                 g = lik.predict_nd_force_preloaded(np.full(n_grid, nat["p"]), pre) / lik.L**2  # (G, N)
-                gg = np.einsum("gn,gn->g", g, g)
-                EI0 = np.where(gg > 0, g @ lik.F_obs / np.where(gg > 0, gg, 1.0), nat["EI0"])
-                rows["EI0"] = np.maximum(EI0, 1e-6)
-                rms = np.sqrt(np.mean((lik.F_obs[None, :] - rows["EI0"][:, None] * g) ** 2, axis=1))
+                EI0, _ = scale_fit_rows(g, lik.F_obs)
+                rows["EI0"] = np.maximum(np.where(np.isfinite(EI0), EI0, nat["EI0"]), 1e-6)
+                _, rms = scale_fit_rows(g, lik.F_obs, rows["EI0"])
                 rows["sigma_force_N"] = np.maximum(rms, 1e-4)
             lps = np.asarray(post.log_prob(post.to_sample(rows)))
             k = int(np.argmax(lps))

@@ -1000,6 +1000,14 @@ def secant_k_theta(
     return np.where(sol.found, sol.force_N * np.asarray(height_m, float) / theta, np.nan)
 
 
+def _hermite(t: NDArray, p0, d0, p1, d1) -> tuple[NDArray, NDArray]:
+    """Cubic Hermite between values p0, p1 with end slopes d0, d1 (per unit t) and its derivative in t."""
+    t2, t3 = t * t, t * t * t
+    val = (2 * t3 - 3 * t2 + 1) * p0 + (t3 - 2 * t2 + t) * d0 + (-2 * t3 + 3 * t2) * p1 + (t3 - t2) * d1
+    der = (6 * t2 - 6 * t) * p0 + (3 * t2 - 4 * t + 1) * d0 + (-6 * t2 + 6 * t) * p1 + (3 * t2 - 2 * t) * d1
+    return val, der
+
+
 def centerline_x_at_heights(grid: ArrayLike, zeta: ArrayLike) -> tuple[NDArray, NDArray]:
     """Horizontal position and cos(tangent angle) where each centerline first reaches each height.
 
@@ -1038,17 +1046,11 @@ def centerline_x_at_heights(grid: ArrayLike, zeta: ArrayLike) -> tuple[NDArray, 
     span = z1 - z0
     t = np.clip((z[None, :] - z0) / np.where(span > 0, span, 1.0), 0.0, 1.0)
 
-    def herm(t, p0, d0, p1, d1):
-        t2, t3 = t * t, t * t * t
-        val = (2 * t3 - 3 * t2 + 1) * p0 + (t3 - 2 * t2 + t) * d0 + (-2 * t3 + 3 * t2) * p1 + (t3 - t2) * d1
-        der = (6 * t2 - 6 * t) * p0 + (3 * t2 - 4 * t + 1) * d0 + (-6 * t2 + 6 * t) * p1 + (3 * t2 - 2 * t) * d1
-        return val, der
-
     for _ in range(4):
-        val, der = herm(t, z0, c0, z1, c1)
+        val, der = _hermite(t, z0, c0, z1, c1)
         t = np.clip(t - (val - z[None, :]) / np.where(np.abs(der) > 1e-12, der, 1e-12), 0.0, 1.0)
-    x, dx = herm(t, x0, s0, x1, s1)
-    _, dz = herm(t, z0, c0, z1, c1)
+    x, dx = _hermite(t, x0, s0, x1, s1)
+    _, dz = _hermite(t, z0, c0, z1, c1)
     cos_phi = dz / np.maximum(np.hypot(dx, dz), 1e-12)
     above = z[None, :] >= top[:, -1:]  # above the highest point: the tip, as the reference reads it
     x = np.where(above, xi[:, -1:], x)
@@ -1083,10 +1085,5 @@ def centerline_at(grid: ArrayLike, sig: ArrayLike) -> NDArray:
     phi0, phi1 = g[k, 2], g[k + 1, 2]
     d0 = np.stack([np.sin(phi0), np.cos(phi0)], axis=1) * h
     d1 = np.stack([np.sin(phi1), np.cos(phi1)], axis=1) * h
-    t = t[:, None]
-    h00 = 2 * t**3 - 3 * t**2 + 1
-    h10 = t**3 - 2 * t**2 + t
-    h01 = -2 * t**3 + 3 * t**2
-    h11 = t**3 - t**2
-    out = h00 * p0 + h10 * d0 + h01 * p1 + h11 * d1  # (m, 2, ...)
+    out, _ = _hermite(t[:, None], p0, d0, p1, d1)  # (m, 2, ...)
     return np.moveaxis(out, 1, 0)
