@@ -14,6 +14,8 @@ from bayesrod.inference.group import (
     base_compliance,
     base_stiffness,
     last_third_masks,
+    map_fit,
+    release_clamps,
     sharing_check,
     start_point,
 )
@@ -116,6 +118,23 @@ def test_sharing_is_supported_for_a_cut_base_and_rejected_when_the_stem_changed(
             nat = post.to_natural(theta)
             assert nat["EI0"][0] == pytest.approx(EI0, rel=0.03)
             assert nat["u_base__a"][0] < 0.02 < nat["u_base__b"][0]
+
+
+def test_a_clamped_cut_is_released_where_the_gradient_cannot(cut_pair):
+    """Below v = 0 the posterior is flat in v (a clamp): L-BFGS-B started with the cut condition clamped stays
+    clamped, with EI0 pulled down; release_clamps tries it soft and finds the start point's optimum again."""
+    lik = GroupLikelihood({d.extra["condition"]: d for d in cut_pair}, load_prior("woody"))
+    post = GroupPosterior(lik)
+    best = start_point(post)
+    i = post.names.index("u_base__b")
+    clamped = best.copy()
+    clamped[i] = -0.1
+    stuck = map_fit(post, clamped)
+    assert stuck[i] <= 0.0 and post.log_prob(stuck) < post.log_prob(best) - 5.0
+    released = release_clamps(post, stuck)
+    assert released[i] > 0.02
+    assert post.log_prob(released) > post.log_prob(best) - 0.05  # the optimum again (or a hair above it)
+    assert post.to_natural(released)["EI0"][0] == pytest.approx(EI0, rel=0.03)
 
 
 def test_find_groups_reports_what_it_cannot_group(tmp_path):

@@ -916,6 +916,7 @@ def fit(
     doc = build_summary(spec, post, samples, res.diagnostics, lik.fit_error(median), effects, extra)
     not_converged = convergence_message(res, max_steps, target_ess)
     doc["convergence"]["converged"] = not_converged is None
+    doc["convergence"]["walkers_restarted"] = int(sum(res.walkers_restarted))
     if not_converged:
         doc["convergence"]["message"] = not_converged
         log.warning("warning: %s: %s", spec.specimen, not_converged)

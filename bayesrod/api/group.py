@@ -395,6 +395,7 @@ def _summary(sid, lik: GroupLikelihood, nat, per, samples, res, pr, check, secon
         "convergence": {
             "rhat_max": float(max(diag["rhat"].values())),
             "ess_bulk_min": float(min(diag["ess_bulk"].values())),
+            "walkers_restarted": int(sum(res.walkers_restarted)),
         },
         "sampler": {"steps": res.n_steps, "burn_in": res.burn, "seconds": round(seconds, 1)},
         "bayesrod": __version__,
