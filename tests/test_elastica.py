@@ -152,11 +152,15 @@ def test_shape_grid_matches_reference():
     "kwargs,field",
     [
         ({"EI0": -1.0}, "EI0"),
+        ({"EI0": 0.0}, "EI0"),  # each bound itself is outside
         ({"p": -0.1}, "p"),
         ({"height_m": 0.9}, "height_m"),
+        ({"height_m": 0.8}, "height_m"),
         ({"height_m": 0.0}, "height_m"),
         ({"length_m": 0.0}, "length_m"),
         ({"displacement_m": -0.1}, "displacement_m"),
+        ({"displacement_m": float("nan")}, "displacement_m"),
+        ({"displacement_m": float("inf")}, "displacement_m"),
     ],
 )
 def test_impossible_inputs_raise_value_error(kwargs, field):
@@ -326,3 +330,35 @@ def test_dimensional_solutions_report_every_field_in_si_units_and_round_trip():
     c = contact_from_force(a.true_force_N, h, EI0, p, L, Effects(yield_moment=0.5 * a.true_force_N[1] * h))
     np.testing.assert_array_equal(c.found, [True, False, False])  # beyond the yield moment: no elastic contact
     assert force_from_displacement(D, h, EI0, p, L).shape_xz_m is None
+
+
+def test_secant_k_theta_is_F_h_over_the_contact_rotation_from_rest_with_its_effects_and_steps():
+    """F h / (angle(F) - angle(0)) written out from contact_from_force, with a rest curvature and a base spring
+    (so the rest angle is not zero and the effects change the number). (The step count passed on cannot be
+    seen here: 12 steps and the default 48 agree to 4e-11.)"""
+    from bayesrod.physics import Effects
+    from bayesrod.physics.elastica import contact_from_force, secant_k_theta
+
+    eff = Effects(rest_curvature=0.4, base_compliance=30.0)
+    F, h = np.array([0.5, 2.0]), 0.45
+    ks = secant_k_theta(F, h, 2.63, 0.43, 0.8, eff, n_steps=12)
+    on = contact_from_force(F, h, 2.63, 0.43, 0.8, eff, n_steps=12)
+    rest = contact_from_force(np.zeros(2), h, 2.63, 0.43, 0.8, eff, n_steps=12)
+    assert abs(rest.contact_angle_rad[0]) > 0.05  # the rest curvature tilts the contact before any push
+    np.testing.assert_allclose(ks, F * h / (on.contact_angle_rad - rest.contact_angle_rad), rtol=1e-12)
+    plain = secant_k_theta(F, h, 2.63, 0.43, 0.8, n_steps=12)
+    assert np.all(plain > 1.05 * ks)  # the base spring softens it
+    far = secant_k_theta([2.0, 500.0], h, 2.63, 0.43, 0.8)
+    assert np.isfinite(far[0]) and np.isnan(far[1])  # no contact at 500 N: NaN, not a number
+
+
+def test_contact_from_force_nd_reports_yield_per_element_of_a_batch():
+    from bayesrod.physics import Effects
+
+    f = np.array([[0.5, 1.0, 2.0], [2.5, 3.0, 3.5]])
+    m_y = 1.2 * 0.8 / 2.63  # M_y L / EI0
+    res = contact_from_force_nd(f, 0.5625, 0.43, Effects(yield_moment=1.2).nondim(0.8, 2.63))
+    assert res["yielded"].shape == f.shape
+    assert res["yielded"].any() and not res["yielded"].all()
+    elastic = contact_from_force_nd(f, 0.5625, 0.43)  # the moment the clamp would carry without yield
+    np.testing.assert_array_equal(res["yielded"], elastic["m0"] > m_y)
