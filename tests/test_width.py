@@ -220,7 +220,8 @@ def test_combined_profile_flags_unresolved_tips_and_carries_the_shared_errors():
 
 
 def test_the_frames_spread_of_contrast_scales_is_a_scale_error_all_stations_share():
-    """Frames whose contrast scales scatter by sd 0.03 carry a shared relative scale error of 0.03, added in
+    """Frames whose contrast scales scatter by sd s carry a shared relative scale error of s / sqrt(frames) (each
+    frame's error is shared by its stations, and the median over frames averages it over frames only), added in
     quadrature to the camera's depth-scale sd; frames that agree (or one frame) add nothing."""
     import dataclasses
 
@@ -228,9 +229,10 @@ def test_the_frames_spread_of_contrast_scales_is_a_scale_error_all_stations_shar
     base = WidthProfile(s, np.full(20, 0.004), np.full(20, 2e-5), np.full(20, 2.0), np.full(20, "ok"), s)
     scales = [1.0, 1.03, 1.06, 1.03, 1.0, 1.06]  # population sd 0.02449
     profs = [dataclasses.replace(base, contrast_scale=k) for k in scales]
-    assert combine_profiles(profs, s).shared_scale_sd == pytest.approx(np.std(scales), rel=1e-12)
+    se = np.std(scales) / np.sqrt(len(scales))
+    assert combine_profiles(profs, s).shared_scale_sd == pytest.approx(se, rel=1e-12)
     both = combine_profiles(profs, s, depth_scale_sd=0.01).shared_scale_sd
-    assert both == pytest.approx(np.hypot(0.01, np.std(scales)), rel=1e-12)
+    assert both == pytest.approx(np.hypot(0.01, se), rel=1e-12)
     same = [dataclasses.replace(base, contrast_scale=1.04) for _ in scales]
     assert combine_profiles(same, s, depth_scale_sd=0.01).shared_scale_sd == pytest.approx(0.01, rel=1e-12)
     assert combine_profiles(profs[1:2], s, min_frames=1).shared_scale_sd == 0.0

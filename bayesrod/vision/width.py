@@ -445,8 +445,8 @@ class DiameterProfile:
     they were ``ok`` but too few; ``unresolved`` where their median width is not above zero: a tip
     thinner than the width's noise). ``shared_offset_sd_m`` [m] and ``shared_scale_sd`` (relative): the
     sd of an offset and of a scale error that every station shares (:data:`OFFSET_SD_PX` pixels at the
-    stem's distance; the camera's ``depth_scale_sd`` and the frames' spread of their contrast scales,
-    added in quadrature), which no number of stations averages down.
+    stem's distance; the camera's ``depth_scale_sd`` and the standard error of the frames' mean contrast
+    scale, added in quadrature), which no number of stations averages down.
     """
 
     s_m: NDArray
@@ -540,11 +540,14 @@ def combine_profiles(
     px = np.concatenate(px) if px else np.array([])
     px = px[np.isfinite(px) & (px > 0)]
     offset_sd = OFFSET_SD_PX * float(np.median(px)) if px.size else 0.0
-    # each frame divides its narrow stations by its own contrast scale; how far those scales scatter over the
-    # frames of a push is what one frame's estimate is worth, and the error the frames share (the estimator's
-    # own bias where the point spread is not its Gaussian) is taken to be as large: on the rendered grass the
-    # frames' sd was 0.026-0.037 and the scale 3-4% off for two seeds of three (docs/validation.md)
-    contrast_sd = float(np.std([wp.contrast_scale for wp in profiles])) if len(profiles) > 1 else 0.0
+    # each frame divides its narrow stations by its own contrast scale, so a frame's scale error is shared by all
+    # its stations; the median over frames averages it down over frames only, not over stations as the stations'
+    # own sd (from the frames' spread at each station, taken as independent along the stem) would have it. The
+    # scale error left in the combined profile: the frames' sd of their scales over sqrt(frames). (Taking the
+    # frames' sd itself, the error of one frame, made the grass's d0 intervals +-5% for errors of sd 1.6%:
+    # twice too wide; docs/validation.md.)
+    n_frames = len(profiles)
+    contrast_sd = float(np.std([wp.contrast_scale for wp in profiles])) / np.sqrt(n_frames) if n_frames > 1 else 0.0
     return DiameterProfile(
         s_m=s_m,
         d_m=d,
