@@ -362,3 +362,15 @@ def test_contact_from_force_nd_reports_yield_per_element_of_a_batch():
     assert res["yielded"].any() and not res["yielded"].all()
     elastic = contact_from_force_nd(f, 0.5625, 0.43)  # the moment the clamp would carry without yield
     np.testing.assert_array_equal(res["yielded"], elastic["m0"] > m_y)
+
+
+def test_a_height_the_rest_shape_never_reaches_is_named_in_a_batch():
+    """With kappa0 L = 3 the unloaded stem curls over at z = L/3: h/L = 0.3 is reached, 0.6 is not, and the
+    error names the one that is not (the second of the batch)."""
+    from bayesrod.physics import Effects
+
+    eff = Effects(rest_curvature=3.0).nondim(1.0, 1.0)
+    ok = force_from_displacement_nd(0.01, 0.3, 0.0, eff)
+    assert np.isfinite(ok["f"]) and ok["f"] > 0
+    with pytest.raises(ValueError, match=r"^height_m: expected a height the unloaded stem reaches, got h/L = 0\.6 "):
+        force_from_displacement_nd(0.01, np.array([0.3, 0.6]), 0.0, eff)

@@ -291,7 +291,7 @@ def _step_plain(Y, sig, h, f, P, active):
     neg_af = -(active * f)
     coef = _stage_coefficients(h)
     inv_e = _inverse_taper(sig + _C * h, P)
-    K = np.empty((13, 4, B))
+    K = np.zeros((13, 4, B))  # zeros: a skipped stage reads 0, not a previous call's stage (see _step_general)
     K[0] = Y
     K2 = K.reshape(13, 4 * B)
     buf = np.empty(4 * B)
@@ -311,7 +311,7 @@ def _step_plain_each(Y, sig, h, f, P, active):
     neg_af = -(active * f)
     h = np.asarray(h, float)
     inv_e = _inverse_taper(np.asarray(sig, float) + _C[:, None] * h, P)  # (12, B) or (12, 1)
-    K = np.empty((12, 4, B))
+    K = np.zeros((12, 4, B))  # zeros: a skipped stage reads 0 (see _step_general)
     K2 = K.reshape(12, 4 * B)
     Yi = Y
     for i in range(12):
@@ -334,7 +334,9 @@ def _step_general(Y, sig, h, f, P, active):
     """The reference path of :func:`_step`: any effects, per-element step sizes."""
     B = Y.shape[1]
     af = active * f
-    K = np.empty((12, 4, B))
+    # zeros, not empty: a stage skipped by mistake must read 0, not the last call's stage left in reused memory
+    # (a mutant that skipped stage 1 passed every test with np.empty)
+    K = np.zeros((12, 4, B))
     K2 = K.reshape(12, 4 * B)
     _rhs(sig, Y, af, P, K[0])
     if isinstance(h, float):  # one step size: the stages are dot products into one buffer
