@@ -238,6 +238,34 @@ def test_the_frames_spread_of_contrast_scales_is_a_scale_error_all_stations_shar
     assert combine_profiles(profs[1:2], s, min_frames=1).shared_scale_sd == 0.0
 
 
+def test_stations_off_the_smooth_profile_are_flagged_and_no_others():
+    """A run of eight stations read 80% wide at the base (clutter of the stem's colour crossing it, in every
+    frame), two read 3x wide mid-stem (a leaf at the probe) and one 15% wide are flagged off_profile; the same
+    profile without them, noise only, has none flagged."""
+    rng = np.random.default_rng(4)
+    s = np.linspace(0.0, 0.4, 110)
+    true = 0.004 * (1 - s / 0.47) ** 1.6
+    bad = np.zeros(s.size, bool)
+    bad[:8] = True
+    bad[50:52] = True
+    bad[80] = True  # 15% wide: over 5%, and about 6 station sd (not 50)
+    for spoil in (True, False):
+        frames = []
+        for _ in range(12):
+            w = true + rng.normal(0, 3e-5, s.size)
+            if spoil:
+                w = np.where(bad, w * np.select([np.arange(s.size) < 8, np.arange(s.size) < 60], [1.8, 3.0], 1.15), w)
+            frames.append(WidthProfile(s, w, np.full(s.size, 3e-5), w / 1e-4, np.full(s.size, "ok"), s))
+        dp = combine_profiles(frames, s)
+        off = dp.flag == "off_profile"
+        if spoil:
+            np.testing.assert_array_equal(off, bad)
+            assert not dp.ok[bad].any() and dp.ok[~bad].all()
+            assert np.all(np.isfinite(dp.d_m[bad]))  # kept for the record
+        else:
+            assert not off.any() and dp.ok.all()
+
+
 @functools.lru_cache(maxsize=1)
 def _twig():
     return bayesrod.simulate("twig", seed=2, heights_m=[0.3])  # immutable: shared by the tests below
