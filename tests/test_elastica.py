@@ -374,3 +374,18 @@ def test_a_height_the_rest_shape_never_reaches_is_named_in_a_batch():
     assert np.isfinite(ok["f"]) and ok["f"] > 0
     with pytest.raises(ValueError, match=r"^height_m: expected a height the unloaded stem reaches, got h/L = 0\.6 "):
         force_from_displacement_nd(0.01, np.array([0.3, 0.6]), 0.0, eff)
+
+
+def test_a_yielded_push_keeps_the_shape_of_its_plastic_solution():
+    """With keep_shape, a displacement past the yield returns the centerline of the plastic solution: its
+    base leaves at the plastic rotation and it passes through the contact the force was solved for."""
+    from bayesrod.physics import Effects
+    from bayesrod.physics.elastica import centerline_x_at_heights
+
+    eff = Effects(yield_moment=0.8).nondim(0.8, 2.63)
+    res = force_from_displacement_nd(np.array([0.02, 0.15]), 0.5625, 0.43, eff, keep_shape=True)
+    assert not res["yielded"][0] and res["yielded"][1] and res["phi_plastic"][1] > 0.01
+    grid = res["grid"]  # (n + 1, 3, 2): xi, zeta, phi
+    np.testing.assert_allclose(grid[0, 2, :], res["phi_plastic"], atol=1e-12)  # the base's tangent angle
+    x, _ = centerline_x_at_heights(grid, np.array([0.5625]))
+    np.testing.assert_allclose(x[:, 0], res["xi_c"], atol=1e-6)
