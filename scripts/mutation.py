@@ -128,6 +128,11 @@ TARGETS: dict[str, tuple[str, list[str], list[str] | None]] = {
         ]
         + ["*.xǁDiagnoserǁstructure__mutmut_*"],
     ),
+    "sampler": (  # added in session 25 with the restart of stuck walkers; not yet run
+        "bayesrod/inference/sampler.py",
+        ["tests/test_sampler.py", "tests/test_inference.py::test_sampler_resumes_from_checkpoint"],
+        ["*.x_replace_stuck_walkers__mutmut_*", "*.x_run_ensembles__mutmut_*", "*.x__collect__mutmut_*"],
+    ),
 }
 
 STATUSES = ("killed", "timeout", "survived", "no tests", "suspicious", "skipped", "segfault")
