@@ -267,7 +267,7 @@ def release_clamps(post: GroupPosterior, theta: NDArray, min_gain: float = 2.0) 
     condition at a time, until no release gains ``min_gain`` in log density. A release must matter
     (default: 2 nats, a likelihood ratio of 7): on the study's replicate 0 an intact clamp softened to
     u = 0.0005 gains 0.005 nats, and its walkers, started there in the posterior's thin soft-intact
-    branch, ended at R-hat 1.15 after 5000 steps (from the clamp: 1.05 in an earlier run).
+    branch, ended at R-hat 1.15 after 5000 steps (from the clamp: 1.05 and 1.07 in two runs).
     """
     names = post.names
     lp = float(post.log_prob(theta))

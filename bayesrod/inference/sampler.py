@@ -299,23 +299,16 @@ def run_ensembles(
             init = _ball(theta0, n_walkers, rng, post) if s.iteration == 0 else None  # None: resume
             if init is None and s.backend is not None and s.backend.random_state is not None:
                 s.random_state = s.backend.random_state
-            s.run_mcmc(
-                init,
-                todo,
-                progress=progress,
-                progress_kwargs={"desc": f"ensemble {k + 1}/{n_ensembles}", "leave": False},
-            )
+            desc = f"ensemble {k + 1}/{n_ensembles}"
+            s.run_mcmc(init, todo, progress=progress, progress_kwargs={"desc": desc, "leave": False})
             if init is not None:  # the first stretch from the start ball: a walker left behind starts again
-                moved = replace_stuck_walkers(s.get_chain(), s.get_log_prob(), rng)
+                chain = s.get_chain()
+                moved = replace_stuck_walkers(chain, s.get_log_prob(), rng)
                 if moved is not None:
-                    replaced[k] = int(np.sum(np.any(moved != s.get_chain()[-1], axis=1)))
-                    s.reset()
-                    s.run_mcmc(
-                        moved,
-                        todo,
-                        progress=progress,
-                        progress_kwargs={"desc": f"ensemble {k + 1}/{n_ensembles} (again)", "leave": False},
-                    )
+                    replaced[k] = int(np.sum(np.any(moved != chain[-1], axis=1)))
+                    s.reset()  # the stretch with the stuck walkers is discarded
+                    again = {"desc": desc + " (again)", "leave": False}
+                    s.run_mcmc(moved, todo, progress=progress, progress_kwargs=again)
             if s.backend is not None and hasattr(s.backend, "flush"):
                 s.backend.flush()
         res = _collect(samplers)

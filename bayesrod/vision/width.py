@@ -582,7 +582,7 @@ def combine_profiles(
     # its stations; the median over frames averages it down over frames only, not over stations as the stations'
     # own sd (from the frames' spread at each station, taken as independent along the stem) would have it. The
     # scale error left in the combined profile: the frames' sd of their scales over sqrt(frames). (Taking the
-    # frames' sd itself, the error of one frame, made the grass's d0 intervals +-5% for errors of sd 1.6%:
+    # frames' sd itself, the error of one frame, made the grass's d0 intervals +-4.5-7% for errors of sd 1.6%:
     # twice too wide; docs/validation.md.)
     n_frames = len(profiles)
     contrast_sd = float(np.std([wp.contrast_scale for wp in profiles])) / np.sqrt(n_frames) if n_frames > 1 else 0.0
