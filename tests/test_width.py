@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -91,7 +92,7 @@ def test_unmixing_reads_a_shaded_stem_that_projection_reads_too_wide():
 @pytest.mark.parametrize("shaded", [False, True])
 def test_auto_colour_model_unmixes_shaded_stems_and_keeps_projection_on_flat_ones(w0, shaded):
     """``auto`` compares the two models at the stations at least WIDE_PX wide: a shaded stem of 3.3-8 px is
-    unmixed (projection reads it 0.33-0.58 px wider than unmixing), a flat one keeps projection (the models
+    unmixed (projection reads it 0.29-0.58 px wider than unmixing), a flat one keeps projection (the models
     agree within 0.03 px), and a flat 3.27-px stem with too few 3-px stations to compare keeps projection,
     saying why; the chosen model reads the width to 0.06 px."""
     from bayesrod.vision.width import choose_colour_model
@@ -101,7 +102,7 @@ def test_auto_colour_model_unmixes_shaded_stems_and_keeps_projection_on_flat_one
     c = choose_colour_model(img, None, line, cam)
     assert c.model == ("unmixing" if shaded else "projection"), c
     if shaded:
-        assert c.stations >= 10 and c.shading_px > 0.3, c
+        assert c.stations >= 10 and c.shading_px > 0.25, c
     elif w0 > 3.5:
         assert c.stations >= 10 and abs(c.shading_px) < 0.05, c
     else:
@@ -236,6 +237,14 @@ def test_the_frames_spread_of_contrast_scales_is_a_scale_error_all_stations_shar
     same = [dataclasses.replace(base, contrast_scale=1.04) for _ in scales]
     assert combine_profiles(same, s, depth_scale_sd=0.01).shared_scale_sd == pytest.approx(0.01, rel=1e-12)
     assert combine_profiles(profs[1:2], s, min_frames=1).shared_scale_sd == 0.0
+    # the error the frames share, for the share of stations that borrowed the frame's colour
+    from bayesrod.vision.width import CONTRAST_SCALE_SD
+
+    for share in (1.0, 0.5, 0.0):
+        borrowed = np.arange(20) < share * 20
+        lent = [dataclasses.replace(p, borrowed=borrowed) for p in profs]
+        expect = np.hypot(se, share * CONTRAST_SCALE_SD)
+        assert combine_profiles(lent, s).shared_scale_sd == pytest.approx(expect, rel=1e-12), share
 
 
 def test_stations_off_the_smooth_profile_are_flagged_and_no_others():
@@ -440,40 +449,66 @@ def test_contrast_scale_recovers_the_contrast_of_blurred_profiles():
     from bayesrod.vision.width import contrast_scale
 
     rng = np.random.default_rng(0)
-    w = rng.uniform(1.5, 5.0, 30)
+    w = np.sort(rng.uniform(1.5, 5.0, 30))[::-1]  # a stem tapering along its stations
     _, _, profiles = _box_profiles(w, 0.8, 1.1, 0.02, rng)
-    assert contrast_scale(profiles, w / 2) == pytest.approx(0.8, abs=0.01)
-    assert contrast_scale(profiles[:4], w[:4] / 2) == 1.0  # too few profiles to read a shape from
+    s = np.arange(w.size)
+    assert contrast_scale(profiles, s) == pytest.approx(0.8, abs=0.01)
+    assert contrast_scale(profiles[:4], s[:4]) == 1.0  # too few profiles to read a shape from
 
 
-def test_contrast_scale_ignores_profiles_that_clutter_crosses():
+def test_contrast_scale_ignores_profiles_that_clutter_crosses(monkeypatch):
     """A stem tapering from 3.3 to 2 px along 60 stations (contrast 1.06 of the assumed colour, blur sd 0.8
     px); clutter crosses every sixth window (a thin object of a colour further from the background, in front
-    of the stem, and the mask merged with it reads wider): those profiles are the widest by mask and, used,
-    set the scale 1.2 or more, as on the rendered grass (docs/validation.md)."""
-    from bayesrod.vision.width import _blurred_box, _clean_profiles, contrast_scale
+    of the stem), and an object of the stem's colour lies beside it in runs of three stations (a sudden wide
+    "stem" that a running median of neighbours let through): used, they set the scale 0.97 (tied widths;
+    1.15 or more with free widths)."""
+    from bayesrod.vision import width as W
 
     w = np.linspace(3.3, 2.0, 60)
     t, c, profiles = _box_profiles(w, 1.06, 0.8, 0.03, np.random.default_rng(1))
-    half = w / 2
     hit = np.arange(60) % 6 == 3
     for i in np.flatnonzero(hit):
-        clutter = 0.7 * _blurred_box(t - c[i], 1.5, 0.8)  # peak coverage 1.5-1.7, as read on the grass
+        clutter = 0.7 * W._blurred_box(t - c[i], 1.5, 0.8)  # peak coverage 1.5-1.7, as read on the grass
         profiles[i] = (t, profiles[i][1] + clutter)
-    beside = np.arange(60) % 6 == 0  # and an object of the stem's colour just beside it: a sudden wide "stem"
+    beside = np.isin(np.arange(60) % 20, (8, 9, 10))
     for i in np.flatnonzero(beside):
-        profiles[i] = (t, profiles[i][1] + 1.06 * _blurred_box(t - c[i] - 4.0, 2.5, 0.8))
-    half_seen = np.where(hit, half + 1.5, np.where(beside, half + 3.0, half))  # the mask merged with the clutter
-    np.testing.assert_array_equal(_clean_profiles(profiles), ~(hit | beside))
-    assert contrast_scale(profiles, half_seen) == pytest.approx(1.06, abs=0.03)
-    # with every profile used (the selection before 2026-11-26) the thin bright objects alone set the scale far
-    # too high
-    from bayesrod.vision import width as W
+        profiles[i] = (t, profiles[i][1] + 1.06 * W._blurred_box(t - c[i] - 4.0, 2.5, 0.8))
+    s = np.arange(60) * 0.003
+    clean, trend = W._clean_profiles(profiles, s)
+    np.testing.assert_array_equal(clean, ~(hit | beside))
+    np.testing.assert_allclose(trend, 1.06 * w, rtol=0.05)  # the stem's own width, through the runs of clutter
+    assert W.contrast_scale(profiles, s) == pytest.approx(1.06, abs=0.02)
+    # with every profile used the clutter sets the scale far off
+    monkeypatch.setattr(W, "PEAK_MAX", np.inf)
+    monkeypatch.setattr(W, "AREA_REL", np.inf)
+    assert abs(W.contrast_scale(profiles, s) - 1.06) > 0.06
 
-    keep = W._clean_profiles
-    try:
-        W._clean_profiles = lambda p: np.ones(len(p), bool)
-        plain = [p for p, b in zip(profiles, beside, strict=True) if not b]
-        assert contrast_scale(plain, half_seen[~beside]) > 1.15
-    finally:
-        W._clean_profiles = keep
+
+def _rendered_grass_profiles():
+    """Profiles ``contrast_scale`` was given in 4 rendered grass frames (seed 5, clutter of the stem's
+    colour at its base), with the drawn widths: tests/data/grass_profiles_seed5.npz, written by
+    ``python scripts/contrast_scale_check.py --seeds 5 --fixture tests/data/grass_profiles_seed5.npz``."""
+    z = np.load(Path(__file__).parent / "data" / "grass_profiles_seed5.npz")
+    edges = np.concatenate([[0], np.cumsum(z["size"])])
+    profiles = [(z["t"][a:b], z["a"][a:b]) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+    return profiles, z["s"], z["frame"], z["true_px"]
+
+
+def test_contrast_scale_reads_rendered_grass_as_its_drawn_widths_need():
+    """On the rendered grass the scale each frame needs (the median coverage integral over the drawn width
+    at its clean stations 2 px or wider) is 1.03-1.11; the tied fit reads it within 8% in every frame and
+    4.5% in the median over frames (-3.5%: part of the integral is an offset, not a scale). With each
+    profile's width free the median was -5.7% and the worst frame -7%."""
+    from bayesrod.vision.width import STEP_PX, _clean_profiles, contrast_scale
+
+    profiles, s, frame, true_px = _rendered_grass_profiles()
+    ratio = []
+    for f in np.unique(frame):
+        i = np.flatnonzero(frame == f)
+        p = [profiles[j] for j in i]
+        clean, _ = _clean_profiles(p, s[i])
+        area = np.array([np.sum(a) * STEP_PX for _, a in p])
+        use = clean & (true_px[i] >= 2.0)
+        need = float(np.median(area[use] / true_px[i][use]))
+        ratio.append(contrast_scale(p, s[i]) / need)
+    assert np.all(np.abs(np.array(ratio) - 1) < 0.08) and abs(np.median(ratio) - 1) < 0.045, ratio

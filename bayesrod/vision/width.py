@@ -66,11 +66,18 @@ OFFSET_SD_PX = 0.1
 OWN_CORE_HALF_PX = 3.0  # a station at least 6 px wide (in the mask) takes the stem colour of its own core
 #: the contrast scale reads only profiles of the stem alone (:func:`_clean_profiles`): coverage peak at most
 #: PEAK_MAX (a stem's coverage against a frame colour still mixed with the background exceeds 1 by the
-#: contrast scale, about 1.06 on the rendered grass), integral within AREA_REL of the running median of
-#: AREA_WINDOW neighbouring stations
+#: contrast scale, about 1.04 on the rendered grass) and integral within AREA_REL of a robust cubic trend of
+#: the integrals along the stem (a stem's width changes smoothly; clutter crossing a window, or a mask merged
+#: with it, does not); of those, the AREA_N_MAX widest by that trend, if at least MIN_AREA_PX wide (a
+#: narrower profile's shape is the blur's, and holds no contrast)
 PEAK_MAX = 1.25
-AREA_REL = 0.5
-AREA_WINDOW = 9
+AREA_REL = 0.3
+MIN_AREA_PX = 2.0
+AREA_N_MAX = 40
+#: sd of the error of a push's contrast scale that its frames share (relative): on the rendered grass the
+#: frames' median scale against the scale its drawn widths need (per frame, a robust regression of the
+#: coverage integrals on the drawn widths) over 6 seeds: 0.974-1.037 of it, rms 2.1% (docs/validation.md)
+CONTRAST_SCALE_SD = 0.02
 
 
 @dataclass(frozen=True)
@@ -80,7 +87,7 @@ class WidthProfile:
     ``width_m`` and ``sd_m`` (k,) [m]; ``width_px`` (k,) [px]; ``flag`` (k,) str from :data:`FLAGS`
     (only ``"ok"`` stations are measurements); ``uv`` (k, 2) the stations' pixels; ``contrast_scale`` the
     factor the widths of stations too narrow for a core colour of their own were divided by
-    (:func:`contrast_scale`; 1 where none).
+    (:func:`contrast_scale`; 1 where none); ``borrowed`` (k,) bool: those stations (None: not recorded).
     """
 
     s_m: NDArray
@@ -90,6 +97,7 @@ class WidthProfile:
     flag: NDArray
     uv: NDArray
     contrast_scale: float = 1.0
+    borrowed: NDArray | None = None
 
 
 def _sample(img: NDArray, pts: NDArray) -> NDArray:
@@ -240,7 +248,7 @@ def width_profile(
     # is still mixed with the background (blur): their coverage is scaled by the contrast the profiles'
     # shapes imply (:func:`contrast_scale`)
     borrowed = [i for i in profiles if not own_core[i] and flag[i] == "ok"]
-    scale = contrast_scale([profiles[i] for i in borrowed], half_mask[borrowed]) if borrowed else 1.0
+    scale = contrast_scale([profiles[i] for i in borrowed], s_m[borrowed]) if borrowed else 1.0
     width_px[~own_core] /= scale
     sd_px[~own_core] /= scale
     return WidthProfile(
@@ -251,6 +259,7 @@ def width_profile(
         flag=flag.astype(str),
         uv=np.column_stack([u, v]),
         contrast_scale=float(scale),
+        borrowed=~own_core,
     )
 
 
@@ -351,45 +360,53 @@ def _blurred_box(t: NDArray, w: NDArray, sigma: float) -> NDArray:
     return ndtr((t + w / 2) / sigma) - ndtr((t - w / 2) / sigma)
 
 
-def contrast_scale(profiles: list, half_mask: NDArray, n_max: int = 40) -> float:
+def contrast_scale(profiles: list, s: NDArray, n_max: int = AREA_N_MAX) -> float:
     """Contrast of the true stem colour relative to the assumed one, from the shapes of narrow profiles.
 
-    Each profile (t, a) of coverage against the assumed colour is modelled as
-    ``k * box(w_i) * Gaussian(sigma)`` with the contrast ``k`` and the blur ``sigma`` shared by the frame
-    (least squares over the ``n_max`` widest profiles; widths and centres per profile). The coverage
-    integral itself needs no model (it is ``k w`` whatever the point spread); only ``k`` does. Returns 1
-    when fewer than 5 profiles are 2 px or wider (no shape to read the contrast from).
+    Each profile (t, a) of coverage against the assumed colour is modelled as ``k * box(w_i) *
+    Gaussian(sigma)``, the contrast ``k`` and the blur ``sigma`` shared by the frame and each box's width
+    tied to its profile's coverage integral, ``w_i = A_i / k`` (the integral is ``k w`` whatever the point
+    spread, so only ``k`` and the centres are fitted; robust least squares over the ``n_max`` widest clean
+    profiles, :func:`_clean_profiles`). With each profile's width free as well (the fit before 2026-11-26)
+    width and contrast traded off, and on the rendered grass the scale came out 2-12% low, most on frames
+    with clutter near the stem (docs/validation.md). Returns 1 when fewer than 5 clean profiles are
+    ``MIN_AREA_PX`` or wider (no shape to read the contrast from).
+
+    Parameters
+    ----------
+    profiles : list of (t, a) pairs of (m_i,) arrays
+        Offsets across the stem [px] and coverage against the assumed colour, one pair per station in
+        order along the stem.
+    s : (n,) array
+        The stations' arc length (any unit): where along the stem each profile was taken.
     """
     from scipy.optimize import least_squares
 
-    order = np.argsort(half_mask)[::-1]
-    clean = _clean_profiles(profiles)
-    use = [i for i in order if 2 * half_mask[i] >= 2.0 and clean[i]][:n_max]
+    clean, trend = _clean_profiles(profiles, s)
+    order = np.argsort(trend)[::-1]
+    use = [i for i in order if clean[i] and trend[i] >= MIN_AREA_PX][:n_max]
     if len(use) < 5:
         return 1.0
     n = len(use)
     t_all = np.concatenate([profiles[i][0] for i in use])
     y_all = np.concatenate([profiles[i][1] for i in use])
     owner = np.repeat(np.arange(n), [profiles[i][0].size for i in use])  # the profile of each sample
-    w0 = np.array([max(float(np.sum(profiles[i][1]) * STEP_PX), 0.5) for i in use])
+    area = np.array([float(np.sum(profiles[i][1])) * STEP_PX for i in use])
 
     def resid(x):
         k, sig = np.exp(x[0]), np.exp(x[1])
-        w, c = x[2 : 2 + n], x[2 + n :]
-        return y_all - k * _blurred_box(t_all - c[owner], w[owner], sig)
+        return y_all - k * _blurred_box(t_all - x[2:][owner], (area / k)[owner], sig)
 
-    # a profile's samples depend on k, sigma and its own width and centre only: with this sparsity the
-    # finite-difference Jacobian takes a handful of evaluations instead of one per parameter
-    sparsity = np.zeros((y_all.size, 2 + 2 * n), bool)
+    # a profile's samples depend on k, sigma and its own centre only: with this sparsity the finite-difference
+    # Jacobian takes a handful of evaluations instead of one per parameter
+    sparsity = np.zeros((y_all.size, 2 + n), bool)
     sparsity[:, :2] = True
     sparsity[np.arange(y_all.size), 2 + owner] = True
-    sparsity[np.arange(y_all.size), 2 + n + owner] = True
-    x0 = np.concatenate([[0.0, np.log(0.8)], w0, np.zeros(n)])
-    lo = np.concatenate([[np.log(0.5), np.log(0.2)], np.full(n, 0.1), np.full(n, -2.0)])
-    hi = np.concatenate([[np.log(2.0), np.log(3.0)], np.full(n, 50.0), np.full(n, 2.0)])
+    lo = np.concatenate([[np.log(0.5), np.log(0.2)], np.full(n, -2.0)])
+    hi = np.concatenate([[np.log(2.0), np.log(3.0)], np.full(n, 2.0)])
     fit = least_squares(
         resid,
-        np.clip(x0, lo + 1e-9, hi - 1e-9),
+        np.concatenate([[0.0, np.log(0.8)], np.zeros(n)]),
         bounds=(lo, hi),
         loss="soft_l1",
         f_scale=0.1,
@@ -398,18 +415,30 @@ def contrast_scale(profiles: list, half_mask: NDArray, n_max: int = 40) -> float
     return float(np.exp(fit.x[0])) if fit.success else 1.0
 
 
-def _clean_profiles(profiles: list) -> NDArray:
-    """True for the profiles (in station order along the stem) that show the stem alone: a coverage
-    peak of at most ``PEAK_MAX`` and an integral within ``AREA_REL`` of the running median of its
-    ``AREA_WINDOW`` neighbours. Clutter crossing a window, or a mask merged with it, reads as more
-    than full coverage or as a sudden wide stem; on the grass such profiles were the widest by mask
-    and set the contrast scale 1.2-1.5 where the stem needs about 1.06 (docs/validation.md)."""
-    from scipy.ndimage import median_filter
+def _clean_profiles(profiles: list, s: NDArray) -> tuple[NDArray, NDArray]:
+    """Which profiles (in station order along the stem, at arc lengths ``s`` (n,)) show the stem alone.
+
+    Returns ``clean`` (n,) bool and ``trend`` (n,) [px]: a cubic in s fitted to the coverage integrals
+    with a robust (Cauchy) loss, the stem's smooth width. Clean: a coverage peak of at most ``PEAK_MAX``
+    and an integral within ``AREA_REL`` of the trend. Clutter crossing a window, or a mask merged with it,
+    reads as more than full coverage or as a sudden wide stem; on the grass such profiles came in runs of
+    several stations, which a running median of neighbours (before 2026-11-26) let through.
+    """
+    from scipy.optimize import least_squares
 
     area = np.array([float(np.sum(a)) * STEP_PX for _, a in profiles])
     peak = np.array([float(np.max(a)) if a.size else np.inf for _, a in profiles])
-    smooth = median_filter(area, size=AREA_WINDOW, mode="reflect") if area.size else area
-    return (peak <= PEAK_MAX) & (np.abs(area - smooth) <= AREA_REL * np.abs(smooth))
+    s = np.asarray(s, float)
+    if area.size < 5:
+        return np.zeros(area.size, bool), area
+    x = (s - s.mean()) / max(float(np.std(s)), 1e-12)
+    X = np.vander(x, min(4, area.size // 8 + 1))
+    scale = max(0.1 * float(np.median(np.abs(area))), 1e-3)
+    coef = np.linalg.lstsq(X, area, rcond=None)[0]
+    for loss in ("soft_l1", "cauchy"):  # the Cauchy loss ignores runs of clutter; soft L1 brings it near first
+        coef = least_squares(lambda c: X @ c - area, coef, loss=loss, f_scale=scale).x
+    trend = X @ coef
+    return (peak <= PEAK_MAX) & (np.abs(area - trend) <= AREA_REL * np.abs(trend)), trend
 
 
 def _purest_pixel(img: NDArray, u: float, v: float, nu: float, nv: float, half: float):
@@ -511,6 +540,22 @@ def _off_profile(s_m: NDArray, d: NDArray, sd: NDArray, ok: NDArray) -> NDArray:
     return out
 
 
+def _borrowed_share(profiles: list[WidthProfile], s_m: NDArray, ok: NDArray) -> float:
+    """Share (0-1) of the ``ok`` stations' frame measurements that borrowed the frame's colour (and so its
+    contrast scale); 0 where no profile recorded it."""
+    hits = total = 0
+    for wp in profiles:
+        if wp.borrowed is None:
+            continue
+        idx = np.searchsorted(s_m, wp.s_m)
+        hit = (idx < s_m.size) & np.isclose(s_m[np.minimum(idx, s_m.size - 1)], wp.s_m, rtol=0, atol=1e-9)
+        use = hit & (wp.flag == "ok")
+        use[hit] &= ok[idx[hit]]
+        hits += int(np.sum(wp.borrowed[use]))
+        total += int(np.sum(use))
+    return hits / total if total else 0.0
+
+
 def combine_profiles(
     profiles: list[WidthProfile], s_m: NDArray, min_frames: int = 3, depth_scale_sd: float = 0.0
 ) -> DiameterProfile:
@@ -581,11 +626,13 @@ def combine_profiles(
     # each frame divides its narrow stations by its own contrast scale, so a frame's scale error is shared by all
     # its stations; the median over frames averages it down over frames only, not over stations as the stations'
     # own sd (from the frames' spread at each station, taken as independent along the stem) would have it. The
-    # scale error left in the combined profile: the frames' sd of their scales over sqrt(frames). (Taking the
-    # frames' sd itself, the error of one frame, made the grass's d0 intervals +-4.5-7% for errors of sd 1.6%:
-    # twice too wide; docs/validation.md.)
+    # scale error left in the combined profile: the frames' sd of their scales over sqrt(frames), and the error
+    # the frames share (the estimator's, CONTRAST_SCALE_SD) weighted by the share of the profile's ok stations that
+    # borrowed the frame's colour. (Taking the frames' sd itself, the error of one frame, made the grass's d0
+    # intervals +-4.5-7% for errors of sd 1.6%: twice too wide; docs/validation.md.)
     n_frames = len(profiles)
     contrast_sd = float(np.std([wp.contrast_scale for wp in profiles])) / np.sqrt(n_frames) if n_frames > 1 else 0.0
+    contrast_sd = float(np.hypot(contrast_sd, CONTRAST_SCALE_SD * _borrowed_share(profiles, s_m, ok)))
     return DiameterProfile(
         s_m=s_m,
         d_m=d,
