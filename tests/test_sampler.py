@@ -65,3 +65,118 @@ def test_run_ensembles_restarts_a_walker_left_in_a_lower_well(monkeypatch):
     assert res.walkers_restarted == (1, 1)
     assert np.all(np.abs(res.chain[..., 0]) < 4.0)  # no draw from the low well
     assert abs(np.std(res.chain[..., 0]) - 1.0) < 0.15
+
+
+class _Gauss:
+    """A standard normal in ``ndim`` dimensions (cheap: the sampler's logic is under test, not a model)."""
+
+    def __init__(self, ndim=2):
+        self.ndim = ndim
+        self.names = tuple(f"x{i}" for i in range(ndim))
+        self.calls = 0  # walker positions evaluated
+
+    def log_prob(self, theta):
+        t = np.atleast_2d(theta)
+        self.calls += t.shape[0]
+        out = -0.5 * np.sum(t**2, axis=-1)
+        return out if np.ndim(theta) > 1 else out[0]
+
+    def prior_coordinates(self, chain):
+        return chain
+
+
+def test_run_ensembles_returns_every_walker_after_burn_in_with_its_log_density():
+    post = _Gauss(3)
+    kw = dict(n_ensembles=3, chunk=300, min_steps=300, max_steps=300, progress=False, target_ess=1.0)
+    res = run_ensembles(post, np.zeros(3), seed=4, **kw)
+    assert res.n_ensembles == 3 and res.n_steps == 300
+    assert res.chain.shape == (3 * 16, 300 - res.burn, 3)  # 16 walkers each: max(16, 4 ndim)
+    assert res.log_prob.shape == res.chain.shape[:2]
+    np.testing.assert_allclose(res.log_prob, post.log_prob(res.chain.reshape(-1, 3)).reshape(res.chain.shape[:2]))
+    assert res.tau.shape == (3,) and np.all(np.isfinite(res.tau) & (res.tau > 0))
+    assert res.burn == int(min(max(300 // 3, 5 * np.max(res.tau)), 150))
+    assert 0.2 < res.acceptance < 0.95
+    assert res.walkers_restarted == (0, 0, 0)  # a healthy run moves nobody
+    assert abs(np.std(res.chain) - 1.0) < 0.1 and abs(np.mean(res.chain)) < 0.1
+    assert set(res.diagnostics) == {"rhat", "ess_bulk"} and set(res.diagnostics["rhat"]) == set(post.names)
+    # the ensembles are independent (their own seeds) and the whole run reproducible from its seed
+    first = [res.chain[16 * k : 16 * (k + 1), 0] for k in range(3)]
+    assert not np.allclose(first[0], first[1]) and not np.allclose(first[1], first[2])
+    again = run_ensembles(_Gauss(3), np.zeros(3), seed=4, **kw)
+    np.testing.assert_array_equal(again.chain, res.chain)
+    other = run_ensembles(_Gauss(3), np.zeros(3), seed=5, **kw)
+    assert not np.allclose(other.chain, res.chain)
+    # walkers: at least 16, 4 per dimension above that
+    wide = run_ensembles(_Gauss(5), np.zeros(5), seed=4, **{**kw, "n_ensembles": 1})
+    assert wide.chain.shape[0] == 20
+
+
+def test_collect_burns_a_third_or_five_autocorrelation_times_at_most_half():
+    """``_collect`` on stand-in samplers whose autocorrelation times are set: burn-in max(n/3, 5 tau) capped
+    at n/2, tau the largest over ensembles per parameter, acceptance the mean."""
+
+    class S:
+        def __init__(self, tau, acc, n=300, w=4, d=2, off=0.0):
+            self.iteration, self._tau, self.acceptance_fraction = n, np.asarray(tau, float), np.full(w, acc)
+            self._c = off + np.arange(n * w * d, dtype=float).reshape(n, w, d)
+
+        def get_chain(self):
+            return self._c
+
+        def get_log_prob(self):
+            return self._c[..., 0] * 10
+
+        def get_autocorr_time(self, tol=0):
+            return self._tau
+
+    for taus, burn in (([[4, 9], [3, 2]], 100), ([[4, 24], [3, 2]], 120), ([[4, 80], [3, 2]], 150)):
+        res = sampler._collect([S(taus[0], 0.3), S(taus[1], 0.5, off=1e6)])
+        np.testing.assert_array_equal(res.tau, np.max(taus, axis=0))
+        assert res.burn == burn and res.n_steps == 300 and res.acceptance == 0.4 and res.n_ensembles == 2
+        assert res.chain.shape == (8, 300 - burn, 2) and res.log_prob.shape == (8, 300 - burn)
+        np.testing.assert_array_equal(res.chain[1, :, 1], S([1], 0).get_chain()[burn:, 1, 1])  # walker 1, step-wise
+        np.testing.assert_array_equal(res.chain[4:, 0, 0], 1e6 + S([1], 0).get_chain()[burn, :, 0])  # 2nd ensemble
+        np.testing.assert_array_equal(res.log_prob, res.chain[..., 0] * 10)
+
+
+def test_run_ensembles_stops_when_every_target_is_met_and_says_when_not(monkeypatch):
+    """Stops at the first check (min_steps, then every chunk) where the bulk ESS of the first two parameters
+    reaches its target, R-hat is at most its target and the run is 50 autocorrelation times long; else runs
+    to max_steps and reports converged False with the diagnostics."""
+    seen = []
+
+    def fake(ess, rhat):
+        def diagnostics(chain, names):
+            seen.append(chain.shape[1])
+            return {"rhat": dict.fromkeys(names, rhat), "ess_bulk": {**dict.fromkeys(names, ess), names[-1]: 1.0}}
+
+        return diagnostics
+
+    kw = dict(n_ensembles=1, n_walkers=16, chunk=100, min_steps=300, max_steps=700, progress=False)
+    for ess, rhat, target_ess, converged in ((500.0, 1.01, 500.0, True), (499.0, 1.0, 500.0, False)):
+        monkeypatch.setattr(sampler, "diagnostics", fake(ess, rhat))
+        seen.clear()
+        res = run_ensembles(_Gauss(3), np.zeros(3), seed=0, target_ess=target_ess, target_rhat=1.01, **kw)
+        assert res.converged is converged and res.diagnostics["rhat"]["x0"] == rhat
+        if converged:  # the first check long enough for the autocorrelation time
+            assert res.n_steps >= 50 * np.max(res.tau) and (res.n_steps == 300 or res.n_steps - 100 < 50 * max(res.tau))
+        else:
+            assert res.n_steps == 700 and len(seen) == 5  # 300, then 100 at a time
+    monkeypatch.setattr(sampler, "diagnostics", fake(1e4, 1.02))
+    res = run_ensembles(_Gauss(3), np.zeros(3), seed=0, target_ess=500.0, target_rhat=1.01, **kw)
+    assert res.converged is False and res.n_steps == 700
+    # ESS and R-hat met, but 100 steps are fewer than 50 autocorrelation times (about 6 steps here)
+    monkeypatch.setattr(sampler, "diagnostics", fake(1e4, 1.0))
+    res = run_ensembles(_Gauss(3), np.zeros(3), seed=0, **{**kw, "min_steps": 100, "max_steps": 100})
+    assert 100 < 50 * np.max(res.tau) and res.converged is False
+
+
+def test_a_resumed_run_does_not_redo_the_steps_it_saved(tmp_path):
+    kw = dict(n_ensembles=2, n_walkers=16, chunk=100, progress=False, backend_path=tmp_path / "c.h5", seed=1)
+    first = _Gauss(2)
+    run_ensembles(first, np.zeros(2), min_steps=200, max_steps=200, **kw)
+    again = _Gauss(2)
+    res = run_ensembles(again, np.zeros(2), min_steps=200, max_steps=300, **kw)
+    assert res.n_steps == 300
+    assert again.calls <= 2 * 100 * 16 + 200  # the 100 new steps of each ensemble (and the start's checks)
+    assert first.calls >= 2 * 200 * 16

@@ -296,9 +296,8 @@ def run_ensembles(
         for k, s in enumerate(samplers):
             if todo <= 0:
                 break
-            init = _ball(theta0, n_walkers, rng, post) if s.iteration == 0 else None  # None: resume
-            if init is None and s.backend is not None and s.backend.random_state is not None:
-                s.random_state = s.backend.random_state
+            # None: resume (emcee restores the random state the backend saved with the last sample)
+            init = _ball(theta0, n_walkers, rng, post) if s.iteration == 0 else None
             desc = f"ensemble {k + 1}/{n_ensembles}"
             s.run_mcmc(init, todo, progress=progress, progress_kwargs={"desc": desc, "leave": False})
             if init is not None:  # the first stretch from the start ball: a walker left behind starts again
