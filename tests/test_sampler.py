@@ -60,7 +60,8 @@ def test_run_ensembles_restarts_a_walker_left_in_a_lower_well(monkeypatch):
         return out
 
     monkeypatch.setattr(sampler, "_ball", ball)
-    kw = dict(n_ensembles=2, n_walkers=16, chunk=200, min_steps=200, max_steps=400, progress=False, target_ess=50)
+    # one stretch only: the check follows the first stretch from the ball, not a later one
+    kw = dict(n_ensembles=2, n_walkers=16, chunk=300, min_steps=300, max_steps=300, progress=False, target_ess=50)
     res = run_ensembles(_TwoWells(), np.zeros(2), seed=0, **kw)
     assert res.walkers_restarted == (1, 1)
     assert np.all(np.abs(res.chain[..., 0]) < 4.0)  # no draw from the low well
@@ -173,10 +174,78 @@ def test_run_ensembles_stops_when_every_target_is_met_and_says_when_not(monkeypa
 
 def test_a_resumed_run_does_not_redo_the_steps_it_saved(tmp_path):
     kw = dict(n_ensembles=2, n_walkers=16, chunk=100, progress=False, backend_path=tmp_path / "c.h5", seed=1)
-    first = _Gauss(2)
-    run_ensembles(first, np.zeros(2), min_steps=200, max_steps=200, **kw)
+    first = _Gauss(2)  # 100 steps: fewer than the checkpoint's flush interval, so the run's end must flush
+    run_ensembles(first, np.zeros(2), min_steps=100, max_steps=100, **kw)
     again = _Gauss(2)
-    res = run_ensembles(again, np.zeros(2), min_steps=200, max_steps=300, **kw)
-    assert res.n_steps == 300
+    res = run_ensembles(again, np.zeros(2), min_steps=100, max_steps=200, **kw)
+    assert res.n_steps == 200
     assert again.calls <= 2 * 100 * 16 + 200  # the 100 new steps of each ensemble (and the start's checks)
-    assert first.calls >= 2 * 200 * 16
+    assert first.calls >= 2 * 100 * 16
+    done = _Gauss(2)  # a finished run asked again: its saved result, no new step
+    res = run_ensembles(done, np.zeros(2), min_steps=100, max_steps=200, **kw)
+    assert res.n_steps == 200 and done.calls == 0
+
+
+def test_a_stuck_walker_lands_beside_another_by_a_thousandth_of_the_spread_per_dimension():
+    """Each stuck walker takes a random other walker's place, nudged by N(0, 1e-3 x the ensemble's sd) in
+    each dimension independently: distinct walkers, jitter scaled per dimension (here 1 and 100)."""
+    rng = np.random.default_rng(2)
+    chain = rng.standard_normal((100, 40, 2)) * [1.0, 100.0]
+    lp = -0.5 * np.sum((chain / [1.0, 100.0]) ** 2, axis=-1)
+    stuck = np.arange(0, 40, 4)  # 10 walkers, far below the rest
+    lp[:, stuck] -= 50.0
+    out = replace_stuck_walkers(chain, lp, rng)
+    good = np.setdiff1d(np.arange(40), stuck)
+    spread = np.std(chain[-1, good], axis=0)
+    # each moved walker's nearest good walker, in units of 1e-3 of the spread per dimension
+    rel = (out[stuck][:, None, :] - chain[-1, good][None, :, :]) / (1e-3 * spread)
+    nearest = rel[np.arange(stuck.size), np.argmin(np.sum(rel**2, axis=-1), axis=1)]  # (10, 2)
+    assert np.all(np.abs(nearest) < 5.0)  # beside a donor, not a spread away
+    assert 0.35 < np.median(np.abs(nearest)) < 1.2  # |N(0, 1)| has median 0.67
+    assert not np.allclose(nearest[:, 0], nearest[:, 1])  # each dimension its own draw
+    assert len({tuple(np.round(x, 12)) for x in out[stuck]}) == stuck.size  # no two moved walkers alike
+
+
+def test_the_walkers_restarted_count_every_walker_moved(monkeypatch):
+    real = sampler.replace_stuck_walkers
+
+    def three(chain, log_prob, rng, **kw):
+        real(chain, log_prob, rng, **kw)
+        out = chain[-1].copy()
+        out[:3] = out[5] + 1e-6 * np.arange(1, 4)[:, None]
+        return out
+
+    monkeypatch.setattr(sampler, "replace_stuck_walkers", three)
+    kw = dict(n_ensembles=2, n_walkers=16, chunk=100, min_steps=100, max_steps=100, progress=False)
+    assert run_ensembles(_Gauss(2), np.zeros(2), seed=0, **kw).walkers_restarted == (3, 3)
+
+
+def test_run_ensembles_ignores_numpys_global_random_state():
+    """emcee seeds each sampler from numpy's global state; run_ensembles seeds every ensemble itself."""
+    kw = dict(n_ensembles=2, n_walkers=16, chunk=100, min_steps=100, max_steps=100, progress=False)
+    saved = np.random.get_state()  # noqa: NPY002
+    try:
+        np.random.seed(0)  # noqa: NPY002 (the global state is what is under test)
+        a = run_ensembles(_Gauss(2), np.zeros(2), seed=3, **kw)
+        np.random.seed(1)  # noqa: NPY002
+        b = run_ensembles(_Gauss(2), np.zeros(2), seed=3, **kw)
+    finally:
+        np.random.set_state(saved)  # noqa: NPY002
+    np.testing.assert_array_equal(a.chain, b.chain)
+
+
+def test_run_ensembles_never_steps_past_its_budget(monkeypatch):
+    def never(chain, names):
+        return {"rhat": dict.fromkeys(names, 2.0), "ess_bulk": dict.fromkeys(names, 1.0)}
+
+    monkeypatch.setattr(sampler, "diagnostics", never)
+    kw = dict(n_ensembles=1, n_walkers=16, progress=False)
+    assert run_ensembles(_Gauss(2), np.zeros(2), chunk=200, min_steps=300, max_steps=650, **kw).n_steps == 650
+    assert run_ensembles(_Gauss(2), np.zeros(2), chunk=100, min_steps=300, max_steps=301, **kw).n_steps == 301
+
+
+def test_progress_bars_name_each_ensemble(capsys):
+    kw = dict(n_ensembles=2, n_walkers=16, chunk=50, min_steps=50, max_steps=50)
+    run_ensembles(_Gauss(2), np.zeros(2), seed=0, progress=True, **kw)
+    err = capsys.readouterr().err
+    assert "ensemble 1/2" in err and "ensemble 2/2" in err
