@@ -126,13 +126,16 @@ def main(argv=None) -> None:
     ap.add_argument("--graded-reps", type=int, default=5)
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--stems", default="twig,grass", help="presets to render, comma separated (default twig,grass)")
+    ap.add_argument(
+        "--first-seed", type=int, default=0, help="seeds first..first+reps-1 (graded: 100+first...); fresh cases"
+    )
     a = ap.parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     csv = out / "diameter_study.csv"
     stems = [s for s in a.stems.split(",") if s]
-    jobs = [(s, k, False) for k in range(a.reps) for s in stems]
-    jobs += [(s, 100 + k, True) for k in range(a.graded_reps) for s in stems]
+    jobs = [(s, a.first_seed + k, False) for k in range(a.reps) for s in stems]
+    jobs += [(s, 100 + a.first_seed + k, True) for k in range(a.graded_reps) for s in stems]
 
     def done_key(r):
         return r["stem"], int(float(r["seed"])), bool(int(float(r["graded"])))

@@ -237,14 +237,6 @@ def test_the_frames_spread_of_contrast_scales_is_a_scale_error_all_stations_shar
     same = [dataclasses.replace(base, contrast_scale=1.04) for _ in scales]
     assert combine_profiles(same, s, depth_scale_sd=0.01).shared_scale_sd == pytest.approx(0.01, rel=1e-12)
     assert combine_profiles(profs[1:2], s, min_frames=1).shared_scale_sd == 0.0
-    # the error the frames share, for the share of stations that borrowed the frame's colour
-    from bayesrod.vision.width import CONTRAST_SCALE_SD
-
-    for share in (1.0, 0.5, 0.0):
-        borrowed = np.arange(20) < share * 20
-        lent = [dataclasses.replace(p, borrowed=borrowed) for p in profs]
-        expect = np.hypot(se, share * CONTRAST_SCALE_SD)
-        assert combine_profiles(lent, s).shared_scale_sd == pytest.approx(expect, rel=1e-12), share
 
 
 def test_stations_off_the_smooth_profile_are_flagged_and_no_others():

@@ -74,10 +74,6 @@ PEAK_MAX = 1.25
 AREA_REL = 0.3
 MIN_AREA_PX = 2.0
 AREA_N_MAX = 40
-#: sd of the error of a push's contrast scale that its frames share (relative): on the rendered grass the
-#: frames' median scale against the scale its drawn widths need (per frame, a robust regression of the
-#: coverage integrals on the drawn widths) over 6 seeds: 0.974-1.037 of it, rms 2.1% (docs/validation.md)
-CONTRAST_SCALE_SD = 0.02
 
 
 @dataclass(frozen=True)
@@ -87,7 +83,7 @@ class WidthProfile:
     ``width_m`` and ``sd_m`` (k,) [m]; ``width_px`` (k,) [px]; ``flag`` (k,) str from :data:`FLAGS`
     (only ``"ok"`` stations are measurements); ``uv`` (k, 2) the stations' pixels; ``contrast_scale`` the
     factor the widths of stations too narrow for a core colour of their own were divided by
-    (:func:`contrast_scale`; 1 where none); ``borrowed`` (k,) bool: those stations (None: not recorded).
+    (:func:`contrast_scale`; 1 where none).
     """
 
     s_m: NDArray
@@ -97,7 +93,6 @@ class WidthProfile:
     flag: NDArray
     uv: NDArray
     contrast_scale: float = 1.0
-    borrowed: NDArray | None = None
 
 
 def _sample(img: NDArray, pts: NDArray) -> NDArray:
@@ -259,7 +254,6 @@ def width_profile(
         flag=flag.astype(str),
         uv=np.column_stack([u, v]),
         contrast_scale=float(scale),
-        borrowed=~own_core,
     )
 
 
@@ -540,22 +534,6 @@ def _off_profile(s_m: NDArray, d: NDArray, sd: NDArray, ok: NDArray) -> NDArray:
     return out
 
 
-def _borrowed_share(profiles: list[WidthProfile], s_m: NDArray, ok: NDArray) -> float:
-    """Share (0-1) of the ``ok`` stations' frame measurements that borrowed the frame's colour (and so its
-    contrast scale); 0 where no profile recorded it."""
-    hits = total = 0
-    for wp in profiles:
-        if wp.borrowed is None:
-            continue
-        idx = np.searchsorted(s_m, wp.s_m)
-        hit = (idx < s_m.size) & np.isclose(s_m[np.minimum(idx, s_m.size - 1)], wp.s_m, rtol=0, atol=1e-9)
-        use = hit & (wp.flag == "ok")
-        use[hit] &= ok[idx[hit]]
-        hits += int(np.sum(wp.borrowed[use]))
-        total += int(np.sum(use))
-    return hits / total if total else 0.0
-
-
 def combine_profiles(
     profiles: list[WidthProfile], s_m: NDArray, min_frames: int = 3, depth_scale_sd: float = 0.0
 ) -> DiameterProfile:
@@ -626,13 +604,12 @@ def combine_profiles(
     # each frame divides its narrow stations by its own contrast scale, so a frame's scale error is shared by all
     # its stations; the median over frames averages it down over frames only, not over stations as the stations'
     # own sd (from the frames' spread at each station, taken as independent along the stem) would have it. The
-    # scale error left in the combined profile: the frames' sd of their scales over sqrt(frames), and the error
-    # the frames share (the estimator's, CONTRAST_SCALE_SD) weighted by the share of the profile's ok stations that
-    # borrowed the frame's colour. (Taking the frames' sd itself, the error of one frame, made the grass's d0
-    # intervals +-4.5-7% for errors of sd 1.6%: twice too wide; docs/validation.md.)
+    # scale error left in the combined profile: the frames' sd of their scales over sqrt(frames). (Taking the
+    # frames' sd itself, the error of one frame, made the grass's d0 intervals +-4.5-7% for errors of sd 1.6%,
+    # and adding a 2% error of the estimator +-3.7-4.6% for errors of rms 1.1%: twice too wide both;
+    # docs/validation.md.)
     n_frames = len(profiles)
     contrast_sd = float(np.std([wp.contrast_scale for wp in profiles])) / np.sqrt(n_frames) if n_frames > 1 else 0.0
-    contrast_sd = float(np.hypot(contrast_sd, CONTRAST_SCALE_SD * _borrowed_share(profiles, s_m, ok)))
     return DiameterProfile(
         s_m=s_m,
         d_m=d,
