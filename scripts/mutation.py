@@ -128,7 +128,7 @@ TARGETS: dict[str, tuple[str, list[str], list[str] | None]] = {
         ]
         + ["*.xǁDiagnoserǁstructure__mutmut_*"],
     ),
-    "sampler": (  # added in session 25 with the restart of stuck walkers; not yet run
+    "sampler": (  # added in session 25 with the restart of stuck walkers; run in session 26 (docs/validation.md)
         "bayesrod/inference/sampler.py",
         ["tests/test_sampler.py", "tests/test_inference.py::test_sampler_resumes_from_checkpoint"],
         ["*.x_replace_stuck_walkers__mutmut_*", "*.x_run_ensembles__mutmut_*", "*.x__collect__mutmut_*"],
