@@ -504,3 +504,31 @@ def test_contrast_scale_reads_rendered_grass_as_its_drawn_widths_need():
         need = float(np.median(area[use] / true_px[i][use]))
         ratio.append(contrast_scale(p, s[i]) / need)
     assert np.all(np.abs(np.array(ratio) - 1) < 0.08) and abs(np.median(ratio) - 1) < 0.045, ratio
+
+
+def test_a_stick_of_the_stems_colour_behind_it_flags_the_stations_it_meets():
+    """A stick of the stem's colour 3 px wide touching a 3.5-px stem over 0.10-0.16 m of its length: where
+    the depth map puts it behind the plane those stations are ``cluttered`` (read 1.8 times too wide
+    otherwise) and no other station is, though the stem's blurred edges lie on background depth too; at
+    the plane's own depth, or without depth, nothing says so."""
+    img, line, truth = _synthetic(4.0, 0.43, 0.0)
+    cam = {"fx": F, "fy": F, "base_px": [128, 441.6]}
+    s = np.linspace(0.10, 0.16, 60)
+    u, v = 128 + F * (0.15 * s**2) / Z + 3.5, 441.6 - F * s / Z  # touching the stem on its right
+    stick = stem_coverage(u, v, np.full(s.size, 3.0), img.shape[:2])
+    img = np.clip(img * (1 - stick[..., None]) + STEM * stick[..., None], 0, 255).astype(np.uint8)
+    # as a camera sees it: the plane's depth where the stem covers most of a pixel, the background's (1 m
+    # behind) elsewhere, the stem's blurred edges included, and dropouts (no depth, not behind)
+    depth = np.where(line.mask, int(Z * 1000), int((Z + 1.0) * 1000)).astype(np.uint16)
+    depth[::7, ::5] = 0
+    plane = np.where(stick > 0, int(Z * 1000), depth).astype(np.uint16)
+    depth[stick > 0.5] = int((Z + 0.5) * 1000)
+    wp = width_profile(img, depth, line, cam)
+    hit = (wp.s_m > 0.10 - 0.004) & (wp.s_m < 0.16 + 0.004)
+    assert np.all(wp.flag[~hit & (wp.s_m > 0.02) & (wp.s_m < 0.38)] == "ok")
+    assert np.mean(wp.flag[(wp.s_m > 0.105) & (wp.s_m < 0.155)] == "cluttered") == 1.0
+    for d in (plane, None):  # the stick at the plane's depth or no depth at all: read as stem
+        seen = width_profile(img, d, line, cam)
+        mid = (seen.s_m > 0.11) & (seen.s_m < 0.15)
+        assert np.all(seen.flag[mid] == "ok")
+        assert np.median(seen.width_px[mid] / truth(seen.s_m[mid])) > 1.5

@@ -239,6 +239,11 @@ def in_front_of_plane(depth_mm: NDArray, Z: float, band_m: float = 0.02) -> NDAr
     return (depth_mm > 0) & (depth_mm / 1000.0 < Z - _band_tol(Z, band_m))
 
 
+def behind_plane(depth_mm: NDArray, Z: float, band_m: float = 0.02) -> NDArray:
+    """Pixels (H, W) whose depth reads farther than the plane's depth band (clutter behind the stem)."""
+    return (depth_mm > 0) & (depth_mm / 1000.0 > Z + _band_tol(Z, band_m))
+
+
 def recentre(uv: NDArray, mask: NDArray, half_window: int = 3, max_half_width: float = 12.0) -> NDArray:
     """Move each path pixel (k, 2) to the middle of the mask across the path's local normal.
 

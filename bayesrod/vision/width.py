@@ -21,6 +21,10 @@ medians (which spreads over the whole window). Stations are flagged and not used
 
 * ``occluded``: the centerline there is bridged (not seen) or the profile window meets an object
   in front of the plane (the probe, the arm) in the depth map;
+* ``cluttered``: samples of the profile that read as stem (coverage above ``CLUTTER_COVERAGE``) over
+  at least ``CLUTTER_PX`` lie on pixels whose depth is behind the plane: a branch or leaf of the
+  stem's colour behind it, merged into its coverage (on a rendered grass blade such a stick ran along
+  the stem's lower quarter and read it 2-5 times too wide);
 * ``low_contrast``: the stem's colour is within 6 noise sd of the background's (a pixel's
   coverage scatters by more than 1/6) or within 12 levels of it on either side (a branch of the
   stem's colour passing behind it);
@@ -39,7 +43,7 @@ from ..dataset.engagement import robust_noise
 from ..dataset.model import SHARED_DIAMETER_ERRORS, Diameters
 
 #: flag names, in the order they are tested (the first that applies is reported)
-FLAGS = ("ok", "occluded", "low_contrast", "edge", "base")
+FLAGS = ("ok", "occluded", "cluttered", "low_contrast", "edge", "base")
 COLOUR_MODELS = ("projection", "unmixing")
 #: what ``bayesrod extract`` takes: either model, or ``auto`` (:func:`choose_colour_model`, per push)
 COLOUR_CHOICES = ("auto", *COLOUR_MODELS)
@@ -74,6 +78,10 @@ PEAK_MAX = 1.25
 AREA_REL = 0.3
 MIN_AREA_PX = 2.0
 AREA_N_MAX = 40
+#: a station is ``cluttered`` when its samples of coverage above CLUTTER_COVERAGE (stem, not the blurred
+#: edge) on pixels behind the plane's depth band add up to CLUTTER_PX [px] or more
+CLUTTER_COVERAGE = 0.75
+CLUTTER_PX = 0.5
 
 
 @dataclass(frozen=True)
@@ -147,7 +155,7 @@ def width_profile(
     import cv2
     from scipy.interpolate import CubicSpline
 
-    from .extract import band_around_centre, in_front_of_plane, mask_across
+    from .extract import band_around_centre, behind_plane, in_front_of_plane, mask_across
 
     if colour_model not in COLOUR_MODELS:
         raise ValueError(f"colour_model: expected one of {', '.join(COLOUR_MODELS)}, got {colour_model!r}")
@@ -192,9 +200,10 @@ def width_profile(
     if frame_stem is None:
         core = cv2.erode(mask.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
         frame_stem = np.median(img[core], axis=0) if core.sum() >= 20 else np.median(img[mask], axis=0)
-    occluder = None
+    occluder = behind = None
     if depth_mm is not None:
         occluder = cv2.dilate(in_front_of_plane(depth_mm, Z).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+        behind = behind_plane(depth_mm, Z)
     observed = np.interp(s_m, line.s_m, (line.observed if line.observed is not None else np.ones(line.s_m.size)))
     k = s_m.size
     width_px, sd_px = np.full(k, np.nan), np.full(k, np.nan)
@@ -235,6 +244,8 @@ def width_profile(
         profiles[i] = (tt[inner], a[inner])
         if observed[i] < 0.999 or (occluder is not None and _touches(occluder, q)):
             flag[i] = "occluded"
+        elif behind is not None and np.sum(_on(behind, q) & (a > CLUTTER_COVERAGE)) * STEP_PX >= CLUTTER_PX:
+            flag[i] = "cluttered"
         elif per_px > 1.0 / 6.0 or min(contrast) < 12.0:  # a pixel's coverage known to worse than 1/6
             flag[i] = "low_contrast"
         elif s_m[i] * np.sqrt(fx * fy) / Z < 3 * max(2 * half_mask[i], 1.0) + 2:
@@ -450,11 +461,16 @@ def _purest_pixel(img: NDArray, u: float, v: float, nu: float, nv: float, half: 
     return patch[int(np.argmax(np.sum((patch - bg) ** 2, axis=1)))]
 
 
-def _touches(mask: NDArray, q: NDArray) -> bool:
-    """True when any point (m, 2) as (u, v) falls on a True pixel of ``mask``."""
+def _on(mask: NDArray, q: NDArray) -> NDArray:
+    """``mask`` (H, W) at the nearest pixel of each point (m, 2) as (u, v): (m,) bool."""
     ui = np.clip(np.round(q[:, 0]).astype(int), 0, mask.shape[1] - 1)
     vi = np.clip(np.round(q[:, 1]).astype(int), 0, mask.shape[0] - 1)
-    return bool(mask[vi, ui].any())
+    return mask[vi, ui]
+
+
+def _touches(mask: NDArray, q: NDArray) -> bool:
+    """True when any point (m, 2) as (u, v) falls on a True pixel of ``mask``."""
+    return bool(_on(mask, q).any())
 
 
 @dataclass(frozen=True)
