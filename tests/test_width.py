@@ -479,7 +479,8 @@ def test_contrast_scale_ignores_profiles_that_clutter_crosses(monkeypatch):
 def _rendered_grass_profiles():
     """Profiles ``contrast_scale`` was given in 4 rendered grass frames (seed 5, clutter of the stem's
     colour at its base), with the drawn widths: tests/data/grass_profiles_seed5.npz, written by
-    ``python scripts/contrast_scale_check.py --seeds 5 --fixture tests/data/grass_profiles_seed5.npz``."""
+    ``python scripts/contrast_scale_check.py --seeds 5 --fixture tests/data/grass_profiles_seed5.npz`` at commit
+    8df17c9 (before the ``cluttered`` flag, which since keeps some of these stations' profiles out)."""
     z = np.load(Path(__file__).parent / "data" / "grass_profiles_seed5.npz")
     edges = np.concatenate([[0], np.cumsum(z["size"])])
     profiles = [(z["t"][a:b], z["a"][a:b]) for a, b in zip(edges[:-1], edges[1:], strict=True)]
