@@ -396,7 +396,7 @@ def contrast_scale(profiles: list, s: NDArray, n_max: int = AREA_N_MAX) -> float
     t_all = np.concatenate([profiles[i][0] for i in use])
     y_all = np.concatenate([profiles[i][1] for i in use])
     owner = np.repeat(np.arange(n), [profiles[i][0].size for i in use])  # the profile of each sample
-    area = np.array([float(np.sum(profiles[i][1])) * STEP_PX for i in use])
+    area = _coverage_integrals([profiles[i] for i in use])
 
     def resid(x):
         k, sig = np.exp(x[0]), np.exp(x[1])
@@ -420,6 +420,11 @@ def contrast_scale(profiles: list, s: NDArray, n_max: int = AREA_N_MAX) -> float
     return float(np.exp(fit.x[0])) if fit.success else 1.0
 
 
+def _coverage_integrals(profiles: list) -> NDArray:
+    """Each profile's coverage integral [px] (n,): its width at the assumed contrast."""
+    return np.array([float(np.sum(a)) * STEP_PX for _, a in profiles])
+
+
 def _clean_profiles(profiles: list, s: NDArray) -> tuple[NDArray, NDArray]:
     """Which profiles (in station order along the stem, at arc lengths ``s`` (n,)) show the stem alone.
 
@@ -429,21 +434,28 @@ def _clean_profiles(profiles: list, s: NDArray) -> tuple[NDArray, NDArray]:
     reads as more than full coverage or as a sudden wide stem; on the grass such profiles came in runs of
     several stations, which a running median of neighbours (before 2026-11-26) let through.
     """
-    from scipy.optimize import least_squares
-
-    area = np.array([float(np.sum(a)) * STEP_PX for _, a in profiles])
+    area = _coverage_integrals(profiles)
     peak = np.array([float(np.max(a)) if a.size else np.inf for _, a in profiles])
     s = np.asarray(s, float)
     if area.size < 5:
         return np.zeros(area.size, bool), area
     x = (s - s.mean()) / max(float(np.std(s)), 1e-12)
-    X = np.vander(x, min(4, area.size // 8 + 1))
     scale = max(0.1 * float(np.median(np.abs(area))), 1e-3)
-    coef = np.linalg.lstsq(X, area, rcond=None)[0]
-    for loss in ("soft_l1", "cauchy"):  # the Cauchy loss ignores runs of clutter; soft L1 brings it near first
-        coef = least_squares(lambda c: X @ c - area, coef, loss=loss, f_scale=scale).x
-    trend = X @ coef
+    # the Cauchy loss ignores runs of clutter; soft L1 brings it near first
+    trend = _robust_poly(x, area, min(4, area.size // 8 + 1), scale, ("soft_l1", "cauchy"))
     return (peak <= PEAK_MAX) & (np.abs(area - trend) <= AREA_REL * np.abs(trend)), trend
+
+
+def _robust_poly(x: NDArray, y: NDArray, n_coef: int, f_scale: float, losses: tuple[str, ...]) -> NDArray:
+    """Fitted values (n,) of a polynomial in ``x`` (n,) with ``n_coef`` coefficients: least squares, then
+    robust least squares with each of ``losses`` in turn (scale ``f_scale``), each from the one before."""
+    from scipy.optimize import least_squares
+
+    X = np.vander(x, n_coef)
+    coef = np.linalg.lstsq(X, y, rcond=None)[0]
+    for loss in losses:
+        coef = least_squares(lambda c: X @ c - y, coef, loss=loss, f_scale=f_scale).x
+    return X @ coef
 
 
 def _purest_pixel(img: NDArray, u: float, v: float, nu: float, nv: float, half: float):
@@ -533,8 +545,6 @@ def _off_profile(s_m: NDArray, d: NDArray, sd: NDArray, ok: NDArray) -> NDArray:
     through such runs; a station more than :data:`OFF_PROFILE_Z` sd (its own or the profile's noise,
     whichever is larger) and :data:`OFF_PROFILE_REL` of the fitted width from it is flagged.
     """
-    from scipy.optimize import least_squares
-
     out = np.zeros(ok.shape, bool)
     idx = np.flatnonzero(ok)
     if idx.size < 20:
@@ -542,9 +552,7 @@ def _off_profile(s_m: NDArray, d: NDArray, sd: NDArray, ok: NDArray) -> NDArray:
     x = (s_m[idx] - s_m[idx].mean()) / max(float(np.ptp(s_m[idx])), 1e-12)
     y = d[idx]
     noise = max(robust_noise(y), 1e-3 * float(np.median(np.abs(y))), 1e-12)
-    X = np.vander(x, 4)
-    fit = least_squares(lambda c: X @ c - y, np.linalg.lstsq(X, y, rcond=None)[0], loss="cauchy", f_scale=noise)
-    smooth = X @ fit.x
+    smooth = _robust_poly(x, y, 4, noise, ("cauchy",))
     resid = np.abs(y - smooth)
     out[idx] = (resid > OFF_PROFILE_Z * np.maximum(sd[idx], noise)) & (resid > OFF_PROFILE_REL * np.abs(smooth))
     return out
