@@ -41,9 +41,10 @@ def test_rendered_coverage_sums_to_the_drawn_width_for_every_width():
             assert a[250].sum() == pytest.approx(w0, abs=1e-3), (w0, off, a[250].sum())
 
 
-def _synthetic(w0: float, p: float, noise: float, seed: int = 1, shaded: bool = False):
+def _synthetic(w0: float, p: float, noise: float, seed: int = 1, shaded: bool = False, ramp: float = 0.0):
     """A gently curved stem of width w0 (1 - s/L)^p [px] on a flat background, blurred like a camera;
-    ``shaded``: a round stem lit from the camera, its colour falling to 55% of the core's at the limbs."""
+    ``shaded``: a round stem lit from the camera, its colour falling to 55% of the core's at the limbs;
+    ``ramp``: the background brightens by this many levels from the bottom of the image to the top."""
     H, W, n = 480, 640, 400
     s = np.linspace(0, 0.4, n)
     x, z = 0.15 * s**2, s
@@ -51,7 +52,7 @@ def _synthetic(w0: float, p: float, noise: float, seed: int = 1, shaded: bool = 
     wpx = w0 * (1 - s / 0.47) ** p
     a, limb = stem_coverage(u, v, wpx, (H, W), return_limb=True)
     rng = np.random.default_rng(seed)
-    img = BG + rng.normal(0, noise, (H, W, 3))
+    img = BG + rng.normal(0, noise, (H, W, 3)) + ramp * (1 - np.arange(H) / H)[:, None, None]
     col = STEM * ((0.55 + 0.45 * limb)[..., None] if shaded else 1.0)
     img = img * (1 - a[..., None]) + col * a[..., None]
     img = cv2.GaussianBlur(np.clip(img, 0, 255).astype(np.uint8), (3, 3), 0.6)
@@ -71,6 +72,21 @@ def test_width_profile_is_subpixel_on_a_thin_and_a_wide_stem(w0):
     assert np.median(np.abs(err)) < 0.03 and abs(np.mean(err)) < 0.03, (np.median(np.abs(err)), np.mean(err))
     # metres: the width at the plane depth
     np.testing.assert_allclose(wp.width_m[ok], wp.width_px[ok] * Z / F, rtol=1e-6)
+
+
+def test_thin_stem_widths_do_not_follow_the_background_behind_them():
+    """A 3-px stem whose background brightens by 60 levels along it: the frame's stem colour is picked at the
+    base, mixed there with the base's background by the blur; measured against another background the mix
+    does not scale with the contrast. The pure colour (the pick extrapolated by the contrast scale) reads the
+    widths within 0.005 px on average above and below mid-stem; the picked colour itself read them -0.033 and
+    -0.052 px (-4.9% above)."""
+    img, line, truth = _synthetic(3.27, 1.6, 0.0, ramp=60.0)
+    wp = width_profile(img, None, line, {"fx": F, "fy": F, "base_px": [128, 441.6]})
+    ok = wp.flag == "ok"
+    err = wp.width_px[ok] - truth(wp.s_m[ok])
+    upper = wp.s_m[ok] > 0.2
+    means = np.mean(err[upper]), np.mean(err[~upper])
+    assert max(abs(m) for m in means) < 0.015, means
 
 
 def test_unmixing_reads_a_shaded_stem_that_projection_reads_too_wide():
@@ -190,12 +206,13 @@ def test_combined_profile_sd_is_calibrated_when_frames_share_their_errors():
     rng = np.random.default_rng(3)
     s = np.linspace(0.0, 0.4, 120)
     true = 0.004 * (1 - s / 0.47) ** 1.6
+    uv = np.column_stack([s, s])
     zs = []
     for _ in range(20):
         shared = rng.normal(0, 1e-4, s.size)  # the same in every frame
         profs = [
             WidthProfile(
-                s, true + shared + rng.normal(0, 2e-5, s.size), np.full(s.size, 2e-5), true, np.full(s.size, "ok"), s
+                s, true + shared + rng.normal(0, 2e-5, s.size), np.full(s.size, 2e-5), true, np.full(s.size, "ok"), uv
             )
             for _ in range(12)
         ]
@@ -205,6 +222,40 @@ def test_combined_profile_sd_is_calibrated_when_frames_share_their_errors():
     assert 0.8 <= np.std(z) <= 1.3, np.std(z)
 
 
+def test_frames_that_saw_a_station_over_the_same_pixels_do_not_average_its_error_down():
+    """Each frame's error is its background's (static) plus fresh noise. Where the stem stood still (the
+    base) every frame read the same pixels: the combined sd must stay at the frame's own sd, not its
+    1/sqrt(frames); where it moved by pixels between frames the errors are independent and average down.
+    Both halves calibrated; and the still half's sd is sqrt(frames) larger than the moving half's."""
+    from bayesrod.vision.width import _independent_frames
+
+    rng = np.random.default_rng(11)
+    k, n_frames, own = 60, 16, 2e-5
+    s = np.linspace(0.0, 0.3, k)
+    still = s < 0.15
+    true = np.full(k, 0.004)
+    zs = []
+    for _ in range(40):
+        background = rng.normal(0, own, (400, k))  # the static scene: one error per pixel position
+        profs = []
+        for j in range(n_frames):
+            shift = np.where(still, 0.0, 5.0 * j)  # px: the upper stations move 5 px per frame
+            uv = np.column_stack([shift, np.zeros(k)])
+            w = true + background[shift.astype(int), np.arange(k)] + rng.normal(0, own / 10, k)
+            profs.append(WidthProfile(s, w, np.full(k, own), w / 1e-4, np.full(k, "ok"), uv))
+        dp = combine_profiles(profs, s)
+        zs.append((dp.d_m - true) / dp.sd_m)
+    z = np.array(zs)
+    assert 0.8 <= np.std(z[:, still]) <= 1.25, np.std(z[:, still])
+    assert 0.8 <= np.std(z[:, ~still]) <= 1.25, np.std(z[:, ~still])
+    assert np.median(dp.sd_m[still]) / np.median(dp.sd_m[~still]) == pytest.approx(np.sqrt(n_frames), rel=0.25)
+    # the count itself: one position -> 1 frame; positions 5 px apart -> all of them; unseen frames left out
+    uv = np.zeros((4, 3, 2))
+    uv[:, 1, 0] = [0.0, 5.0, 10.0, 15.0]
+    uv[3, 2] = np.nan
+    assert _independent_frames(uv) == pytest.approx([1.0, 4.0, 1.0], rel=1e-4)
+
+
 def test_combined_profile_flags_unresolved_tips_and_carries_the_shared_errors():
     from bayesrod.vision.width import OFFSET_SD_PX
 
@@ -212,7 +263,14 @@ def test_combined_profile_flags_unresolved_tips_and_carries_the_shared_errors():
     px = 2e-3  # metres per pixel
     true = np.where(s < 0.35, 0.004, 2e-5)
     profs = [
-        WidthProfile(s, true + np.where(s < 0.35, 0.0, -6e-5), np.full(20, 2e-5), true / px, np.full(20, "ok"), s)
+        WidthProfile(
+            s,
+            true + np.where(s < 0.35, 0.0, -6e-5),
+            np.full(20, 2e-5),
+            true / px,
+            np.full(20, "ok"),
+            np.column_stack([s, s]),
+        )
         for _ in range(4)
     ]
     dp = combine_profiles(profs, s, depth_scale_sd=0.01)
@@ -227,7 +285,9 @@ def test_the_frames_spread_of_contrast_scales_is_a_scale_error_all_stations_shar
     import dataclasses
 
     s = np.linspace(0.0, 0.4, 20)
-    base = WidthProfile(s, np.full(20, 0.004), np.full(20, 2e-5), np.full(20, 2.0), np.full(20, "ok"), s)
+    base = WidthProfile(
+        s, np.full(20, 0.004), np.full(20, 2e-5), np.full(20, 2.0), np.full(20, "ok"), np.column_stack([s, s])
+    )
     scales = [1.0, 1.03, 1.06, 1.03, 1.0, 1.06]  # population sd 0.02449
     profs = [dataclasses.replace(base, contrast_scale=k) for k in scales]
     se = np.std(scales) / np.sqrt(len(scales))
@@ -252,11 +312,15 @@ def test_stations_off_the_smooth_profile_are_flagged_and_no_others():
     bad[80] = True  # 15% wide: over 5%, and about 6 station sd (not 50)
     for spoil in (True, False):
         frames = []
-        for _ in range(12):
+        for j in range(12):  # frames 5 px apart: independent noise
             w = true + rng.normal(0, 3e-5, s.size)
             if spoil:
                 w = np.where(bad, w * np.select([np.arange(s.size) < 8, np.arange(s.size) < 60], [1.8, 3.0], 1.15), w)
-            frames.append(WidthProfile(s, w, np.full(s.size, 3e-5), w / 1e-4, np.full(s.size, "ok"), s))
+            frames.append(
+                WidthProfile(
+                    s, w, np.full(s.size, 3e-5), w / 1e-4, np.full(s.size, "ok"), np.column_stack([s + 5.0 * j, s])
+                )
+            )
         dp = combine_profiles(frames, s)
         off = dp.flag == "off_profile"
         if spoil:

@@ -191,12 +191,13 @@ def width_profile(
     # background (an interval of >= 2 px always covers one whole pixel). An interpolated sample on the
     # centerline, or the median of eroded mask pixels, mixes in the background: a 3-px stem came out 15% too wide
     wide = np.flatnonzero(2 * half_mask >= 2.5)
-    frame_stem = None
+    frame_stem = pick_rgb = pick_bg = None
     if wide.size >= 3:
         top = wide[np.argsort(half_mask[wide])[-max(3, wide.size // 3) :]]
         picks = [c for c in (_purest_pixel(img, u[i], v[i], nu[i], nv[i], half_mask[i]) for i in top) if c is not None]
         if picks:
-            frame_stem = np.median(np.array(picks), axis=0)
+            pick_rgb, pick_bg = (np.array(x) for x in zip(*picks, strict=True))
+            frame_stem = np.median(pick_rgb, axis=0)
     if frame_stem is None:
         core = cv2.erode(mask.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
         frame_stem = np.median(img[core], axis=0) if core.sum() >= 20 else np.median(img[mask], axis=0)
@@ -210,18 +211,21 @@ def width_profile(
     flag = np.full(k, "ok", dtype=object)
     own_core = half_mask >= OWN_CORE_HALF_PX
     profiles: dict[int, tuple] = {}
-    for i in range(k):
+
+    def measure(i: int, stem_rgb: NDArray | None) -> None:
+        """Station i's coverage profile, width, sd and flag against the stem colour ``stem_rgb`` (None:
+        the median of its own core)."""
         T = half[i]
         tt = np.arange(-(T + BG_PX), T + BG_PX + 1e-9, STEP_PX)
         q = np.stack([u[i] + tt * nu[i], v[i] + tt * nv[i]], axis=-1)
         if q[:, 0].min() < 0 or q[:, 0].max() > W - 1 or q[:, 1].min() < 0 or q[:, 1].max() > H - 1:
             flag[i] = "edge"
-            continue
+            return
         prof = _sample(img, q)
         inner = np.abs(tt) <= T
         bg_l = np.median(prof[tt < -T], axis=0)
         bg_r = np.median(prof[tt > T], axis=0)
-        stem = np.median(prof[np.abs(tt) <= half_mask[i] - 1.5], axis=0) if own_core[i] else frame_stem
+        stem = np.median(prof[np.abs(tt) <= half_mask[i] - 1.5], axis=0) if stem_rgb is None else stem_rgb
         a = np.empty(tt.size)
         contrast = []
         for side, bg in ((tt < 0, bg_l), (tt >= 0, bg_r)):
@@ -242,6 +246,7 @@ def width_profile(
         width_px[i] = float(np.sum(a[inner]) * STEP_PX)
         sd_px[i] = per_px * np.sqrt(2 * T + 2 * (np.pi / 2) * T**2 / BG_PX)
         profiles[i] = (tt[inner], a[inner])
+        flag[i] = "ok"
         if observed[i] < 0.999 or (occluder is not None and _touches(occluder, q)):
             flag[i] = "occluded"
         elif behind is not None and np.sum(_on(behind, q) & (a > CLUTTER_COVERAGE)) * STEP_PX >= CLUTTER_PX:
@@ -250,11 +255,24 @@ def width_profile(
             flag[i] = "low_contrast"
         elif s_m[i] * np.sqrt(fx * fy) / Z < 3 * max(2 * half_mask[i], 1.0) + 2:
             flag[i] = "base"
+
+    for i in range(k):
+        measure(i, None if own_core[i] else frame_stem)
     # stations without a core of their own used the frame's stem colour, which on a stem a few pixels wide
     # is still mixed with the background (blur): their coverage is scaled by the contrast the profiles'
     # shapes imply (:func:`contrast_scale`)
     borrowed = [i for i in profiles if not own_core[i] and flag[i] == "ok"]
     scale = contrast_scale([profiles[i] for i in borrowed], s_m[borrowed]) if borrowed else 1.0
+    if pick_bg is not None and borrowed and scale != 1.0:
+        # the picked colour c is a mix m stem + (1 - m) b with the background b beside the pick, and the scale
+        # is 1 / m: the pure colour is b + scale (c - b). Against a background other than b the mixed colour's
+        # contrast is not the stem's contrast times m, and on the grass's sky (a gradient of +-25 levels) the
+        # widths came out up to 8% high along a third of the stem: an error the taper fit reads as taper
+        stem_pure = np.median(pick_bg + scale * (pick_rgb - pick_bg), axis=0)
+        for i in np.flatnonzero(~own_core):
+            measure(i, stem_pure)
+        borrowed = [i for i in profiles if not own_core[i] and flag[i] == "ok"]
+        scale = contrast_scale([profiles[i] for i in borrowed], s_m[borrowed]) if borrowed else 1.0
     width_px[~own_core] /= scale
     sd_px[~own_core] /= scale
     return WidthProfile(
@@ -459,7 +477,8 @@ def _robust_poly(x: NDArray, y: NDArray, n_coef: int, f_scale: float, losses: tu
 
 
 def _purest_pixel(img: NDArray, u: float, v: float, nu: float, nv: float, half: float):
-    """Colour (3,) of the pixel within 1 px of (u, v) farthest from the background beyond ``half`` + 3 px."""
+    """Colour (3,) of the pixel within 1 px of (u, v) farthest from the background beyond ``half`` + 3 px,
+    and that background's colour (3,) (the mean of one pixel on each side); None off the image."""
     H, W = img.shape[:2]
     ui, vi = int(round(u)), int(round(v))
     if not (4 <= ui < W - 4 and 4 <= vi < H - 4):
@@ -470,7 +489,7 @@ def _purest_pixel(img: NDArray, u: float, v: float, nu: float, nv: float, half: 
         return None
     bg = np.mean([img[int(round(b)), int(round(a))] for a, b in bg_pts], axis=0)
     patch = img[vi - 1 : vi + 2, ui - 1 : ui + 2].reshape(-1, 3)
-    return patch[int(np.argmax(np.sum((patch - bg) ** 2, axis=1)))]
+    return patch[int(np.argmax(np.sum((patch - bg) ** 2, axis=1)))], bg
 
 
 def _on(mask: NDArray, q: NDArray) -> NDArray:
@@ -558,6 +577,30 @@ def _off_profile(s_m: NDArray, d: NDArray, sd: NDArray, ok: NDArray) -> NDArray:
     return out
 
 
+#: two frames' samples of a station this far apart [px] (sd of a Gaussian weight) read the same background pixels
+SAME_PIXELS_PX = 1.0
+
+
+def _median_sd(sd: NDArray, n: NDArray) -> NDArray:
+    """sd of the median of ``n`` independent values of sd ``sd``: sd sqrt((1 + (pi/2 - 1)(1 - 1/n)) / n); 1 value:
+    sd, many: sqrt(pi/2) sd / sqrt(n) (the median's asymptotic efficiency)."""
+    n = np.maximum(np.asarray(n, float), 1.0)
+    return sd * np.sqrt((1.0 + (np.pi / 2 - 1.0) * (1.0 - 1.0 / n)) / n)
+
+
+def _independent_frames(uv: NDArray) -> NDArray:
+    """Effective number of frames with independent background errors at each station, (k,), from where
+    the frames saw it, ``uv`` (n_frames, k, 2) [px] (nan where a frame did not): n^2 / sum_jl c_jl with
+    c_jl = exp(-|uv_j - uv_l|^2 / (2 ``SAME_PIXELS_PX``^2)) (the correlation of two frames' background
+    errors; 1 for a station that never moved, n for one seen over other pixels in every frame)."""
+    seen = np.all(np.isfinite(uv), axis=-1)  # (n, k)
+    x = np.where(seen[..., None], uv, 0.0)
+    d2 = np.sum((x[:, None] - x[None, :]) ** 2, axis=-1)  # (n, n, k)
+    c = np.exp(-0.5 * d2 / SAME_PIXELS_PX**2) * (seen[:, None] & seen[None, :])
+    n = seen.sum(axis=0)
+    return n**2 / np.maximum(c.sum(axis=(0, 1)), 1.0)
+
+
 def combine_profiles(
     profiles: list[WidthProfile], s_m: NDArray, min_frames: int = 3, depth_scale_sd: float = 0.0
 ) -> DiameterProfile:
@@ -574,6 +617,7 @@ def combine_profiles(
     W = np.full((len(profiles), k), np.nan)
     S = np.full((len(profiles), k), np.nan)
     raw = np.full((len(profiles), k), np.nan)  # every frame's number, flagged or not
+    UV = np.full((len(profiles), k, 2), np.nan)  # where each frame saw each station [px]
     flags = np.full((len(profiles), k), "", dtype=object)
     for j, wp in enumerate(profiles):
         idx = np.searchsorted(s_m, wp.s_m)
@@ -583,6 +627,7 @@ def combine_profiles(
         good = hit & (wp.flag == "ok")
         W[j, idx[good]] = wp.width_m[good]
         S[j, idx[good]] = wp.sd_m[good]
+        UV[j, idx[good]] = wp.uv[good]
     n = np.sum(np.isfinite(W), axis=0)
     d = np.full(k, np.nan)
     sd = np.full(k, np.nan)
@@ -591,8 +636,13 @@ def combine_profiles(
         med = np.nanmedian(W[:, ok], axis=0)
         spread = 1.4826 * np.nanmedian(np.abs(W[:, ok] - med), axis=0)
         own = np.nanmedian(S[:, ok], axis=0)
-        # the median of n values: sqrt(pi/2) x the mean's sd
-        sd_ok = np.sqrt(np.pi / 2) * np.maximum(spread, own) / np.sqrt(n[ok])
+        # the median of n independent values: about sqrt(pi/2) x the mean's sd (1 for one value). A frame's
+        # own error (the background's pixels)
+        # averages down only over frames that saw the station over other pixels: near the base, where the
+        # stem barely moves, all frames read the same background, agree with each other, and their spread
+        # over sqrt(n) made the grass's lowest stations' z-scores 1.6-1.9 (1.0 above mid-stem)
+        n_eff = _independent_frames(UV[:, ok])
+        sd_ok = np.maximum(_median_sd(spread, n[ok]), _median_sd(own, n_eff))
         d[ok], sd[ok] = med, sd_ok
         if ok.sum() >= 8:
             rice = robust_noise(med)
