@@ -10,7 +10,9 @@ that sum). The stem's width in pixels is the integral of ``a`` across it:
 
 with ``bg`` the median colour just beyond the stem on each side (each half of the profile uses
 its own side) and ``stem`` the median colour of the stem's core at the station (where the stem
-is wider than 4 px; else the frame's core colour). Whole-pixel counting of the mask would be
+is 6 px wide or more; else the frame's stem colour: the most stem-coloured pixel at its widest
+stations, extrapolated from its mix with the background by the contrast the profiles' shapes
+imply, :func:`contrast_scale`). Whole-pixel counting of the mask would be
 off by up to a pixel; the coverage integral is unbiased for any width, sub-pixel ones included.
 
 Metres: w_m = w_px Z |n / f| with the plane depth Z and the focal lengths along the normal n.
@@ -607,10 +609,12 @@ def combine_profiles(
     """Median over frames of widths measured at the same stations ``s_m`` (k,), with an honest sd.
 
     The frames of a push share their background, so their errors at a station are correlated and
-    do not average down as 1/sqrt(n): the sd is the larger of the frames' spread over sqrt(n) (and
-    their own sd over sqrt(n)) and the noise the combined profile shows along the stem, measured
-    by second differences of neighbouring stations (robust, Rice 1984; the true profile is smooth on
-    the scale of a few pixels), which scales every station's sd up when it is the larger.
+    do not average down as 1/sqrt(n): the sd is the larger of the frames' spread over sqrt(n), their
+    own sd over the square root of the number of frames that saw the station over other pixels
+    (:func:`_independent_frames`; 1 where the stem stood still), and the noise the combined profile
+    shows along the stem, measured by second differences of neighbouring stations (robust, Rice 1984;
+    the true profile is smooth on the scale of a few pixels), which scales every station's sd up when
+    it is the larger.
     """
     s_m = np.asarray(s_m, float)
     k = s_m.size
