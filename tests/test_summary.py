@@ -109,9 +109,17 @@ def test_modulus_and_diameter_draws_follow_the_taper_laws():
     x = 1 - s[None] / L
     want = E0[:, None] * x ** (4 * (graded["p"] - graded["p_geom"])[:, None])
     np.testing.assert_allclose(S.modulus_draws(graded, L, s), want, rtol=1e-12)
-    # beyond the tip: 0 where the modulus tapers (4 (p - p_geom) > 0), not NaN from a negative base
-    tapering = {**graded, "p_geom": graded["p"] - 0.1}
-    np.testing.assert_array_equal(S.modulus_draws(tapering, L, [L, 1.2 * L]), 0.0)
+    # at and beyond the tip no stem, no modulus: NaN whichever way the modulus tapers (a negative power of 0
+    # read infinite), and the band's quantiles leave those draws out
+    for dq in (0.1, -0.1):
+        tapering = {**graded, "p_geom": graded["p"] - dq}
+        assert np.isnan(S.modulus_draws(tapering, L, [L, 1.2 * L])).all()
+    # a sampled length: each draw ends at its own tip; the summary's band stays finite where some draws reach
+    sampled = {**graded, "p_geom": graded["p"] + 0.1, "length_m": np.array([0.85 * L, 1.1 * L])}
+    E = S.modulus_draws(sampled, L, [0.5 * L, 0.9 * L])
+    assert np.isfinite(E[:, 0]).all() and np.isnan(E[0, 1]) and np.isfinite(E[1, 1])
+    band = S.youngs_modulus_summary(sampled, L)["band"]
+    assert np.isfinite(np.array([band[k] for k in ("median", "q05", "q95")], float)).all()
     d_g = stem_diameter(s[None], samples["d0_m"][:, None], graded["p_geom"][:, None], L)
     np.testing.assert_allclose(S.diameter_draws(graded, L, s), d_g, rtol=1e-12)
     # beyond the tip the stem has no width (clipped, not negative powers of negative numbers)

@@ -195,7 +195,8 @@ class Posterior:
 
     def modulus_band(self, s_m: ArrayLike, level: float = 0.9) -> Band:
         """E(s) [Pa] over arc lengths ``s_m`` [m], shape (m,): E0 (1 - s/L)^(4 (p - p_geom)); flat under the
-        uniform-modulus model (``diameter="shared"``)."""
+        uniform-modulus model (``diameter="shared"``); NaN where every draw's stem has ended (s >= L), and
+        beyond a draw's own tip that draw is left out (a sampled length)."""
         from ..inference.summary import modulus_draws
 
         level = _check_level(level)

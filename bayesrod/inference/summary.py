@@ -69,11 +69,14 @@ def youngs_modulus(samples: dict) -> NDArray:
 
 
 def modulus_draws(samples: dict, length_m: float, s_m) -> NDArray:
-    """E(s) [Pa] per draw over ``s_m`` (m,), shape (n, m): E0 (1 - s/L)^(4 (p - p_geom)), flat when p_geom = p."""
+    """E(s) [Pa] per draw over ``s_m`` (m,), shape (n, m): E0 (1 - s/L)^(4 (p - p_geom)), flat when p_geom = p;
+    NaN at and beyond a draw's tip (s >= L: no stem there, and (1 - s/L)^(negative) would read as infinite
+    where the length is sampled), which :func:`quantiles` leaves out."""
     E0 = youngs_modulus(samples)[:, None]
     dq = np.asarray(samples["p"], float) - np.asarray(samples.get("p_geom", samples["p"]), float)
-    x = np.clip(1.0 - np.asarray(s_m, float)[None, :] / draw_lengths(samples, length_m), 0.0, None)
-    return E0 * x ** (4.0 * dq[:, None])
+    x = 1.0 - np.asarray(s_m, float)[None, :] / draw_lengths(samples, length_m)
+    with np.errstate(invalid="ignore"):
+        return np.where(x > 0.0, E0 * np.where(x > 0.0, x, 1.0) ** (4.0 * dq[:, None]), np.nan)
 
 
 def diameter_draws(samples: dict, length_m: float, s_m) -> NDArray:
