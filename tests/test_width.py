@@ -456,6 +456,8 @@ def test_free_width_taper_tests_uniform_modulus():
             # the report says so, and draws the widths against the fitted d(s) and E(s)
             html = post.report_html(pngs={})
             assert "Young's modulus" in html and "The modulus varies along the stem" in html
+            # widths from frames: the report says how far to trust the verdict (from calipers it does not)
+            assert "Confirm with calipers" in html
             import matplotlib.pyplot as plt
 
             from bayesrod.report.plots import plot_diameter_fit

@@ -79,6 +79,14 @@ def _modulus_section(ym: dict | None, lo: float, hi: float) -> str:
                 '<p class="warn">The modulus varies along the stem: 0 lies outside the interval of '
                 "p - p_geom (E(s) = E0 (1 - s/L)^(4 (p - p_geom)), figure <i>diameter_fit</i>).</p>"
             )
+            if ym.get("source") == "frames":
+                # measured on rendered stems of uniform modulus (docs/validation.md, issue 22)
+                verdict += (
+                    '<p class="warn">Widths read from frames carry an error that drifts along the stem, which '
+                    "the interval does not include: on rendered stems of uniform modulus this test said "
+                    "<i>rejected</i> several times more often than its 10%. Confirm with calipers at a few "
+                    "heights before reporting a gradient.</p>"
+                )
         else:
             verdict = "<p>A uniform modulus is consistent with the data (0 lies inside the interval of p - p_geom).</p>"
     model = "uniform modulus (width and bending share p)" if ym["model"] == "uniform" else "modulus free to vary"
