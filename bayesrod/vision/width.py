@@ -595,12 +595,15 @@ def _independent_frames(uv: NDArray) -> NDArray:
     the frames saw it, ``uv`` (n_frames, k, 2) [px] (nan where a frame did not): n^2 / sum_jl c_jl with
     c_jl = exp(-|uv_j - uv_l|^2 / (2 ``SAME_PIXELS_PX``^2)) (the correlation of two frames' background
     errors; 1 for a station that never moved, n for one seen over other pixels in every frame)."""
+    from scipy.spatial.distance import pdist
+
     seen = np.all(np.isfinite(uv), axis=-1)  # (n, k)
-    x = np.where(seen[..., None], uv, 0.0)
-    d2 = np.sum((x[:, None] - x[None, :]) ** 2, axis=-1)  # (n, n, k)
-    c = np.exp(-0.5 * d2 / SAME_PIXELS_PX**2) * (seen[:, None] & seen[None, :])
     n = seen.sum(axis=0)
-    return n**2 / np.maximum(c.sum(axis=(0, 1)), 1.0)
+    total = n.astype(float)  # c_jj = 1
+    for i in range(uv.shape[1]):  # one station at a time, pairs once: no (n, n, k) array for long videos
+        d2 = pdist(uv[seen[:, i], i], "sqeuclidean")
+        total[i] += 2.0 * np.exp(-0.5 * d2 / SAME_PIXELS_PX**2).sum()
+    return n**2 / np.maximum(total, 1.0)
 
 
 def combine_profiles(
