@@ -1,5 +1,6 @@
-"""What the resumable study scripts share: skip the jobs whose rows are already in the results CSV, run
-the rest in a process pool and append each row as it finishes (an interrupted study resumes)."""
+"""What the study scripts share: skip the jobs whose rows are already in the results CSV, run the rest in a
+process pool and append each row as it finishes (an interrupted study resumes); simulate and extract one
+rendered push of a stem with its drawn diameter profile (the width studies)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,12 @@ from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import numpy as np
+
 from bayesrod.dataset.io import append_rows, read_rows
+
+#: p - q of the width studies' graded stems: a diameter taper 0.15 below the bending taper
+GRADIENT = 0.15
 
 
 def run_pending(
@@ -23,3 +29,23 @@ def run_pending(
     new_file = not Path(csv_path).exists()
     with ProcessPoolExecutor(workers) as pool:
         yield from append_rows(csv_path, fields, pool.map(fn, todo), new_file=new_file)
+
+
+def extracted_push(stem: str, seed: int, graded: bool, folder: Path):
+    """``bayesrod simulate`` one push of preset ``stem`` (its middle contact height; rendered frames with
+    exact widths; ``graded``: a diameter taper ``GRADIENT`` below the bending taper) into ``folder``/raw,
+    then ``bayesrod.extract``. Returns (extraction, the drawn diameter at its stations [m] (k,), metres
+    per pixel at the push's plane)."""
+    import bayesrod
+    from bayesrod.dataset.simulate import SimConfig
+    from bayesrod.physics import stem_diameter
+
+    cfg = SimConfig.from_preset(stem, seed=seed)
+    h = cfg.heights_m[len(cfg.heights_m) // 2]
+    over = {"exact_width": True, **({"diameter_taper": cfg.p - GRADIENT} if graded else {})}
+    bayesrod.simulate(stem, seed=seed, heights_m=[h], config_overrides=over).save(Path(folder) / "raw", frames=True)
+    ex = bayesrod.extract(Path(folder) / "raw", progress=False)
+    ds, truth = ex.dataset, ex.source.extra["truth"]
+    drawn = stem_diameter(ex.diameters.s_m, truth["base_diameter_m"], truth["diameter_taper"], ds.length_m)
+    metres_per_px = ex.doc["pushes"][ds.pushes[0].id]["plane_depth_m"] / ds.camera.fx
+    return ex, np.asarray(drawn, float), float(metres_per_px)

@@ -29,46 +29,32 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _study import run_pending
+from _study import extracted_push, run_pending
 
 import bayesrod
 from bayesrod.dataset.io import read_rows
-from bayesrod.physics import stem_diameter
 
 FIELDS = ["stem", "seed", "graded", "stations_ok", "median_abs_err_px", "z_sd", "z_cover90"]
 FIELDS += ["d0_true", "d0", "d0_q05", "d0_q95", "E_true", "E", "E_q05", "E_q95"]
 FIELDS += ["p_true", "p_q05_shared", "p_q95_shared", "p_q05_off", "p_q95_off", "dq_q05", "dq_q95", "verdict"]
 FIELDS += ["seconds", "length"]
-GRADIENT = 0.15  # p - q of the graded stems
 
 
 def one(job) -> dict:
     stem, seed, graded, length = job
     t0 = time.perf_counter()
-    from bayesrod.dataset.simulate import SimConfig
-
-    cfg = SimConfig.from_preset(stem, seed=seed)
-    h = cfg.heights_m[len(cfg.heights_m) // 2]
-    over = {"exact_width": True, **({"diameter_taper": cfg.p - GRADIENT} if graded else {})}
-    sim = bayesrod.simulate(stem, seed=seed, heights_m=[h], config_overrides=over)
     row = {"stem": stem, "seed": seed, "graded": int(graded), "length": length}
     with tempfile.TemporaryDirectory() as tmp:
-        sim.save(Path(tmp) / "raw", frames=True)
-        ex = bayesrod.extract(Path(tmp) / "raw", progress=False)
-        ds = ex.dataset
-        truth = ex.source.extra["truth"]
-        d0, q, L = truth["base_diameter_m"], truth["diameter_taper"], ds.length_m
-        dp = ex.diameters
+        ex, true, px = extracted_push(stem, seed, graded, Path(tmp))
+        ds, dp, truth = ex.dataset, ex.diameters, ex.source.extra["truth"]
         ok = dp.ok
-        true = stem_diameter(dp.s_m, d0, q, L)
-        px = ex.doc["pushes"][ds.pushes[0].id]["plane_depth_m"] / ds.camera.fx  # metres per pixel
         z = (dp.d_m[ok] - true[ok]) / dp.sd_m[ok]
         row.update(
             stations_ok=int(ok.sum()),
             median_abs_err_px=float(np.median(np.abs(dp.d_m[ok] - true[ok])) / px),
             z_sd=float(np.std(z)),
             z_cover90=float(np.mean(np.abs(z) < 1.645)),
-            d0_true=d0,
+            d0_true=truth["base_diameter_m"],
             E_true=truth["youngs_modulus_Pa"],
             p_true=truth["p"],
         )

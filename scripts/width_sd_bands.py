@@ -17,11 +17,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-
-import bayesrod
-from bayesrod.physics import stem_diameter
-
-GRADIENT = 0.15  # p - q of the graded stems, as in scripts/diameter_study.py
+from _study import GRADIENT, extracted_push
 
 
 def seeds(text: str) -> list[int]:
@@ -34,27 +30,18 @@ def seeds(text: str) -> list[int]:
 
 def one(stem: str, seed: int, graded: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(z, s/L, error [px]) of the ok stations of one extracted push."""
-    from bayesrod.dataset.simulate import SimConfig
-
-    cfg = SimConfig.from_preset(stem, seed=seed)
-    h = cfg.heights_m[len(cfg.heights_m) // 2]
-    over = {"exact_width": True, **({"diameter_taper": cfg.p - GRADIENT} if graded else {})}
-    sim = bayesrod.simulate(stem, seed=seed, heights_m=[h], config_overrides=over)
     with tempfile.TemporaryDirectory() as tmp:
-        sim.save(Path(tmp) / "raw", frames=True)
-        ex = bayesrod.extract(Path(tmp) / "raw", progress=False)
-    ds, dp, truth = ex.dataset, ex.diameters, ex.source.extra["truth"]
-    true = stem_diameter(dp.s_m, truth["base_diameter_m"], truth["diameter_taper"], ds.length_m)
-    px = ex.doc["pushes"][ds.pushes[0].id]["plane_depth_m"] / ds.camera.fx
-    ok = dp.ok
-    return (dp.d_m[ok] - true[ok]) / dp.sd_m[ok], dp.s_m[ok] / ds.length_m, (dp.d_m[ok] - true[ok]) / px
+        ex, true, px = extracted_push(stem, seed, graded, Path(tmp))
+    dp, ok = ex.diameters, ex.diameters.ok
+    err = dp.d_m[ok] - true[ok]
+    return err / dp.sd_m[ok], dp.s_m[ok] / ex.dataset.length_m, err / px
 
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--stem", default="grass")
     ap.add_argument("--seeds", default="20-31", help="uniform-modulus seeds: '20-31' or '1,4,7'")
-    ap.add_argument("--graded", default="", help="seeds drawn with a modulus gradient (diameter taper p - 0.15)")
+    ap.add_argument("--graded", default="", help=f"seeds drawn with a modulus gradient (diameter taper p - {GRADIENT})")
     a = ap.parse_args(argv)
     jobs = [(s, False) for s in seeds(a.seeds)] + [(s, True) for s in (seeds(a.graded) if a.graded else [])]
     zs, ss, es = [], [], []

@@ -458,6 +458,10 @@ def test_free_width_taper_tests_uniform_modulus():
             assert "Young's modulus" in html and "The modulus varies along the stem" in html
             # widths from frames: the report says how far to trust the verdict (from calipers it does not)
             assert "Confirm with calipers" in html
+            from bayesrod.report.html import _modulus_section
+
+            caliper = {**post.to_dict()["youngs_modulus"], "source": "caliper"}
+            assert "Confirm with calipers" not in _modulus_section(caliper, 5.0, 95.0)
             import matplotlib.pyplot as plt
 
             from bayesrod.report.plots import plot_diameter_fit
@@ -471,6 +475,34 @@ def test_free_width_taper_tests_uniform_modulus():
                 0.01 * 0.5**0.28, rel=0.02
             )
     assert verdicts == {0.43: "consistent", 0.28: "rejected"}
+
+
+@pytest.mark.parametrize("source, cautioned", [("frames", True), ("caliper", False)])
+def test_cli_cautions_a_rejected_uniform_modulus_read_from_frames(capsys, source, cautioned):
+    """`bayesrod fit` prints the uniform-modulus verdict; a rejection on widths from frames comes with the
+    caution to confirm with calipers (docs/validation.md: rejected 2-3 times as often as its level)."""
+    import argparse
+
+    from bayesrod.cli import _print_fit
+
+    q = {"median": 0.1, "q05": 0.05, "q95": 0.15}
+    summary = {
+        "parameters": {},
+        "k_theta": [],
+        "youngs_modulus": {
+            "model": "graded",
+            "source": source,
+            "E_Pa": {"median": 9e9, "q05": 8e9, "q95": 1e10},
+            "modulus_taper": q,
+            "uniform_modulus": "rejected",
+        },
+        "convergence": {"rhat_max": 1.0, "ess_bulk_min": 1000.0},
+        "sampler": {"seconds": 1.0},
+    }
+    _print_fit(summary, "RUN", argparse.Namespace(json=False))
+    out = capsys.readouterr().out
+    assert "uniform modulus rejected" in out
+    assert ("confirm with calipers" in out) == cautioned
 
 
 def test_diameter_model_errors_name_the_field():

@@ -75,8 +75,8 @@ def modulus_draws(samples: dict, length_m: float, s_m) -> NDArray:
     E0 = youngs_modulus(samples)[:, None]
     dq = np.asarray(samples["p"], float) - np.asarray(samples.get("p_geom", samples["p"]), float)
     x = 1.0 - np.asarray(s_m, float)[None, :] / draw_lengths(samples, length_m)
-    with np.errstate(invalid="ignore"):
-        return np.where(x > 0.0, E0 * np.where(x > 0.0, x, 1.0) ** (4.0 * dq[:, None]), np.nan)
+    inside = x > 0.0
+    return np.where(inside, E0 * np.where(inside, x, 1.0) ** (4.0 * dq[:, None]), np.nan)
 
 
 def diameter_draws(samples: dict, length_m: float, s_m) -> NDArray:

@@ -84,7 +84,7 @@ def _modulus_section(ym: dict | None, lo: float, hi: float) -> str:
                 verdict += (
                     '<p class="warn">Widths read from frames carry an error that drifts along the stem, which '
                     "the interval does not include: on rendered stems of uniform modulus this test said "
-                    "<i>rejected</i> several times more often than its 10%. Confirm with calipers at a few "
+                    "<i>rejected</i> two to three times as often as its 10%. Confirm with calipers at a few "
                     "heights before reporting a gradient.</p>"
                 )
         else:
