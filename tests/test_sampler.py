@@ -249,3 +249,52 @@ def test_progress_bars_name_each_ensemble(capsys):
     run_ensembles(_Gauss(2), np.zeros(2), seed=0, progress=True, **kw)
     err = capsys.readouterr().err
     assert "ensemble 1/2" in err and "ensemble 2/2" in err
+
+
+def test_the_defaults_every_fit_samples_with_are_the_documented_ones():
+    """``fit`` and ``fit_group`` take the ensemble count, chunk, step budget and targets from these defaults;
+    docs/inference.md ("Sampling") states them to the user."""
+    import inspect
+    from pathlib import Path
+
+    got = {k: v.default for k, v in inspect.signature(run_ensembles).parameters.items() if v.default is not v.empty}
+    want = dict(n_ensembles=4, chunk=500, max_steps=8000, min_steps=1000, target_ess=1000.0, target_rhat=1.01)
+    assert {k: got[k] for k in want} == want
+    doc = " ".join((Path(__file__).parents[1] / "docs" / "inference.md").read_text().split())
+    for phrase in (
+        "Four independent emcee ensembles",
+        "chunks of 500 steps",
+        "bulk ESS of EI0 and p is at least 1000",
+        "R-hat <= 1.01",
+        "or 8000 steps",
+        "(the minimum steps, 1000)",
+    ):
+        assert phrase in doc
+
+
+def test_every_ensemble_of_a_run_has_its_own_random_state():
+    """Two ensembles with one random state would propose alike and understate R-hat."""
+    for seed in (0, 1, 4, 7919, 2**31 + 5):
+        seeds = sampler.ensemble_seeds(seed, 8)
+        assert len(set(seeds)) == 8 and all(0 <= x < 2**32 for x in seeds)
+    assert sampler.ensemble_seeds(3, 4) != sampler.ensemble_seeds(4, 4)
+
+
+def test_a_run_exactly_fifty_autocorrelation_times_long_is_long_enough(monkeypatch):
+    """The stopping rule's length test is n_steps >= 50 tau: at tau = n_steps / 50 the run stops."""
+    real = sampler._collect
+
+    def collect(samplers):
+        res = real(samplers)
+        res.tau = np.full_like(res.tau, res.n_steps / 50.0)
+        return res
+
+    monkeypatch.setattr(sampler, "_collect", collect)
+    monkeypatch.setattr(
+        sampler,
+        "diagnostics",
+        lambda chain, names: {"rhat": dict.fromkeys(names, 1.0), "ess_bulk": dict.fromkeys(names, 1e4)},
+    )
+    kw = dict(n_ensembles=1, n_walkers=16, chunk=100, min_steps=200, max_steps=400, progress=False)
+    res = run_ensembles(_Gauss(2), np.zeros(2), seed=0, **kw)
+    assert res.converged is True and res.n_steps == 200

@@ -248,6 +248,11 @@ def _ball(theta0, n, rng, post):
     return out
 
 
+def ensemble_seeds(seed: int, n_ensembles: int) -> list[int]:
+    """The seed of each ensemble's random state: distinct for the ensembles of one run, in [0, 2**32)."""
+    return [(seed * 7919 + k) % 2**32 for k in range(n_ensembles)]
+
+
 def run_ensembles(
     post,
     theta0,
@@ -287,8 +292,8 @@ def run_ensembles(
             moves=default_moves(),  # emcee's own snooker move is biased (inference/moves.py)
         )
         samplers.append(s)
-    for k, s in enumerate(samplers):
-        s.random_state = np.random.RandomState((seed * 7919 + k) % 2**32).get_state()
+    for s, k_seed in zip(samplers, ensemble_seeds(seed, n_ensembles), strict=True):
+        s.random_state = np.random.RandomState(k_seed).get_state()
     replaced = [0] * n_ensembles
     while True:
         done = min(s.iteration for s in samplers)
