@@ -13,11 +13,13 @@ from bayesrod.inference.group import (
     GroupPosterior,
     base_compliance,
     base_stiffness,
+    clamp_or_u,
     last_third_masks,
     map_fit,
     release_clamps,
     sharing_check,
     start_point,
+    z_of_u,
 )
 from bayesrod.inference.likelihood import RodLikelihood
 from bayesrod.inference.priors import load_prior
@@ -62,16 +64,16 @@ def test_group_likelihood_is_the_sum_of_the_single_condition_likelihoods(cut_pai
         "p": np.array([0.4, 0.45]),
         "sigma_force_N__a": np.array([0.03, 0.05]),
         "rho_force__a": np.array([0.8, 0.5]),
-        "u_base__a": np.array([0.0, 0.05]),
+        "z_base__a": np.array([-0.5, float(z_of_u(0.05))]),
         "sigma_force_N__b": np.array([0.04, 0.02]),
         "rho_force__b": np.array([0.9, 0.7]),
-        "u_base__b": np.array([0.2, 0.3]),
+        "z_base__b": z_of_u(np.array([0.2, 0.3])),
     }
     got = lik.log_likelihood(params)
     want = np.zeros(2)
     for c in ("a", "b"):
         one = lik.liks[c]
-        kb = base_stiffness(params[f"u_base__{c}"], params["EI0"], one.L)
+        kb = base_stiffness(clamp_or_u(params[f"z_base__{c}"]), params["EI0"], one.L)
         want += one.log_likelihood(
             {
                 "EI0": params["EI0"],
@@ -83,7 +85,7 @@ def test_group_likelihood_is_the_sum_of_the_single_condition_likelihoods(cut_pai
         )
     np.testing.assert_allclose(got, want, rtol=1e-12)
     # the per-condition base spring matters: swapping the conditions' compliances changes the likelihood
-    swapped = {**params, "u_base__a": params["u_base__b"], "u_base__b": params["u_base__a"]}
+    swapped = {**params, "z_base__a": params["z_base__b"], "z_base__b": params["z_base__a"]}
     assert np.all(np.abs(lik.log_likelihood(swapped) - got) > 1.0)
     # restricting to a subset of samples equals a likelihood built on that subset's tables
     one = lik.liks["a"]
@@ -117,23 +119,23 @@ def test_sharing_is_supported_for_a_cut_base_and_rejected_when_the_stem_changed(
         if want == "supported":  # the MAP finds the stem and the cut base
             nat = post.to_natural(theta)
             assert nat["EI0"][0] == pytest.approx(EI0, rel=0.03)
-            assert nat["u_base__a"][0] < 0.02 < nat["u_base__b"][0]
+            assert clamp_or_u(nat["z_base__a"][0]) < 0.02 < clamp_or_u(nat["z_base__b"][0])
 
 
 def test_a_clamped_cut_is_released_where_the_gradient_cannot(cut_pair):
-    """Below v = 0 the posterior is flat in v (a clamp): L-BFGS-B started with the cut condition clamped stays
+    """Below z = 0 the posterior is flat in z (a clamp): L-BFGS-B started with the cut condition clamped stays
     clamped, with EI0 pulled down; release_clamps tries it soft and finds the start point's optimum again."""
     lik = GroupLikelihood({d.extra["condition"]: d for d in cut_pair}, load_prior("woody"))
     post = GroupPosterior(lik)
     best = start_point(post)
-    i = post.names.index("u_base__b")
+    i = post.names.index("z_base__b")
     clamped = best.copy()
     clamped[i] = -0.1
     stuck = map_fit(post, clamped)
-    assert stuck[i] <= 0.0 and post.log_prob(stuck) < post.log_prob(best) - 5.0
+    assert stuck[i] <= 0.0 and post.map_log_density(stuck) < post.map_log_density(best) - 5.0
     released = release_clamps(post, stuck)
-    assert released[i] > 0.02
-    assert post.log_prob(released) > post.log_prob(best) - 0.05  # the optimum again (or a hair above it)
+    assert clamp_or_u(released[i]) > 0.02
+    assert post.map_log_density(released) > post.map_log_density(best) - 0.05  # the optimum again (or a hair above it)
     assert post.to_natural(released)["EI0"][0] == pytest.approx(EI0, rel=0.03)
 
 
@@ -242,3 +244,37 @@ def test_the_sharing_check_starts_its_refits_from_the_posteriors_best_draw(cut_p
     best = res.chain.reshape(-1, seen["post"].ndim)[np.argmax(res.log_prob.reshape(-1))]
     np.testing.assert_array_equal(seen["theta"], best)
     assert not np.array_equal(seen["theta"], seen["theta0"])
+
+
+def test_the_sampled_base_coordinate_keeps_the_prior_on_u(cut_pair):
+    """z_base is a coordinate for the sampler only: its prior puts 1/2 on the clamp and spreads the rest
+    uniformly over u in (0, U_MAX]; the MAP objective is the density in u (continuous at the clamp)."""
+    from scipy import integrate, stats
+
+    from bayesrod.inference.group import U_MAX, U_SCALE, Z_CLAMP
+    from bayesrod.inference.priors import ParamPrior
+
+    pr = ParamPrior("z", "clamp_or_uniform", (Z_CLAMP, U_SCALE, U_MAX))
+    lo, hi = pr.bounds()
+    assert (lo, hi) == (-Z_CLAMP, U_MAX / U_SCALE)
+    dens = lambda z: float(np.exp(pr.logpdf_sample(np.array([z]))[0]))  # noqa: E731
+    assert integrate.quad(dens, lo, 0.0)[0] == pytest.approx(0.5, rel=1e-9)
+    assert integrate.quad(dens, 0.0, hi, limit=200)[0] == pytest.approx(0.5, rel=1e-9)
+    assert np.all(np.isneginf(pr.logpdf_sample(np.array([lo - 1e-9, hi + 1e-9]))))
+    draws = pr.draw(np.random.default_rng(0), 20000)
+    assert abs(np.mean(draws <= 0) - 0.5) < 0.015 and draws.min() >= lo and draws.max() <= hi
+    u = clamp_or_u(draws[draws > 0])
+    assert stats.kstest(u, "uniform", args=(0.0, U_MAX)).pvalue > 0.01
+    assert pr.quantile(0.25) == pytest.approx(-Z_CLAMP / 2) and clamp_or_u(pr.quantile(0.75)) == pytest.approx(
+        U_MAX / 2
+    )
+    # MAP objective: the posterior density in u, continuous across the clamp's edge
+    post = GroupPosterior(GroupLikelihood({d.extra["condition"]: d for d in cut_pair}, load_prior("woody")))
+    t = start_point(post)
+    i = post.names.index("z_base__a")
+    edge = np.array([t, t])
+    edge[:, i] = [-1e-9, 1e-9]
+    a, b = post.map_log_density(edge)
+    assert a == pytest.approx(b, abs=1e-5)
+    c, d = post.log_prob(edge)
+    assert d - c == pytest.approx(np.log(U_SCALE * Z_CLAMP / U_MAX), abs=1e-5)  # the sampler's density: z's Jacobian

@@ -306,7 +306,7 @@ def fit_group(
     per = {c: lik.condition_params(nat, c) for c in lik.conditions}  # EI0, p and k_b of each condition, per draw
     samples = dict(nat)
     for c in lik.conditions:
-        u = clamp_or_u(nat[lik.local[c]["u_base"]])
+        u = clamp_or_u(nat[lik.local[c]["z_base"]])
         samples[f"base_compliance_rad_per_Nm__{c}"] = base_compliance(u, per[c]["EI0"], lik.liks[c].L)
     # the held-out refits start from the posterior's best draw: the start point can sit in a worse optimum
     # that a refit from it never leaves (a stem whose anchorage alone changed was then 'rejected')
@@ -335,7 +335,7 @@ def _summary(sid, lik: GroupLikelihood, nat, per, samples, res, pr, check, secon
         kt = k_theta(np.array(heights)[None, :], EI0[:, None], p[:, None], lik.liks[c].L, kb[:, None])
         row = {
             "base_compliance_rad_per_Nm": credible_interval(samples[f"base_compliance_rad_per_Nm__{c}"]),
-            "prob_rigid_clamp": float(np.mean(clamp_or_u(nat[loc["u_base"]]) == 0.0)),
+            "prob_rigid_clamp": float(np.mean(clamp_or_u(nat[loc["z_base"]]) == 0.0)),
             "k_theta": [{"height_m": h, **credible_interval(kt[:, i])} for i, h in enumerate(heights)],
             "sigma_force_N": credible_interval(nat[loc["sigma_force_N"]]),
         }

@@ -10,11 +10,20 @@ Parameterisation. The base compliance enters the elastica through c = EI0 C / L 
 rotational compliance relative to the rod's, L/EI0); the likelihood tables it on the bounded
 coordinate u = c / (1 + c) in [0, U_MAX] (u = 0: a clamp) for every p, exactly as the
 ``base_compliance`` effect of a single fit (:class:`~bayesrod.inference.likelihood.EffectAxis`).
-Each condition's u is the positive part of a sampled v (``u_base__<condition>``) uniform on
-[-U_MAX, U_MAX]: u = max(v, 0). So the prior gives a rigid clamp (u = 0) probability 1/2 and spreads
-the rest uniformly over (0, U_MAX]: scale-free, and an intact clamp is not forced to be soft (with a
-prior continuous on [0, U_MAX] the clamp sat on the boundary, the posterior gave it some compliance
-and a stiffer stem, and the stem's EI0 came out biased high).
+The prior of each condition's u gives a rigid clamp (u = 0) probability 1/2 and spreads the rest
+uniformly over (0, U_MAX]: scale-free, and an intact clamp is not forced to be soft (with a prior
+continuous on [0, U_MAX] the clamp sat on the boundary, the posterior gave it some compliance and a
+stiffer stem, and the stem's EI0 came out biased high).
+
+The sampler sees each condition's u through ``z_base__<condition>`` (:func:`clamp_or_u`): z in
+[-Z_CLAMP, 0] is the clamp, z > 0 is u = U_SCALE z, and the prior density in z carries the
+Jacobian (``ParamPrior`` ``clamp_or_uniform``), so the posterior of u is the same as if u were sampled.
+The coordinate is for the sampler. Sampled as u itself (u = max(v, 0), v uniform on [-U_MAX, U_MAX]),
+an intact condition's posterior was an L: a flat arm 0.9 long (the clamp) joined to a soft arm a few
+thousandths long in which EI0 rises with u; the ensembles split between the arms and did not cross
+(R-hat 1.1-1.7 on half of the group study's replicates, with intervals up to 4x too wide). In z the
+clamp's arm is 1 long and a soft arm of u < 0.005 (U_SCALE) is 1 long (docs/validation.md, "One stem,
+many conditions").
 
 Sharing. ``shared`` names the stem parameters common to all conditions (default EI0 and p);
 a parameter not shared gets one copy per condition (``EI0__<condition>``). The *separate*
@@ -39,6 +48,11 @@ from .priors import ParamPrior
 
 #: upper end of the base-compliance coordinate u = c/(1+c): c = EI0 C / L up to 9
 U_MAX = 0.9
+#: the sampled coordinate z: u = U_SCALE z for z > 0 (the ridge along which a stem's EI0 trades against the
+#: conditions' base compliances spans about 0.005 in u on the group study's two-height pushes)
+U_SCALE = 0.005
+#: length of the clamp's arm z in [-Z_CLAMP, 0] (prior mass 1/2 whatever its length)
+Z_CLAMP = 1.0
 #: nodes of the u table axis: 25 (with 13 the interpolation biased a two-height fit of precise forces by
 #: 1.4% in EI0 (2.668 vs 2.63), outside its 90% interval; with 25 by 0.2% (2.624), tests/test_group.py)
 U_NODES = 25
@@ -120,8 +134,8 @@ class GroupLikelihood:
                 loc["rho_force"] = condition_name("rho_force", c)
                 priors[loc["rho_force"]] = prior.get("rho_force")
             if anchorage:
-                loc["u_base"] = condition_name("u_base", c)
-                priors[loc["u_base"]] = ParamPrior(loc["u_base"], "uniform", (-U_MAX, U_MAX), "1")
+                loc["z_base"] = condition_name("z_base", c)
+                priors[loc["z_base"]] = ParamPrior(loc["z_base"], "clamp_or_uniform", (Z_CLAMP, U_SCALE, U_MAX), "1")
             if force_offsets:
                 loc["force_offset"] = condition_name("force_offset_N", c)
                 peak = float(np.max(np.abs(lik.F_obs))) if lik.n_force else 1.0
@@ -145,7 +159,7 @@ class GroupLikelihood:
         if "force_offset" in loc:
             out["force_offset"] = params[loc["force_offset"]]
         if self.anchorage:
-            out["base_compliance"] = base_stiffness(clamp_or_u(params[loc["u_base"]]), out["EI0"], self.liks[c].L)
+            out["base_compliance"] = base_stiffness(clamp_or_u(params[loc["z_base"]]), out["EI0"], self.liks[c].L)
         return out
 
     def log_likelihood(self, params: dict) -> NDArray:
@@ -163,9 +177,14 @@ class GroupLikelihood:
         )
 
 
-def clamp_or_u(v: NDArray) -> NDArray:
-    """The compliance coordinate u = max(v, 0) of a sampled ``u_base``: v <= 0 is a rigid clamp."""
-    return np.maximum(np.asarray(v, float), 0.0)
+def clamp_or_u(z: NDArray) -> NDArray:
+    """The table coordinate u of a sampled ``z_base``: 0 (a rigid clamp) for z <= 0, else U_SCALE z."""
+    return U_SCALE * np.maximum(np.asarray(z, float), 0.0)
+
+
+def z_of_u(u: NDArray) -> NDArray:
+    """The sampled coordinate of a soft base u > 0 (inverse of :func:`clamp_or_u`)."""
+    return np.asarray(u, float) / U_SCALE
 
 
 def base_stiffness(u: NDArray, EI0: NDArray, L: float) -> NDArray:
@@ -190,6 +209,7 @@ class GroupPosterior(PosteriorBase):
         self.priors = [likelihood.priors[n] for n in self.names]
         self._p_idx = [i for i, n in enumerate(self.names) if n == "p" or n.startswith("p__")]
         self._p_bounds = likelihood.p_range
+        self._z_idx = [i for i, n in enumerate(self.names) if n.startswith("z_base")]
 
     def sample_bounds(self) -> list[tuple[float | None, float | None]]:
         """Bounds of each sampling-space coordinate (None: unbounded), for a bounded optimiser."""
@@ -203,6 +223,22 @@ class GroupPosterior(PosteriorBase):
                 lo, hi = max(lo, self._p_bounds[0]), min(hi, self._p_bounds[1])
             out.append((lo if np.isfinite(lo) else None, hi if np.isfinite(hi) else None))
         return out
+
+    def map_log_density(self, theta) -> NDArray | float:
+        """The log posterior density in u rather than in the sampled z (what a maximum a posteriori fit maximises).
+
+        ``log_prob`` is a density in z, in which the clamp's arm (prior mass 1/2 over Z_CLAMP) is
+        U_MAX / U_SCALE times denser than a soft base: an optimiser would prefer a clamp by log(180) nats.
+        In u the density is continuous at the clamp and flat below it, with the maximum where the
+        likelihood (times the other priors) is largest.
+        """
+        theta_arr = np.asarray(theta, float)
+        t = np.atleast_2d(theta_arr)
+        out = np.asarray(self.log_prob(t), float).copy()
+        for i in self._z_idx:
+            z = t[:, i]
+            out -= np.where(z > 0, math.log(U_SCALE), math.log(U_MAX / Z_CLAMP))
+        return float(out[0]) if theta_arr.ndim == 1 else out
 
 
 def start_point(post: GroupPosterior) -> NDArray:
@@ -231,23 +267,23 @@ def start_point(post: GroupPosterior) -> NDArray:
             for n in STEM_PARAMETERS:
                 if n not in lik.shared:
                     nat[loc[n]] = scales[c] if n == "EI0" else p
-            if "u_base" in loc:
+            if "z_base" in loc:
                 # the apparent softening top / EI0_c - 1 ~ c at small deflection (an upper bound at the tip)
                 c_app = top / scales[c] - 1.0 if "EI0" in lik.shared else 0.0
-                nat[loc["u_base"]] = float(np.clip(c_app / (1.0 + c_app), 0.02, 0.8 * U_MAX))
+                nat[loc["z_base"]] = float(z_of_u(np.clip(c_app / (1.0 + c_app), 0.02, 0.8 * U_MAX)))
         if "EI0" in lik.shared:
             nat["EI0"] = top
         if "p" in lik.shared:
             nat["p"] = p
         theta = post.to_sample(nat)[0]
-        grid.append((float(post.log_prob(theta)), theta))
+        grid.append((float(post.map_log_density(theta)), theta))
     grid = sorted((g for g in grid if np.isfinite(g[0])), key=lambda g: -g[0])[:START_CANDIDATES]
     if not grid:
         raise ValueError("fit_group: expected a starting point with finite posterior density, found none")
     # several starts: L-BFGS-B from the best grid point alone can stop far from the mode (on a replicate
     # of the group study it ran into the p bound and stopped 1277 nats below the mode the others reach)
     fits = [map_fit(post, t) for _, t in grid]
-    best = max(fits, key=lambda t: float(post.log_prob(t)))
+    best = max(fits, key=lambda t: float(post.map_log_density(t)))
     return release_clamps(post, best)
 
 
@@ -258,9 +294,9 @@ RELEASE_U = (0.02, 0.1)
 
 
 def release_clamps(post: GroupPosterior, theta: NDArray, min_gain: float = 2.0) -> NDArray:
-    """Try every condition the optimum left at a rigid clamp (v <= 0) a little soft, refit, keep what is better.
+    """Try every condition the optimum left at a rigid clamp (z <= 0) a little soft, refit, keep what is better.
 
-    The posterior is flat in v below zero (u = max(v, 0)), so a gradient optimiser that reaches the
+    The posterior is flat in z below zero (the clamp), so a gradient optimiser that reaches the
     clamp never learns that a soft base would fit better: on a replicate of the group study the
     start landed 172 nats below the posterior's mode with the first cut clamped and EI0 20% low, and
     some walkers never left it (docs/validation.md, "One stem, many conditions"). Repeated, one
@@ -270,16 +306,16 @@ def release_clamps(post: GroupPosterior, theta: NDArray, min_gain: float = 2.0) 
     branch, ended at R-hat 1.15 after 5000 steps (from the clamp: 1.05 and 1.07 in two runs).
     """
     names = post.names
-    lp = float(post.log_prob(theta))
+    lp = float(post.map_log_density(theta))
     for _ in range(len(names)):
         trials = []
         for i, n in enumerate(names):
-            if n.startswith("u_base") and theta[i] <= 0:
+            if n.startswith("z_base") and theta[i] <= 0:
                 for u in RELEASE_U:
                     t = theta.copy()
-                    t[i] = u
+                    t[i] = z_of_u(u)
                     t = map_fit(post, t)
-                    trials.append((float(post.log_prob(t)), t))
+                    trials.append((float(post.map_log_density(t)), t))
         if not trials:
             break
         lp_new, t_new = max(trials, key=lambda x: x[0])
@@ -290,28 +326,35 @@ def release_clamps(post: GroupPosterior, theta: NDArray, min_gain: float = 2.0) 
 
 
 def map_fit(post: GroupPosterior, theta0: NDArray, maxiter: int = 400) -> NDArray:
-    """Maximum a posteriori in the sampling space: L-BFGS-B with central differences batched in one call."""
+    """Maximum a posteriori (:meth:`GroupPosterior.map_log_density`): L-BFGS-B with central differences batched
+    in one call, each ``z_base`` optimised as u = U_SCALE z (so every coordinate moves on a scale of order one)."""
     n = theta0.size
     h = 1e-5
+    scale = np.ones(n)
+    scale[post._z_idx] = U_SCALE  # x = scale * theta
 
-    def fg(t):
-        pts = np.vstack([t, t + h * np.eye(n), t - h * np.eye(n)])
-        lp = post.log_prob(pts)
+    def fg(x):
+        pts = np.vstack([x, x + h * np.eye(n), x - h * np.eye(n)]) / scale
+        lp = post.map_log_density(pts)
         if not np.isfinite(lp[0]):
             return 1e300, np.zeros(n)
         g = (lp[1 : n + 1] - lp[n + 1 :]) / (2 * h)
         g = np.where(np.isfinite(g), g, 0.0)
         return -lp[0], -g
 
-    bounds = post.sample_bounds()
     # a central difference must not leave the support: keep h inside every bound
-    bounds = [(None if lo is None else lo + 2 * h, None if hi is None else hi - 2 * h) for lo, hi in bounds]
-    theta0 = np.clip(
-        theta0, [-np.inf if b[0] is None else b[0] for b in bounds], [np.inf if b[1] is None else b[1] for b in bounds]
+    bounds = [
+        (None if lo is None else lo * k + 2 * h, None if hi is None else hi * k - 2 * h)
+        for (lo, hi), k in zip(post.sample_bounds(), scale, strict=True)
+    ]
+    x0 = np.clip(
+        theta0 * scale,
+        [-np.inf if b[0] is None else b[0] for b in bounds],
+        [np.inf if b[1] is None else b[1] for b in bounds],
     )
-    res = minimize(fg, theta0, jac=True, method="L-BFGS-B", bounds=bounds, options={"maxiter": maxiter})
-    t = res.x if np.isfinite(res.fun) and res.fun <= -post.log_prob(theta0) else theta0
-    return t
+    res = minimize(fg, x0, jac=True, method="L-BFGS-B", bounds=bounds, options={"maxiter": maxiter})
+    theta1 = x0 / scale
+    return res.x / scale if np.isfinite(res.fun) and res.fun <= -post.map_log_density(theta1) else theta1
 
 
 @dataclass(frozen=True)

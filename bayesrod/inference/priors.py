@@ -64,6 +64,10 @@ class ParamPrior:
         if self.dist == "uniform":
             lo, hi = a
             return np.where((u >= lo) & (u <= hi), -math.log(hi - lo), -np.inf)
+        if self.dist == "clamp_or_uniform":  # z: a clamp on [-width, 0] (mass 1/2), u = scale z uniform on (0, u_max]
+            width, scale, u_max = a
+            out = np.where(u > 0, math.log(0.5 * scale / u_max), -math.log(2.0 * width))  # p(z) = p(u) du/dz
+            return np.where((u >= -width) & (u <= u_max / scale), out, -np.inf)
         if self.dist == "arcsine":  # density (1 - x^2)^(-1/2) / (asin(high) - asin(low)) on [low, high]
             lo, hi = a
             inside = (u >= lo) & (u <= hi)
@@ -78,6 +82,8 @@ class ParamPrior:
             return self.args[2], self.args[3]
         if self.dist in ("uniform", "arcsine"):
             return self.args
+        if self.dist == "clamp_or_uniform":
+            return -self.args[0], self.args[2] / self.args[1]
         if self.log_space:
             return 0.0, math.inf
         return -math.inf, math.inf
@@ -96,6 +102,8 @@ class ParamPrior:
             return stats.truncnorm.rvs((lo - mean) / sd, (hi - mean) / sd, loc=mean, scale=sd, size=n, random_state=rng)
         if self.dist == "arcsine":  # x = sin(t), t uniform: dx = cos(t) dt = sqrt(1 - x^2) dt
             return np.sin(rng.uniform(*self._angles(), n))
+        if self.dist == "clamp_or_uniform":
+            return self._clamp_or_uniform_quantile(rng.uniform(0.0, 1.0, n))
         return rng.uniform(a[0], a[1], n)
 
     def quantile(self, q: float) -> float:
@@ -112,7 +120,14 @@ class ParamPrior:
         if self.dist == "arcsine":
             t0, t1 = self._angles()
             return float(math.sin(t0 + q * (t1 - t0)))
+        if self.dist == "clamp_or_uniform":
+            return float(self._clamp_or_uniform_quantile(np.asarray(q, float)))
         return float(a[0] + q * (a[1] - a[0]))
+
+    def _clamp_or_uniform_quantile(self, q: NDArray) -> NDArray:
+        """Inverse CDF of ``clamp_or_uniform``: the lower half of q on the clamp, the upper half uniform in u."""
+        width, scale, u_max = self.args
+        return np.where(q <= 0.5, width * (2.0 * q - 1.0), np.maximum(2.0 * q - 1.0, 0.0) * u_max / scale)
 
 
 class ParameterSpace:
