@@ -13,6 +13,12 @@ Run:  python benchmarks/bench_likelihood.py [--repeat 3]
 3. The naive sampler would need the same evaluations for the same ESS (same
    target, same sampler), so its ESS/s = ESS / (evaluations x time per
    evaluation). Running it would take days, hence the extrapolation.
+4. The naive evaluation is also the yardstick of the machine: the table fit's
+   ESS/s scaled by (naive time today / naive time on the reference day,
+   ``--reference-naive-s``, 24.5 s on 2026-11-21) is what the fit would give on
+   the reference day's machine. The same machine ran the same code 3x slower on
+   some days than on others (docs/performance.md), so an absolute ESS/s target
+   (issue 19: >= 300 for the AR(1) fit) is read on this scaled number.
 """
 
 from __future__ import annotations
@@ -56,6 +62,12 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--force-noise", choices=["iid", "ar1"], default="iid", help="the table likelihood's noise model")
+    ap.add_argument(
+        "--reference-naive-s",
+        type=float,
+        default=24.5,
+        help="seconds of one naive evaluation on the reference day (2026-11-21), the machine's yardstick",
+    )
     args = ap.parse_args()
     spec = read_dataset(resources.files("bayesrod") / "data" / "default")
     t0 = time.perf_counter()
@@ -96,6 +108,11 @@ def main():
         f"{ess_s_naive:.2e} ESS/s for the same number of evaluations"
     )
     print(f"ratio: x{ess_s_fast / ess_s_naive:.3g}")
+    speed = per_eval_naive / args.reference_naive_s
+    print(
+        f"machine: the naive evaluation took {speed:.2f}x its {args.reference_naive_s:g} s of the reference day -> "
+        f"{ess_s_fast * speed:.0f} ESS/s on the reference day's machine"
+    )
 
 
 if __name__ == "__main__":

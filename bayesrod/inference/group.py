@@ -335,7 +335,8 @@ def map_fit(post: GroupPosterior, theta0: NDArray, maxiter: int = 400) -> NDArra
 
     def fg(x):
         pts = np.vstack([x, x + h * np.eye(n), x - h * np.eye(n)]) / scale
-        lp = post.map_log_density(pts)
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):  # a line search's trial at log EI0 ~ 200
+            lp = post.map_log_density(pts)
         if not np.isfinite(lp[0]):
             return 1e300, np.zeros(n)
         g = (lp[1 : n + 1] - lp[n + 1 :]) / (2 * h)
