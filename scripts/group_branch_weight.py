@@ -3,8 +3,10 @@
 Run:  python scripts/group_branch_weight.py 7 4      # replicates of scripts/group_study.py (two heights)
 
 Each replicate is simulated and fitted as group_study.py does (fit_group, prior woody, AR(1) noise,
-5000 steps at most, seed = replicate). The intact condition's sampled coordinate v (u = max(v, 0): v <= 0 a
-rigid clamp) has a posterior density that is flat on [-0.9, 0] and continuous at 0, so if the sampler
+5000 steps at most, seed = replicate). The intact condition's draws are read as v: u on the soft side
+(u = 0.005 z for the sampled z > 0) and U_MAX z on the clamp (z in [-1, 0] -> v in [-0.9, 0]). Under
+the prior (1/2 on the clamp, u uniform on (0, 0.9]) v is uniform on [-0.9, 0.9]; its posterior density
+is flat on [-0.9, 0] and continuous at 0, so if the sampler
 weighs the soft branch (v > 0) right, the density of the draws just above 0 matches the density just
 below it. Printed: both densities over windows of 0.002-0.02, the soft fraction, EI0 on each branch, and
 the 95% quantile of EI0 from the clamp draws alone.
@@ -19,13 +21,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import group_study as G
 
 import bayesrod
+from bayesrod.inference.group import U_MAX, clamp_or_u
 
 for rep in [int(a) for a in sys.argv[1:]]:
     dss, EI0, _, _ = G.replicate_data(rep, "base", [0.45, 0.65])
     g = bayesrod.fit_group(
         list(dss), prior="woody", progress=False, target_ess=200, max_steps=5000, seed=rep, sharing=False
     )
-    v = np.asarray(g.samples["u_base__intact"])
+    z = np.asarray(g.samples["z_base__intact"])
+    v = np.where(z > 0, clamp_or_u(z), U_MAX * z)
     e = np.asarray(g.samples["EI0"])
     q05, q95 = np.quantile(e, [0.05, 0.95])
     print(f"rep {rep}: EI0 true {EI0:.4f} interval [{q05:.4f}, {q95:.4f}] covered {q05 <= EI0 <= q95}; n {v.size}")
