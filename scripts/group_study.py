@@ -111,6 +111,11 @@ def one(job) -> dict:
     return row
 
 
+def _z(row, truth: str, q: str) -> float:
+    half = (float(row[f"{q}_q95"]) - float(row[f"{q}_q05"])) / 2.0
+    return (float(row[f"{q}_med"]) - float(row[truth])) / (half / 1.645)
+
+
 def table(rows) -> str:
     out = []
     for kind in ("base", "stem"):
@@ -134,6 +139,11 @@ def table(rows) -> str:
                 out.append(f"| base compliance of {c}: 90% interval covers the truth | {cc:.0%} |")
                 dc = np.mean([int(r[f"D_{c}_cover"]) for r in rs])
                 out.append(f"| compliance difference {c} - intact: 90% interval covers the truth | {dc:.0%} |")
+            # calibration of the width: z = (median - truth) / (90% half-width / 1.645); rms 1 when calibrated
+            zc = [_z(r, f"C_{c}_true", f"C_{c}") for r in rs for c in RATIOS]
+            out.append(f"| cut compliances: z rms (1 when right) | {math.sqrt(np.mean(np.square(zc))):.2f} |")
+        zE = [_z(r, "EI0", "EI0") for r in rs]
+        out.append(f"| shared EI0: z rms | {math.sqrt(np.mean(np.square(zE))):.2f} |")
         med_w = np.median([float(r["EI0_q95"]) / float(r["EI0_q05"]) for r in rs])
         out.append(f"| median width of the shared EI0 interval (q95/q05) | {med_w:.3f} |")
         out.append(
