@@ -21,7 +21,7 @@ Jacobian (``ParamPrior`` ``clamp_or_uniform``), so the posterior of u is the sam
 The coordinate is for the sampler. Sampled as u itself (u = max(v, 0), v uniform on [-U_MAX, U_MAX]),
 an intact condition's posterior was an L: a flat arm 0.9 long (the clamp) joined to a soft arm a few
 thousandths long in which EI0 rises with u; the ensembles split between the arms and did not cross
-(R-hat 1.1-1.7 on half of the group study's replicates, with intervals up to 4x too wide). In z the
+(R-hat 1.1-1.7 on half of the group study's replicates, with EI0 intervals up to 5x too wide). In z the
 clamp's arm is 1 long and a soft arm of u < 0.005 (U_SCALE) is 1 long (docs/validation.md, "One stem,
 many conditions").
 
@@ -229,15 +229,15 @@ class GroupPosterior(PosteriorBase):
 
         ``log_prob`` is a density in z, in which the clamp's arm (prior mass 1/2 over Z_CLAMP) is
         U_MAX / U_SCALE times denser than a soft base: an optimiser would prefer a clamp by log(180) nats.
-        In u the density is continuous at the clamp and flat below it, with the maximum where the
-        likelihood (times the other priors) is largest.
+        Without z's prior the density is continuous at the clamp and flat below it, with the maximum where
+        the likelihood (times the other priors) is largest: the density in u, up to a constant.
         """
         theta_arr = np.asarray(theta, float)
         t = np.atleast_2d(theta_arr)
-        out = np.asarray(self.log_prob(t), float).copy()
-        for i in self._z_idx:
-            z = t[:, i]
-            out -= np.where(z > 0, math.log(U_SCALE), math.log(U_MAX / Z_CLAMP))
+        out = np.asarray(self.log_prob(t), float)
+        # dropping z's prior leaves a flat prior in z, which is flat in u on both arms (up to a constant)
+        z_prior = sum(self.priors[i].logpdf_sample(t[:, i]) for i in self._z_idx)
+        out = np.where(np.isfinite(out), out - z_prior, -np.inf)
         return float(out[0]) if theta_arr.ndim == 1 else out
 
 
