@@ -1,6 +1,7 @@
 """Is the soft-intact branch of fit_group weighted as the posterior says? (issue 23, docs/validation.md)
 
 Run:  python scripts/group_branch_weight.py 7 4      # replicates of scripts/group_study.py (two heights)
+      python scripts/group_branch_weight.py 1 2 4 --heights 0.55 --max-steps 20000   # one height
 
 Each replicate is simulated and fitted as group_study.py does (fit_group, prior woody, AR(1) noise,
 5000 steps at most, seed = replicate). The intact condition's draws are read as v: u on the soft side
@@ -12,6 +13,7 @@ below it. Printed: both densities over windows of 0.002-0.02, the soft fraction,
 the 95% quantile of EI0 from the clamp draws alone.
 """
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -23,15 +25,29 @@ import group_study as G
 import bayesrod
 from bayesrod.inference.group import U_MAX, clamp_or_u
 
-for rep in [int(a) for a in sys.argv[1:]]:
-    dss, EI0, _, _ = G.replicate_data(rep, "base", [0.45, 0.65])
+ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+ap.add_argument("replicates", nargs="+", type=int)
+ap.add_argument("--heights", default="0.45,0.65", help="contact heights [m], comma separated (group_study's)")
+ap.add_argument("--max-steps", type=int, default=5000)
+ap.add_argument("--target-ess", type=int, default=200)
+args = ap.parse_args()
+heights = [float(h) for h in args.heights.split(",")]
+for rep in args.replicates:
+    dss, EI0, _, _ = G.replicate_data(rep, "base", heights)
     g = bayesrod.fit_group(
-        list(dss), prior="woody", progress=False, target_ess=200, max_steps=5000, seed=rep, sharing=False
+        list(dss),
+        prior="woody",
+        progress=False,
+        target_ess=args.target_ess,
+        max_steps=args.max_steps,
+        seed=rep,
+        sharing=False,
     )
     z = np.asarray(g.samples["z_base__intact"])
     v = np.where(z > 0, clamp_or_u(z), U_MAX * z)
     e = np.asarray(g.samples["EI0"])
     q05, q95 = np.quantile(e, [0.05, 0.95])
+    print(f"rep {rep} (heights {heights}): R-hat max {g.doc['convergence']['rhat_max']:.3f}")
     print(f"rep {rep}: EI0 true {EI0:.4f} interval [{q05:.4f}, {q95:.4f}] covered {q05 <= EI0 <= q95}; n {v.size}")
     print(f"  P(v > 0) = {np.mean(v > 0):.4f}")
     for w in (0.002, 0.005, 0.01, 0.02):

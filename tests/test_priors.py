@@ -31,6 +31,29 @@ class _TruncArcsine:
         return self.lo, self.hi
 
 
+class _ClampOrUniform:
+    """Half the mass uniform on the clamp [-width, 0], half uniform in u = scale z on (0, u_max]: an equal
+    mixture of two scipy uniforms in z (fit-group's base coordinate, bayesrod.inference.group)."""
+
+    def __init__(self, width, scale, u_max):
+        self.clamp, self.soft = stats.uniform(-width, width), stats.uniform(0.0, u_max / scale)
+        self.lo, self.hi = -width, u_max / scale
+
+    def logpdf(self, x):
+        x = np.asarray(x, float)
+        return np.log(0.5 * np.where(x <= 0, self.clamp.pdf(x), self.soft.pdf(x)))
+
+    def cdf(self, x):
+        return 0.5 * self.clamp.cdf(x) + 0.5 * self.soft.cdf(x)
+
+    def ppf(self, q):
+        q = np.asarray(q, float)
+        return np.where(q <= 0.5, self.clamp.ppf(np.minimum(2 * q, 1.0)), self.soft.ppf(np.maximum(2 * q - 1, 0.0)))
+
+    def support(self):
+        return self.lo, self.hi
+
+
 CASES = [
     ("lognormal", (2.5, 0.7), stats.lognorm(0.7, scale=2.5)),
     ("halfnormal", (0.3,), stats.halfnorm(scale=0.3)),
@@ -38,6 +61,7 @@ CASES = [
     ("truncnormal", (0.5, 0.8, 0.0, 3.0), stats.truncnorm((0.0 - 0.5) / 0.8, (3.0 - 0.5) / 0.8, loc=0.5, scale=0.8)),
     ("uniform", (0.2, 1.4), stats.uniform(0.2, 1.2)),
     ("arcsine", (-0.5, 0.995), _TruncArcsine(-0.5, 0.995)),
+    ("clamp_or_uniform", (2.0, 0.01, 0.5), _ClampOrUniform(2.0, 0.01, 0.5)),
 ]
 
 
@@ -55,7 +79,7 @@ def test_density_in_the_sampling_space_is_the_natural_density_times_the_jacobian
 @pytest.mark.parametrize("dist, args, ref", CASES, ids=[c[0] for c in CASES])
 def test_draws_and_quantiles_follow_the_distribution(dist, args, ref):
     pr = ParamPrior("x", dist, args)
-    for q in (0.05, 0.5, 0.9):
+    for q in (0.05, 0.3, 0.5, 0.9):
         assert pr.quantile(q) == pytest.approx(ref.ppf(q), rel=1e-12)
     x = pr.draw(np.random.default_rng(4), 20_000)
     assert x.shape == (20_000,) and stats.kstest(x, ref.cdf).pvalue > 0.01
@@ -73,7 +97,13 @@ def test_draws_and_quantiles_follow_the_distribution(dist, args, ref):
 
 
 @pytest.mark.parametrize(
-    "dist, args", [("truncnormal", (0.5, 0.8, 0.0, 3.0)), ("uniform", (0.2, 1.4)), ("arcsine", (-0.5, 0.995))]
+    "dist, args",
+    [
+        ("truncnormal", (0.5, 0.8, 0.0, 3.0)),
+        ("uniform", (0.2, 1.4)),
+        ("arcsine", (-0.5, 0.995)),
+        ("clamp_or_uniform", (2.0, 0.01, 0.5)),
+    ],
 )
 def test_outside_a_bounded_support_the_density_is_zero_and_at_the_edge_it_is_not(dist, args):
     pr = ParamPrior("x", dist, args)
@@ -234,3 +264,14 @@ def test_unknown_effects_and_missing_files_are_named(tmp_path):
         ValueError, match=r"^prior: expected one of default, grass, .* or a JSON file, got 'nonexistent'"
     ):
         load_prior("nonexistent")
+
+
+def test_the_clamp_or_uniform_coordinate_owns_zero_and_steps_down_by_its_jacobian_above_it():
+    """z = 0 is on the clamp (u = 0); just above it the density in z is p(u) du/dz = (1/2) scale / u_max."""
+    width, scale, u_max = 2.0, 0.01, 0.5
+    pr = ParamPrior("z", "clamp_or_uniform", (width, scale, u_max))
+    below, zero, above = pr.logpdf_sample(np.array([-1e-12, 0.0, 1e-12]))
+    assert below == zero == pytest.approx(-math.log(2 * width), rel=1e-15)
+    assert above == pytest.approx(math.log(0.5 * scale / u_max), rel=1e-15)
+    assert pr.quantile(0.5) == 0.0 and pr.quantile(0.0) == -width and pr.quantile(1.0) == u_max / scale
+    assert not pr.log_space and pr.to_sample(0.25) == 0.25 and pr.from_sample(-0.5) == -0.5
