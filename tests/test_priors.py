@@ -275,3 +275,93 @@ def test_the_clamp_or_uniform_coordinate_owns_zero_and_steps_down_by_its_jacobia
     assert above == pytest.approx(math.log(0.5 * scale / u_max), rel=1e-15)
     assert pr.quantile(0.5) == 0.0 and pr.quantile(0.0) == -width and pr.quantile(1.0) == u_max / scale
     assert not pr.log_space and pr.to_sample(0.25) == 0.25 and pr.from_sample(-0.5) == -0.5
+
+
+def _noise_space(names, priors):
+    space = ParameterSpace()
+    space.names, space.priors = names, priors
+    return space
+
+
+SD = ParamPrior("sigma_force_N", "halfnormal", (0.1,))
+RHO = ParamPrior("rho_force", "arcsine", (-0.5, 0.995))
+
+
+def test_an_ar1_force_noise_is_sampled_by_its_innovation_sd_and_mapped_back_exactly():
+    """(log sigma sqrt(1 - rho^2), rho) in the sampling space, (sigma, rho) in natural units; per-condition
+    copies pair by suffix; the shear has unit Jacobian, so prior_coordinates is the prior's own transform."""
+    names = ["EI0", "sigma_force_N__a", "rho_force__a", "sigma_force_N__b", "rho_force__b"]
+    sd_a, rho_a, sd_b, rho_b = (
+        ParamPrior(n, d.dist, d.args) for n, d in zip(names[1:], [SD, RHO, SD, RHO], strict=True)
+    )
+    space = _noise_space(names, [ParamPrior("EI0", "lognormal", (2.0, 1.0)), sd_a, rho_a, sd_b, rho_b])
+    assert space.noise_pairs() == [(1, 2), (3, 4)]
+    nat = {
+        "EI0": np.array([2.0, 3.0]),
+        "sigma_force_N__a": np.array([0.2, 0.05]),
+        "rho_force__a": np.array([0.9, -0.4]),
+    }
+    nat |= {"sigma_force_N__b": np.array([0.1, 0.3]), "rho_force__b": np.array([0.0, 0.6])}
+    theta = space.to_sample(nat)
+    assert theta.shape == (2, 5)
+    want = np.column_stack(
+        [
+            np.log(nat["EI0"]),
+            np.log(nat["sigma_force_N__a"] * np.sqrt(1 - nat["rho_force__a"] ** 2)),
+            nat["rho_force__a"],
+            np.log(nat["sigma_force_N__b"] * np.sqrt(1 - nat["rho_force__b"] ** 2)),
+            nat["rho_force__b"],
+        ]
+    )
+    np.testing.assert_allclose(theta, want, rtol=1e-14)
+    before = theta.copy()
+    back = space.to_natural(theta)
+    np.testing.assert_array_equal(theta, before)  # the caller's array is not sheared in place
+    for n, v in nat.items():
+        np.testing.assert_allclose(back[n], v, rtol=1e-13)
+    prior = space.prior_coordinates(theta)
+    np.testing.assert_array_equal(theta, before)
+    np.testing.assert_allclose(
+        prior[:, [1, 3]], np.log(np.column_stack([nat["sigma_force_N__a"], nat["sigma_force_N__b"]]))
+    )
+    np.testing.assert_array_equal(prior[:, [0, 2, 4]], theta[:, [0, 2, 4]])
+    # a correlation at the edge of [-1, 1] stays finite (clipped a hair inside)
+    edge = space.prior_coordinates(np.array([0.0, -1.0, 1.0, -1.0, -1.0]))
+    assert np.all(np.isfinite(edge)) and edge[1] == pytest.approx(-1.0 - 0.5 * np.log1p(-((1 - 1e-12) ** 2)), rel=1e-6)
+
+
+@pytest.mark.parametrize(
+    "names, priors",
+    [
+        (["sigma_force_N", "rho_force"], [ParamPrior("sigma_force_N", "normal", (0.1, 0.1)), RHO]),  # sd not in log
+        (["sigma_force_N", "rho_force"], [SD, ParamPrior("rho_force", "lognormal", (0.5, 1.0))]),  # rho in log
+        (["sigma_force_N__a", "rho_force__b"], [SD, RHO]),  # different conditions
+        (["sigma_force_N", "rho_shape"], [SD, RHO]),  # not the force noise's correlation
+    ],
+)
+def test_only_a_log_sd_with_its_own_linear_force_correlation_is_sheared(names, priors):
+    space = _noise_space(names, priors)
+    assert space.noise_pairs() == []
+    theta = np.array([[-2.0, 0.7]])
+    np.testing.assert_array_equal(space.prior_coordinates(theta), theta)
+
+
+def test_names_and_priors_must_pair_one_to_one():
+    space = _noise_space(["EI0", "p"], [ParamPrior("EI0", "lognormal", (2.0, 1.0))])
+    with pytest.raises(ValueError):
+        space.to_natural(np.zeros((1, 2)))
+    with pytest.raises(ValueError):
+        space.to_sample({"EI0": 1.0, "p": 0.5})
+
+
+def test_prior_files_are_found_from_a_source_tree_without_the_installed_package(monkeypatch):
+    from importlib import resources
+
+    from bayesrod.inference import priors as P
+
+    def missing(name):
+        raise ModuleNotFoundError(name)
+
+    monkeypatch.setattr(resources, "files", missing)
+    folder = P._priors_dir()
+    assert (folder / "woody.json").is_file() and folder.name == "priors"
