@@ -1,0 +1,143 @@
+"""Is the diameter taper p_geom from the width profile alone calibrated? (issue 22)
+
+    python scripts/width_taper_check.py --stem grass --seeds 20-31 [--graded 120-122] --cache DIR
+        [--same-pixels 1,3]
+
+Per seed: simulate and extract one rendered push as scripts/diameter_study.py does (``_study.extracted_push``),
+keeping every frame's width profile (cached in ``DIR``, so variants of how the frames are combined rerun in
+seconds). For each value of ``SAME_PIXELS_PX`` given (how far apart [px] two frames' samples of a station must
+lie to read independent background pixels; the library's value first), the frames are combined again
+(``combine_profiles``) and the width term of ``bayesrod.fit`` alone (d0, p_geom, the station sd scale and
+their AR(1) correlation, the shared offset and scale marginalised; flat prior on p_geom) is sampled with
+emcee. Printed per variant: the taper's z-score (median - drawn) / (90% half-width / 1.645) and whether its
+90% interval covers the drawn taper, per seed and pooled (z rms 1 and 90% cover when calibrated).
+"""
+
+from __future__ import annotations
+
+import argparse
+import pickle
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from _study import extracted_push
+
+from bayesrod.inference.likelihood import shared_error_loglik
+from bayesrod.physics import stem_diameter
+from bayesrod.vision import width as W
+
+
+def seeds(text: str) -> list[int]:
+    """'20-31' or '1,4,7' -> list of ints."""
+    if "-" in text:
+        a, b = (int(x) for x in text.split("-"))
+        return list(range(a, b + 1))
+    return [int(x) for x in text.split(",") if x]
+
+
+def frames_of(stem: str, seed: int, graded: bool, cache: Path) -> dict:
+    """The frames' width profiles of one push and its truth (cached)."""
+    f = cache / f"{stem}_{seed}_{int(graded)}.pkl"
+    if f.exists():
+        return pickle.loads(f.read_bytes())
+    seen = {}
+    real = W.combine_profiles
+
+    def keep(profiles, s_m, *a, **k):
+        seen.update(profiles=profiles, s_m=s_m, args=a, kwargs=k)
+        return real(profiles, s_m, *a, **k)
+
+    W.combine_profiles = keep
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            ex, _, px = extracted_push(stem, seed, graded, Path(tmp))
+    finally:
+        W.combine_profiles = real
+    truth = ex.source.extra["truth"]
+    out = {
+        **seen,
+        "d0": truth["base_diameter_m"],
+        "q": truth["diameter_taper"],
+        "L": ex.dataset.length_m,
+        "px": px,
+    }
+    cache.mkdir(parents=True, exist_ok=True)
+    f.write_bytes(pickle.dumps(out))
+    return out
+
+
+def taper_posterior(dp, L: float, seed: int) -> np.ndarray:
+    """Draws of p_geom from the width term alone (as RodLikelihood._diameter_loglik; flat p_geom in [0, 3])."""
+    import emcee
+
+    ok = dp.ok
+    s, d, sd = dp.s_m[ok], dp.d_m[ok], dp.sd_m[ok]
+    first = np.concatenate([[True], np.diff(s) > 1.5 * float(np.median(np.diff(s)))])
+
+    def log_prob(th):
+        th = np.atleast_2d(th)
+        logd0, pg, logk, rho = th.T
+        bad = (pg < 0) | (pg > 3) | (rho < -0.5) | (rho > 0.995)
+        pred = stem_diameter(s[None], np.exp(logd0)[:, None], pg[:, None], L)
+        z = (d[None] - pred) / sd[None]
+        shared = [np.broadcast_to(dp.shared_offset_sd_m / sd, z.shape)]
+        if dp.shared_scale_sd > 0:
+            shared.append(dp.shared_scale_sd * pred / sd[None])
+        ll = shared_error_loglik(z, np.exp(logk)[:, None], rho[:, None], first, shared)
+        lp = -0.5 * (logk / 0.5) ** 2
+        return np.where(bad, -np.inf, ll + lp)
+
+    rng = np.random.default_rng(seed)
+    nw = 32
+    start = np.column_stack(
+        [
+            np.log(d[0]) + 0.01 * rng.standard_normal(nw),
+            1.0 + 0.05 * rng.standard_normal(nw),
+            0.1 * rng.standard_normal(nw),
+            0.1 * rng.uniform(0, 1, nw),
+        ]
+    )
+    sampler = emcee.EnsembleSampler(nw, 4, log_prob, vectorize=True)
+    sampler._random = np.random.mtrand.RandomState(seed)  # emcee's own generator, seeded: reproducible draws
+    sampler.run_mcmc(start, 3000, progress=False)
+    return sampler.get_chain(discard=1000, flat=True)[:, 1]
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--stem", default="grass")
+    ap.add_argument("--seeds", default="20-31")
+    ap.add_argument("--graded", default="")
+    ap.add_argument("--cache", type=Path, required=True)
+    ap.add_argument("--same-pixels", default=str(W.SAME_PIXELS_PX), help="SAME_PIXELS_PX values, comma separated")
+    a = ap.parse_args(argv)
+    jobs = [(s, False) for s in seeds(a.seeds)] + [(s, True) for s in seeds(a.graded)]
+    values = [float(v) for v in a.same_pixels.split(",")]
+    keep = W.SAME_PIXELS_PX
+    pooled = {v: [] for v in values}
+    for seed, graded in jobs:
+        fr = frames_of(a.stem, seed, graded, a.cache)
+        line = [f"{a.stem} {seed}{' graded' if graded else ''}: drawn p_geom {fr['q']:.3f}"]
+        for v in values:
+            W.SAME_PIXELS_PX = v
+            try:
+                dp = W.combine_profiles(fr["profiles"], fr["s_m"], *fr["args"], **fr["kwargs"])
+            finally:
+                W.SAME_PIXELS_PX = keep
+            pg = taper_posterior(dp, fr["L"], seed)
+            q05, q50, q95 = np.quantile(pg, [0.05, 0.5, 0.95])
+            z = (q50 - fr["q"]) / ((q95 - q05) / 2 / 1.645)
+            pooled[v].append((z, q05 <= fr["q"] <= q95, (q95 - q05) / 2))
+            line.append(f"same_px {v:g}: {q50:.3f} [{q05:.3f}, {q95:.3f}] z {z:+.2f}")
+        print("; ".join(line), flush=True)
+    for v, rows in pooled.items():
+        z, cov, hw = (np.array(c) for c in zip(*rows, strict=True))
+        print(
+            f"SAME_PIXELS_PX {v:g}: {len(z)} pushes, taper z rms {np.sqrt(np.mean(z**2)):.2f}, "
+            f"90% cover {np.mean(cov):.2f}, median half-width {np.median(hw):.3f}"
+        )
+
+
+if __name__ == "__main__":
+    main()
