@@ -67,7 +67,7 @@ def frames_of(stem: str, seed: int, graded: bool, cache: Path) -> dict:
     return out
 
 
-def taper_posterior(dp, L: float, seed: int) -> np.ndarray:
+def taper_posterior(dp, L: float, seed: int, floor: bool = False) -> np.ndarray:
     """Draws of p_geom from the width term alone (as RodLikelihood._diameter_loglik; flat p_geom in [0, 3])."""
     import emcee
 
@@ -75,18 +75,28 @@ def taper_posterior(dp, L: float, seed: int) -> np.ndarray:
     s, d, sd = dp.s_m[ok], dp.d_m[ok], dp.sd_m[ok]
     first = np.concatenate([[True], np.diff(s) > 1.5 * float(np.median(np.diff(s)))])
 
+    typical = float(np.median(sd))
+
     def log_prob(th):
         th = np.atleast_2d(th)
-        logd0, pg, logk, rho = th.T
+        logd0, pg, logk, rho = th.T[:4]
+        logf = th[:, 4] if floor else None
         bad = (pg < 0) | (pg > 3) | (rho < -0.5) | (rho > 0.995)
         pred = stem_diameter(s[None], np.exp(logd0)[:, None], pg[:, None], L)
-        z = (d[None] - pred) / sd[None]
-        shared = [np.broadcast_to(dp.shared_offset_sd_m / sd, z.shape)]
+        # each station's sd: the sd scale k times its own, and (floor) a floor f x the median station sd
+        f = np.exp(logf)[:, None] * typical if floor else 0.0
+        sde = np.sqrt((np.exp(logk)[:, None] * sd[None]) ** 2 + f**2)
+        z = (d[None] - pred) / sde
+        shared = [np.broadcast_to(dp.shared_offset_sd_m / sde, z.shape)]
         if dp.shared_scale_sd > 0:
-            shared.append(dp.shared_scale_sd * pred / sd[None])
-        ll = shared_error_loglik(z, np.exp(logk)[:, None], rho[:, None], first, shared)
+            shared.append(dp.shared_scale_sd * pred / sde)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ll = shared_error_loglik(z, np.ones((z.shape[0], 1)), rho[:, None], first, shared)
+        ll = ll - np.sum(np.log(sde), axis=1)
         lp = -0.5 * (logk / 0.5) ** 2
-        return np.where(bad, -np.inf, ll + lp)
+        if floor:  # half-normal(1) on the floor's ratio to the median sd, sampled in log
+            lp = lp - 0.5 * np.exp(2 * logf) + logf
+        return np.where(bad | ~np.isfinite(ll), -np.inf, ll + lp)
 
     rng = np.random.default_rng(seed)
     nw = 32
@@ -97,8 +107,9 @@ def taper_posterior(dp, L: float, seed: int) -> np.ndarray:
             0.1 * rng.standard_normal(nw),
             0.1 * rng.uniform(0, 1, nw),
         ]
+        + ([np.log(0.3) + 0.1 * rng.standard_normal(nw)] if floor else [])
     )
-    sampler = emcee.EnsembleSampler(nw, 4, log_prob, vectorize=True)
+    sampler = emcee.EnsembleSampler(nw, start.shape[1], log_prob, vectorize=True)
     sampler._random = np.random.mtrand.RandomState(seed)  # emcee's own generator, seeded: reproducible draws
     sampler.run_mcmc(start, 3000, progress=False)
     return sampler.get_chain(discard=1000, flat=True)[:, 1]
@@ -111,6 +122,7 @@ def main(argv=None) -> None:
     ap.add_argument("--graded", default="")
     ap.add_argument("--cache", type=Path, required=True)
     ap.add_argument("--same-pixels", default=str(W.SAME_PIXELS_PX), help="SAME_PIXELS_PX values, comma separated")
+    ap.add_argument("--floor", action="store_true", help="stations' sd with a sampled floor (sd^2 k^2 + f^2)")
     a = ap.parse_args(argv)
     jobs = [(s, False) for s in seeds(a.seeds)] + [(s, True) for s in seeds(a.graded)]
     values = [float(v) for v in a.same_pixels.split(",")]
@@ -125,7 +137,7 @@ def main(argv=None) -> None:
                 dp = W.combine_profiles(fr["profiles"], fr["s_m"], *fr["args"], **fr["kwargs"])
             finally:
                 W.SAME_PIXELS_PX = keep
-            pg = taper_posterior(dp, fr["L"], seed)
+            pg = taper_posterior(dp, fr["L"], seed, a.floor)
             q05, q50, q95 = np.quantile(pg, [0.05, 0.5, 0.95])
             z = (q50 - fr["q"]) / ((q95 - q05) / 2 / 1.645)
             pooled[v].append((z, q05 <= fr["q"] <= q95, (q95 - q05) / 2))
