@@ -50,7 +50,7 @@ for rep in args.replicates:
     print(f"rep {rep} (heights {heights}): R-hat max {g.doc['convergence']['rhat_max']:.3f}")
     print(f"rep {rep}: EI0 true {EI0:.4f} interval [{q05:.4f}, {q95:.4f}] covered {q05 <= EI0 <= q95}; n {v.size}")
     print(f"  P(v > 0) = {np.mean(v > 0):.4f}")
-    for w in (0.002, 0.005, 0.01, 0.02):
+    for w in (0.0005, 0.001, 0.002, 0.005, 0.01, 0.02):
         below = np.mean((v > -w) & (v <= 0)) / w
         above = np.mean((v > 0) & (v < w)) / w
         print(f"  density of v on [-{w}, 0]: {below:.3f}, on (0, {w}): {above:.3f}")
