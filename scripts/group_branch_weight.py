@@ -1,7 +1,7 @@
 """Is the soft-intact branch of fit_group weighted as the posterior says? (issue 23, docs/validation.md)
 
 Run:  python scripts/group_branch_weight.py 7 4      # replicates of scripts/group_study.py (two heights)
-      python scripts/group_branch_weight.py 1 2 4 --heights 0.55 --max-steps 20000   # one height
+      python scripts/group_branch_weight.py 1 2 4 --heights 0.55 [--jump 8]   # one height
 
 Each replicate is simulated and fitted as group_study.py does (fit_group, prior woody, AR(1) noise,
 5000 steps at most, seed = replicate). The intact condition's draws are read as v: u on the soft side
@@ -30,10 +30,48 @@ ap.add_argument("replicates", nargs="+", type=int)
 ap.add_argument("--heights", default="0.45,0.65", help="contact heights [m], comma separated (group_study's)")
 ap.add_argument("--max-steps", type=int, default=5000)
 ap.add_argument("--target-ess", type=int, default=200)
+ap.add_argument(
+    "--jump",
+    type=float,
+    default=0.0,
+    help="experiment (session 29, not in the library): add, at weight 0.1, a Metropolis-Hastings move that swaps "
+    "one condition's z between the clamp [-1, 0] and the soft arm (0, JUMP], uniform on each side",
+)
 args = ap.parse_args()
 heights = [float(h) for h in args.heights.split(",")]
+
+
+def use_jump_move(dss, reach: float) -> None:
+    """Replace the samplers' moves by DE 0.7, snooker 0.2 and the clamp/soft swap 0.1 (see --jump)."""
+    from emcee.moves import DEMove, MHMove
+
+    import bayesrod.inference.moves as M
+    from bayesrod.inference.group import Z_CLAMP, GroupLikelihood, GroupPosterior
+    from bayesrod.inference.priors import load_prior
+
+    post = GroupPosterior(GroupLikelihood({d.extra["condition"]: d for d in dss}, load_prior("woody")))
+    zidx = np.array(post._z_idx)
+
+    def swap(x, random):
+        n = x.shape[0]
+        q = x.copy()
+        j = zidx[random.randint(len(zidx), size=n)]
+        z = x[np.arange(n), j]
+        clamp = z <= 0
+        within = clamp | (z <= reach)
+        new = np.where(clamp, random.uniform(0, reach, n), random.uniform(-Z_CLAMP, 0, n))
+        q[np.arange(n), j] = np.where(within, new, z)
+        # log q(x | x') - log q(x' | x): uniform on each side
+        lf = np.where(clamp, np.log(reach / Z_CLAMP), np.log(Z_CLAMP / reach))
+        return q, np.where(within, lf, 0.0)
+
+    M.default_moves = lambda: [(DEMove(), 0.7), (M.SnookerMove(), 0.2), (MHMove(swap), 0.1)]
+
+
 for rep in args.replicates:
     dss, EI0, _, _ = G.replicate_data(rep, "base", heights)
+    if args.jump > 0:
+        use_jump_move(dss, args.jump)
     g = bayesrod.fit_group(
         list(dss),
         prior="woody",
