@@ -9,7 +9,8 @@ seconds). For each value of ``SAME_PIXELS_PX`` given (how far apart [px] two fra
 lie to read independent background pixels; the library's value first), the frames are combined again
 (``combine_profiles``) and the width term of ``bayesrod.fit`` alone (d0, p_geom, the station sd scale and
 their AR(1) correlation, the shared offset and scale marginalised; flat prior on p_geom) is sampled with
-emcee. Printed per variant: the taper's z-score (median - drawn) / (90% half-width / 1.645) and whether its
+emcee. Printed per variant: the widths' scale error (d0 fitted at the drawn taper, the stations' median
+relative error), the taper's z-score (median - drawn) / (90% half-width / 1.645) and whether its
 90% interval covers the drawn taper, per seed and pooled (z rms 1 and 90% cover when calibrated).
 """
 
@@ -137,11 +138,20 @@ def main(argv=None) -> None:
                 dp = W.combine_profiles(fr["profiles"], fr["s_m"], *fr["args"], **fr["kwargs"])
             finally:
                 W.SAME_PIXELS_PX = keep
+            # the widths' scale error: d0 fitted at the drawn taper (weights 1/sd^2), the stations' median error
+            ok = dp.ok
+            g = stem_diameter(dp.s_m[ok], 1.0, fr["q"], fr["L"])
+            w = 1.0 / dp.sd_m[ok] ** 2
+            d0_at_truth = float(np.sum(w * g * dp.d_m[ok]) / np.sum(w * g * g)) / fr["d0"] - 1.0
+            station = float(np.median(dp.d_m[ok] / (fr["d0"] * g) - 1.0))
             pg = taper_posterior(dp, fr["L"], seed, a.floor)
             q05, q50, q95 = np.quantile(pg, [0.05, 0.5, 0.95])
             z = (q50 - fr["q"]) / ((q95 - q05) / 2 / 1.645)
             pooled[v].append((z, q05 <= fr["q"] <= q95, (q95 - q05) / 2))
-            line.append(f"same_px {v:g}: {q50:.3f} [{q05:.3f}, {q95:.3f}] z {z:+.2f}")
+            line.append(
+                f"same_px {v:g}: {q50:.3f} [{q05:.3f}, {q95:.3f}] z {z:+.2f}, d0 at the drawn taper "
+                f"{100 * d0_at_truth:+.2f}%, stations' median error {100 * station:+.2f}%"
+            )
         print("; ".join(line), flush=True)
     for v, rows in pooled.items():
         z, cov, hw = (np.array(c) for c in zip(*rows, strict=True))
