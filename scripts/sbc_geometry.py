@@ -112,6 +112,10 @@ def reference_dataset(ds, case: dict):
                     frames.append(fr)
                     continue
                 f = R.solve_displacement(Dk / L, sp.height_m / L, p, nd)["f"] if Dk > 0 else 0.0
+                if not np.isfinite(f):  # a frame within ~1e-3 L of the slip, past the reference's own: keep it
+                    n_fallback += 1
+                    frames.append(fr)
+                    continue
                 xz = R.shape_at_force(f, sp.height_m / L, p, sp.s_m / L, nd) * L
                 noise = sp.shapes_obs[k] - sp.shapes_true[k]
                 obs = xz + noise

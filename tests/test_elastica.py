@@ -148,6 +148,15 @@ def test_shape_grid_matches_reference():
     np.testing.assert_allclose(res["grid"][:, 1], ref[1], atol=1e-8)
 
 
+def test_the_reference_shape_refuses_the_force_of_a_push_past_its_slip():
+    """solve_displacement gives f = NaN past the slip; the shape at it is refused by name, not deep in scipy
+    (sbc_geometry.py crashed on a frame 1e-3 L past the reference's slip)."""
+    past = R.solve_displacement(0.9, 0.5625, 0.43)
+    assert past["slipped"] and not np.isfinite(past["f"])
+    with pytest.raises(ValueError, match="f: expected a finite"):
+        R.shape_at_force(past["f"], 0.5625, 0.43, np.linspace(0, 1, 5))
+
+
 @pytest.mark.parametrize(
     "kwargs,field",
     [

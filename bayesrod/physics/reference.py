@@ -154,7 +154,12 @@ def kx_quad(eta: float, p: float) -> float:
 
 
 def shape_at_force(f: float, eta: float, p: float, sig: np.ndarray, eff: dict | None = None) -> np.ndarray:
-    """Centerline (xi, zeta) at arc lengths ``sig`` (sorted) for force f; no friction/weight."""
+    """Centerline (xi, zeta) at arc lengths ``sig`` (sorted) for force f; no friction/weight.
+
+    ``f`` must be finite: :func:`solve_displacement` returns NaN for a displacement past the slip.
+    """
+    if not math.isfinite(f):
+        raise ValueError(f"f: expected a finite nondimensional force (a push before its slip), got {f}")
     eff = eff or {}
     kappa0, tilt, c_base = eff.get("kappa0", 0.0), eff.get("tilt", 0.0), eff.get("c_base", 0.0)
     r = solve_force(f, eta, p, eff)
