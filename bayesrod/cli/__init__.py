@@ -864,7 +864,7 @@ def _print_fit(summary: dict, out, args) -> None:
                 f"[{m['q05']:.3g}, {m['q95']:.3g}]"
             )
             if y["uniform_modulus"] == "rejected" and y.get("source") == "frames":
-                print("  (widths from frames reject a uniform modulus too often: confirm with calipers; report.html)")
+                print("  (frame widths reject 1 uniform stem in 10 at this level: confirm with calipers; report.html)")
     c = summary["convergence"]
     print(f"  R-hat max {c['rhat_max']:.4f}, bulk ESS min {c['ess_bulk_min']:.0f}, {summary['sampler']['seconds']:g} s")
     print(f"wrote {out}/summary.json, posterior.nc, report.html")
