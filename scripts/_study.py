@@ -31,6 +31,14 @@ def run_pending(
         yield from append_rows(csv_path, fields, pool.map(fn, todo), new_file=new_file)
 
 
+def seeds(text: str) -> list[int]:
+    """'20-31' or '1,4,7' -> list of ints (the width scripts' seed arguments)."""
+    if "-" in text:
+        a, b = (int(x) for x in text.split("-"))
+        return list(range(a, b + 1))
+    return [int(x) for x in text.split(",") if x]
+
+
 def extracted_push(stem: str, seed: int, graded: bool, folder: Path):
     """``bayesrod simulate`` one push of preset ``stem`` (its middle contact height; rendered frames with
     exact widths; ``graded``: a diameter taper ``GRADIENT`` below the bending taper) into ``folder``/raw,

@@ -20,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 from _study import extracted_push
-from scipy.optimize import least_squares
 
 from bayesrod.physics import stem_diameter
 from bayesrod.vision import width as W
@@ -35,33 +34,6 @@ def need(s: np.ndarray, profiles: list, truth: dict, L: float, px: float) -> tup
     if use.sum() < 4:
         return float("nan"), float("nan")
     return float(np.median(area[use] / drawn[use])), float(np.polyfit(drawn[use], area[use], 1)[0])
-
-
-def scale_with_loss(profiles: list, s: np.ndarray, loss: str, f_scale: float) -> float:
-    """:func:`bayesrod.vision.width.contrast_scale` with another robust loss (the same model and start)."""
-    clean, trend = W._clean_profiles(profiles, s)
-    order = np.argsort(trend)[::-1]
-    use = [i for i in order if clean[i] and trend[i] >= W.MIN_AREA_PX][: W.AREA_N_MAX]
-    if len(use) < 5:
-        return 1.0
-    n = len(use)
-    t_all = np.concatenate([profiles[i][0] for i in use])
-    y_all = np.concatenate([profiles[i][1] for i in use])
-    owner = np.repeat(np.arange(n), [profiles[i][0].size for i in use])
-    area = W._coverage_integrals([profiles[i] for i in use])
-
-    def resid(x):
-        k, sig = np.exp(x[0]), np.exp(x[1])
-        return y_all - k * W._blurred_box(t_all - x[2:][owner], (area / k)[owner], sig)
-
-    sparsity = np.zeros((y_all.size, 2 + n), bool)
-    sparsity[:, :2] = True
-    sparsity[np.arange(y_all.size), 2 + owner] = True
-    lo = np.concatenate([[np.log(0.5), np.log(0.2)], np.full(n, -2.0)])
-    hi = np.concatenate([[np.log(2.0), np.log(3.0)], np.full(n, 2.0)])
-    x0 = np.concatenate([[0.0, np.log(0.8)], np.zeros(n)])
-    fit = least_squares(resid, x0, bounds=(lo, hi), loss=loss, f_scale=f_scale, jac_sparsity=sparsity)
-    return float(np.exp(fit.x[0]))
 
 
 def main(argv=None) -> None:
@@ -100,7 +72,9 @@ def main(argv=None) -> None:
     print(f"  second pass: scale {med[3]:.3f}, need {med[4]:.3f} (slope {med[5]:.3f})")
     print(f"  second scale / need: {np.nanmedian(R[:, 3] / R[:, 4]):.4f}")
     for loss, f_scale in (("soft_l1", 0.1), ("linear", 1.0), ("soft_l1", 0.3), ("cauchy", 0.1)):
-        ratio = [scale_with_loss(c[1][1], c[1][0], loss, f_scale) / r[4] for c, r in zip(frames, rows, strict=True)]
+        ratio = [
+            real_scale(c[1][1], c[1][0], loss=loss, f_scale=f_scale) / r[4] for c, r in zip(frames, rows, strict=True)
+        ]
         print(f"  loss {loss} (f_scale {f_scale}): second scale / need {np.nanmedian(ratio):.4f}")
 
 

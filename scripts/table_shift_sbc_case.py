@@ -15,15 +15,11 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
 import sbc_geometry as S
-from scipy.optimize import minimize
 
 from bayesrod import simulate
-from bayesrod.api._common import as_dataset
-from bayesrod.api.calibration import _hessian
+from bayesrod.api.calibration import table_shift_on
 from bayesrod.dataset.simulate import NoiseModel
-from bayesrod.inference.likelihood import build_likelihood
 from bayesrod.inference.priors import load_prior
 
 
@@ -48,27 +44,21 @@ def main(argv=None) -> None:
     )
     if not a.fast:
         ds, _, _ = S.reference_dataset(ds, case | {"shapes": True})
-    prior = load_prior(str(S.PRIOR))
-    lik = build_likelihood(
-        as_dataset(ds), prior, (effect,) if effect else (), use_shapes=not a.forces_only, n_effect=a.n_effect
+    out = table_shift_on(
+        ds,
+        load_prior(str(S.PRIOR)),
+        {"EI0": case["EI0"], "p": case["p"], **({effect: case["effect_value"]} if effect else {})},
+        noise=(max(case["sigma_force_N"], 1e-3), 0.0015),
+        use_shapes=not a.forces_only,
+        n_effect=a.n_effect,
     )
-    fixed = {"sigma_force_N": max(case["sigma_force_N"], 1e-3), "sigma_shape_m": 0.0015, "shape_sd_scale": 1.0}
-
-    def loglik(x) -> float:
-        params = {"EI0": np.exp(x[:1]), "p": x[1:2], **{k: np.array([v]) for k, v in fixed.items()}}
-        if effect:
-            params[effect] = x[2:3]
-        return float(lik.log_likelihood(params)[0]) if lik.in_table(params)[0] else -np.inf
-
-    x0 = np.array([np.log(case["EI0"]), case["p"]] + ([case["effect_value"]] if effect else []))
-    res = minimize(lambda x: -loglik(x), x0, method="Nelder-Mead", options={"xatol": 1e-10, "fatol": 1e-10})
-    sd = np.sqrt(np.diag(np.linalg.inv(-_hessian(loglik, res.x, np.full(x0.size, 1e-4)))))
-    axis = 0 if lik.axis is None else lik.axis.grid.size
-    print(f"seed {a.seed}: {case['effect'] or 'no effect'}, {len(case['heights_m'])} heights, p {case['p']:.4f}")
-    print(f"  effect axis nodes {axis}; log likelihood at the truth {loglik(x0):.2f}, at the maximum {-res.fun:.2f}")
-    names = ["log EI0", "p"] + ([effect] if effect else [])
-    for n, t, m, s in zip(names, x0, res.x, sd, strict=True):
-        print(f"  {n}: truth {t:.5f}, table MLE {m:.5f}, Laplace sd {s:.5f}, shift {(m - t) / s:+.2f} sd")
+    print(f"seed {a.seed}: {effect or 'no effect'}, {len(case['heights_m'])} heights, p {case['p']:.4f}")
+    print(
+        f"  effect axis nodes {out['effect_nodes']}; log likelihood at the truth {out['loglik_truth']:.2f}, "
+        f"at the maximum {out['loglik_max']:.2f}"
+    )
+    for n, t, m, s, z in zip(*(out[k] for k in ("names", "truth", "mle", "laplace_sd", "shift_in_sd")), strict=True):
+        print(f"  {n}: truth {t:.5f}, table MLE {m:.5f}, Laplace sd {s:.5f}, shift {z:+.2f} sd")
 
 
 if __name__ == "__main__":

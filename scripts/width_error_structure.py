@@ -16,20 +16,19 @@ smooth term is not confounded with the taper here as it is in a fit.
 from __future__ import annotations
 
 import argparse
-import pickle
 from pathlib import Path
 
 import numpy as np
 from scipy.optimize import minimize
+from width_taper_check import combined, load_cached
 
 from bayesrod.physics import stem_diameter
-from bayesrod.vision import width as W
 
 
 def load(cache: Path, key: str) -> tuple:
     """(e [px], sd [px], s / L, span of s / L, offset sd [px], scale error [px] per station) of one push."""
-    fr = pickle.loads((cache / f"{key}.pkl").read_bytes())
-    dp = W.combine_profiles(fr["profiles"], fr["s_m"], *fr["args"], **fr["kwargs"])
+    fr = load_cached(cache, key)
+    dp = combined(fr)
     ok, px = dp.ok, fr["px"]
     s = dp.s_m[ok]
     true = stem_diameter(s, fr["d0"], fr["q"], fr["L"])

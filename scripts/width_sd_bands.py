@@ -17,15 +17,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from _study import GRADIENT, extracted_push
-
-
-def seeds(text: str) -> list[int]:
-    """'20-31' or '1,4,7' -> list of ints."""
-    if "-" in text:
-        a, b = (int(x) for x in text.split("-"))
-        return list(range(a, b + 1))
-    return [int(x) for x in text.split(",") if x]
+from _study import GRADIENT, extracted_push, seeds
 
 
 def one(stem: str, seed: int, graded: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

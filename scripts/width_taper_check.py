@@ -22,26 +22,29 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from _study import extracted_push
+from _study import extracted_push, seeds
 
-from bayesrod.inference.likelihood import shared_error_loglik
+from bayesrod.dataset.io import write_bytes_atomic
+from bayesrod.inference.likelihood import width_loglik
 from bayesrod.physics import stem_diameter
 from bayesrod.vision import width as W
 
 
-def seeds(text: str) -> list[int]:
-    """'20-31' or '1,4,7' -> list of ints."""
-    if "-" in text:
-        a, b = (int(x) for x in text.split("-"))
-        return list(range(a, b + 1))
-    return [int(x) for x in text.split(",") if x]
+def load_cached(cache: Path, key: str) -> dict:
+    """A push cached by :func:`frames_of` under ``key`` = ``<stem>_<seed>_<graded>``."""
+    return pickle.loads((cache / f"{key}.pkl").read_bytes())
+
+
+def combined(fr: dict):
+    """The frames of a cached push combined as ``bayesrod.extract`` does (a ``DiameterProfile``)."""
+    return W.combine_profiles(fr["profiles"], fr["s_m"], *fr["args"], **fr["kwargs"])
 
 
 def frames_of(stem: str, seed: int, graded: bool, cache: Path) -> dict:
     """The frames' width profiles of one push and its truth (cached)."""
-    f = cache / f"{stem}_{seed}_{int(graded)}.pkl"
-    if f.exists():
-        return pickle.loads(f.read_bytes())
+    key = f"{stem}_{seed}_{int(graded)}"
+    if (cache / f"{key}.pkl").exists():
+        return load_cached(cache, key)
     seen = {}
     real = W.combine_profiles
 
@@ -64,7 +67,7 @@ def frames_of(stem: str, seed: int, graded: bool, cache: Path) -> dict:
         "px": px,
     }
     cache.mkdir(parents=True, exist_ok=True)
-    f.write_bytes(pickle.dumps(out))
+    write_bytes_atomic(cache / f"{key}.pkl", pickle.dumps(out))
     return out
 
 
@@ -84,16 +87,12 @@ def taper_posterior(dp, L: float, seed: int, floor: bool = False) -> np.ndarray:
         logf = th[:, 4] if floor else None
         bad = (pg < 0) | (pg > 3) | (rho < -0.5) | (rho > 0.995)
         pred = stem_diameter(s[None], np.exp(logd0)[:, None], pg[:, None], L)
-        # each station's sd: the sd scale k times its own, and (floor) a floor f x the median station sd
         f = np.exp(logf)[:, None] * typical if floor else 0.0
+        # each station's sd: the sd scale k times its own, and (floor) a floor f x the median station sd
         sde = np.sqrt((np.exp(logk)[:, None] * sd[None]) ** 2 + f**2)
-        z = (d[None] - pred) / sde
-        shared = [np.broadcast_to(dp.shared_offset_sd_m / sde, z.shape)]
-        if dp.shared_scale_sd > 0:
-            shared.append(dp.shared_scale_sd * pred / sde)
+        ones = np.ones((pred.shape[0], 1))
         with np.errstate(invalid="ignore", divide="ignore"):
-            ll = shared_error_loglik(z, np.ones((z.shape[0], 1)), rho[:, None], first, shared)
-        ll = ll - np.sum(np.log(sde), axis=1)
+            ll = width_loglik(d, pred, sde, ones, rho[:, None], first, dp.shared_offset_sd_m, dp.shared_scale_sd)
         lp = -0.5 * (logk / 0.5) ** 2
         if floor:  # half-normal(1) on the floor's ratio to the median sd, sampled in log
             lp = lp - 0.5 * np.exp(2 * logf) + logf
@@ -135,7 +134,7 @@ def main(argv=None) -> None:
         for v in values:
             W.SAME_PIXELS_PX = v
             try:
-                dp = W.combine_profiles(fr["profiles"], fr["s_m"], *fr["args"], **fr["kwargs"])
+                dp = combined(fr)
             finally:
                 W.SAME_PIXELS_PX = keep
             # the widths' scale error: d0 fitted at the drawn taper (weights 1/sd^2), the stations' median error

@@ -133,18 +133,48 @@ def table_shift(
         ``names`` (log EI0, p[, effect]), ``truth``, ``mle``, ``laplace_sd`` and ``shift_in_sd`` (k,) each;
         ``effect_nodes`` the nodes of the effect's table axis (0 without one).
     """
-    from scipy.optimize import minimize
-
     from ..dataset.simulate import NoiseModel
-    from ..inference.likelihood import build_likelihood
-    from ._common import as_dataset
 
     effects = {effect: value} if effect else {}
     ds = simulate("twig", seed=seed, noise_model=NoiseModel(force_sd_N=0.0, shape_sd_m=0.0), effects=effects)
     truth = ds.extra["truth"]
-    spec = as_dataset(ds)
-    lik = build_likelihood(spec, load_prior("woody"), tuple(effects), use_shapes=use_shapes, n_effect=n_effect)
-    fixed = {"sigma_force_N": TABLE_STUDY_NOISE[0], "sigma_shape_m": TABLE_STUDY_NOISE[1]}
+    return table_shift_on(
+        ds,
+        load_prior("woody"),
+        {"EI0": truth["EI0"], "p": truth["p"], **effects},
+        noise=TABLE_STUDY_NOISE,
+        use_shapes=use_shapes,
+        n_effect=n_effect,
+    )
+
+
+def table_shift_on(
+    data,
+    prior,
+    truth: dict,
+    *,
+    noise: tuple[float, float] = TABLE_STUDY_NOISE,
+    use_shapes: bool = False,
+    n_effect: int | None = None,
+) -> dict:
+    """:func:`table_shift` on any noise-free dataset whose exact-model MLE is ``truth``.
+
+    ``truth``: ``EI0`` [N m^2], ``p`` and at most one tabled effect by name with its value; ``noise``:
+    the force sd [N] and centerline sd [m] held fixed (a centerline sd scale at 1). Returns what
+    :func:`table_shift` returns, plus ``loglik_truth`` and ``loglik_max``: the table log likelihood at
+    the truth and at its maximum.
+    """
+    from scipy.optimize import minimize
+
+    from ..inference.likelihood import build_likelihood
+    from ._common import as_dataset
+
+    effect = next((k for k in truth if k not in ("EI0", "p")), None)
+    value = float(truth[effect]) if effect else 0.0
+    lik = build_likelihood(
+        as_dataset(data), prior, (effect,) if effect else (), use_shapes=use_shapes, n_effect=n_effect
+    )
+    fixed = {"sigma_force_N": noise[0], "sigma_shape_m": noise[1], "shape_sd_scale": 1.0}
 
     def loglik(x) -> float:
         params = {"EI0": np.exp(x[:1]), "p": x[1:2], **{k: np.array([v]) for k, v in fixed.items()}}
@@ -163,6 +193,8 @@ def table_shift(
         "laplace_sd": sd,
         "shift_in_sd": (res.x - x_true) / sd,
         "effect_nodes": 0 if lik.axis is None else int(lik.axis.grid.size),
+        "loglik_truth": loglik(x_true),
+        "loglik_max": -float(res.fun),
     }
 
 

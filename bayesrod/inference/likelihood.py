@@ -572,21 +572,14 @@ class RodLikelihood:
         sd scale for a profile; independent for a few caliper readings), plus the offset and scale
         errors all stations share, marginalised exactly (rank-k update, :func:`shared_error_loglik`)."""
         pred = self.predict_diameter(params)
-        z = (self.d_obs[None, :] - pred) / self.d_sd[None, :]
+        W = pred.shape[0]
         if self.d_first is None:
-            scale = np.ones((z.shape[0], 1))
-            rho = np.zeros((z.shape[0], 1))
-            first = np.ones(self.n_diameters, bool)
+            scale, rho, first = np.ones((W, 1)), np.zeros((W, 1)), np.ones(self.n_diameters, bool)
         else:
             scale = np.atleast_1d(np.asarray(params["diameter_sd_scale"], float))[:, None]
             rho = np.atleast_1d(np.asarray(params["rho_diameter"], float))[:, None]
             first = self.d_first
-        shared = []
-        if self.d_offset_sd > 0:
-            shared.append(np.broadcast_to(self.d_offset_sd / self.d_sd, z.shape))
-        if self.d_scale_sd > 0:
-            shared.append(self.d_scale_sd * pred / self.d_sd[None, :])
-        return shared_error_loglik(z, scale, rho, first, shared) - float(np.sum(np.log(self.d_sd)))
+        return width_loglik(self.d_obs, pred, self.d_sd, scale, rho, first, self.d_offset_sd, self.d_scale_sd)
 
     # ------------------------------------------------------------------ tables
     def _build_tables(self) -> None:
@@ -1163,6 +1156,34 @@ def ar1_loglik(r: NDArray, sigma: NDArray, rho: NDArray, first: NDArray) -> NDAr
     return (
         np.sum(-0.5 * e**2 / (sigma**2 * v) - 0.5 * np.log(v), axis=-1) - n * np.log(sigma[..., 0]) - 0.5 * n * _LOG_2PI
     )
+
+
+def width_loglik(
+    d_obs: NDArray,
+    pred: NDArray,
+    sd: NDArray,
+    scale: NDArray,
+    rho: NDArray,
+    first: NDArray,
+    offset_sd: float,
+    scale_sd: float,
+) -> NDArray:
+    """Log density (W,) of measured widths ``d_obs`` (N,) [m] given predicted ones ``pred`` (W, N).
+
+    Each station's error has sd ``scale`` x ``sd`` (``sd`` (N,) or (W, N) [m], ``scale`` (W, 1)), AR(1)
+    along s with correlation ``rho`` (W, 1) (chains start where ``first`` (N,)); an offset of sd
+    ``offset_sd`` [m] and a relative scale error of sd ``scale_sd`` are shared by all stations and
+    marginalised exactly (:func:`shared_error_loglik`). The width term of :class:`RodLikelihood`
+    (docs/inference.md, "Young's modulus").
+    """
+    sd = np.broadcast_to(sd, pred.shape)
+    z = (d_obs - pred) / sd
+    shared = []
+    if offset_sd > 0:
+        shared.append(offset_sd / sd)
+    if scale_sd > 0:
+        shared.append(scale_sd * pred / sd)
+    return shared_error_loglik(z, scale, rho, first, shared) - np.sum(np.log(sd), axis=-1)
 
 
 def shared_error_loglik(z: NDArray, sigma: NDArray, rho: NDArray, first: NDArray, shared: list) -> NDArray:

@@ -388,7 +388,9 @@ def _blurred_box(t: NDArray, w: NDArray, sigma: float) -> NDArray:
     return ndtr((t + w / 2) / sigma) - ndtr((t - w / 2) / sigma)
 
 
-def contrast_scale(profiles: list, s: NDArray, n_max: int = AREA_N_MAX) -> float:
+def contrast_scale(
+    profiles: list, s: NDArray, n_max: int = AREA_N_MAX, *, loss: str = "soft_l1", f_scale: float = 0.1
+) -> float:
     """Contrast of the true stem colour relative to the assumed one, from the shapes of narrow profiles.
 
     Each profile (t, a) of coverage against the assumed colour is modelled as ``k * box(w_i) *
@@ -407,6 +409,9 @@ def contrast_scale(profiles: list, s: NDArray, n_max: int = AREA_N_MAX) -> float
         order along the stem.
     s : (n,) array
         The stations' arc length (any unit): where along the stem each profile was taken.
+    loss, f_scale : str, float
+        The robust loss of the fit and its scale (``scipy.optimize.least_squares``); the defaults are the
+        extraction's (scripts/contrast_scale_passes.py compares others).
     """
     from scipy.optimize import least_squares
 
@@ -436,8 +441,8 @@ def contrast_scale(profiles: list, s: NDArray, n_max: int = AREA_N_MAX) -> float
         resid,
         np.concatenate([[0.0, np.log(0.8)], np.zeros(n)]),
         bounds=(lo, hi),
-        loss="soft_l1",
-        f_scale=0.1,
+        loss=loss,
+        f_scale=f_scale,
         jac_sparsity=sparsity,
     )
     return float(np.exp(fit.x[0])) if fit.success else 1.0
