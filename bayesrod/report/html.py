@@ -83,7 +83,7 @@ def _modulus_section(ym: dict | None, lo: float, hi: float) -> str:
                 # measured on rendered stems of uniform modulus (docs/validation.md, issue 22)
                 verdict += (
                     '<p class="warn">The interval is at 90%: on 78 rendered stems of uniform modulus, widths read '
-                    "from frames made this test say <i>rejected</i> 9 times (12%), about as often as its 10%. One "
+                    "from frames made this test say <i>rejected</i> 9 times (11.5%), about as often as its 10%. One "
                     "push is not enough to report a gradient: confirm with calipers at a few heights, or with "
                     "more stems.</p>"
                 )
