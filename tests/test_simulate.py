@@ -190,3 +190,38 @@ def test_a_fixed_step_push_whose_branch_folds_near_its_end_stays_a_forward_recor
     assert n >= 4 and np.array_equal(sim.engaged, np.arange(sim.engaged.size) < n)  # engaged up to the slip only
     ds.save(tmp_path / "fold")
     assert [p for p in validate_dataset(tmp_path / "fold") if p.severity == "error"] == []
+
+
+def test_every_engaged_frame_shows_the_stem_at_its_contact_even_where_the_branch_end_is_flat():
+    """Rest curvature -0.53 at one height (scripts/sbc_geometry.py, seed 57): the stem bends over until it
+    is nearly horizontal at the sensor, the force is flat to 1e-8 over the last centimetre and the
+    contact's solve ill-conditioned there. A frame 1.4 mm before the slip failed its solve and was
+    recorded, engaged, with the unloaded stem's shape 0.67 m away; the table likelihood then moved the
+    MLE by -660 sd. Each engaged frame's centerline must pass through its contact point."""
+    from bayesrod import simulate
+    from bayesrod.dataset.simulate import NoiseModel
+
+    L = 1.420548171281834
+    stem = {"EI0": 4.755345846741793, "p": 0.5919057926626894, "length_m": L, "heights_m": (0.9226659119616725,)}
+    ds = simulate(
+        stem | {"specimen": "flat-end"},
+        seed=57,
+        noise_model=NoiseModel(force_sd_N=0.0, shape_sd_m=0.0, shape_sd_reported_m=0.0015),
+        effects={"rest_curvature": -0.5256909007510875},
+        config_overrides={"robot_step_m": 0.01 * L},
+    )
+    _, (sim,) = ds.simulation
+    h = sim.height_m
+    rest = sim.shapes_true[-1]  # after the slip: the unloaded stem
+    assert np.isnan(sim.frame_contact_x_m[-1])
+    x_rest = float(np.interp(h, rest[1], rest[0]))  # its rest shape rises monotonically through h
+    t_last = sim.time_s[sim.engaged][-1]
+    on = np.isfinite(sim.frame_contact_x_m)
+    assert on.sum() >= 20 and np.all(sim.frame_time_s[on] <= t_last) and np.all(np.diff(sim.frame_time_s) > 0)
+    s_fine = np.linspace(0.0, L, 20001)
+    for k in np.flatnonzero(on):
+        x = np.interp(s_fine, sim.s_m, sim.shapes_true[k, 0])
+        z = np.interp(s_fine, sim.s_m, sim.shapes_true[k, 1])
+        # nearest point, not the crossing of z = h: near horizontal at the sensor, the crossing is ill-posed
+        gap = np.min(np.hypot(x - (x_rest + sim.frame_contact_x_m[k]), z - h))
+        assert gap < 2e-3, (k, gap)

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.interpolate import PchipInterpolator
 
 from .._version import __version__
@@ -207,6 +208,23 @@ def _loading_branch(cfg: SimConfig, h: float) -> tuple[np.ndarray, np.ndarray]:
     return D[order], F[order]
 
 
+def _step_back(D: NDArray, L: float, solve, slipped, tries: int = 12) -> tuple[NDArray, object]:
+    """Contact displacements (m) moved back until ``solve`` holds contact at each: 1e-6 L, then 4x more per try.
+
+    Near the branch's end (it folds, or is flat) a displacement the placement table puts on the branch
+    may be past it, or its solve ill-conditioned; the nearest one behind it that solves is what a rig
+    records there. Returns the displacements and the last solve (``slipped(sol)`` True where none held).
+    """
+    sol = solve(D)
+    for k in range(tries):
+        bad = np.asarray(slipped(sol))
+        if not bad.any():
+            break
+        D = np.where(bad, np.maximum(D - 1e-6 * L * 4**k, 0.0), D)
+        sol = solve(D)
+    return D, sol
+
+
 def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> SimulatedPush:
     L, EI0, p, eff = cfg.length_m, cfg.EI0, cfg.p, cfg.effects
     D_branch, F_branch = _loading_branch(cfg, h)
@@ -238,12 +256,7 @@ def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> Simulat
     robot = np.arange(n_e + cfg.n_force_after) * step
     engaged = robot <= x_slip
     D = np.interp(robot[engaged], robot_dense, D_dense)
-    eng = force_from_displacement(D, h, EI0, p, L, eff)
-    for k in range(12):  # the branch end folds: a sample within ~1e-6 L of it may land past it; step back
-        if not eng.slipped.any():
-            break
-        D = np.where(eng.slipped, np.maximum(D - 1e-6 * L * 4**k, 0.0), D)
-        eng = force_from_displacement(D, h, EI0, p, L, eff)
+    D, eng = _step_back(D, L, lambda d: force_from_displacement(d, h, EI0, p, L, eff), lambda r: r.slipped)
     if eng.slipped.any():
         raise RuntimeError(f"simulate: {int(eng.slipped.sum())} engaged samples past the slip at h = {h:g} m")
     back = np.flatnonzero(np.diff(D) <= 0.0)
@@ -277,18 +290,30 @@ def simulate_push(cfg: SimConfig, h: float, rng: np.random.Generator) -> Simulat
         t_frames = np.arange(0.3, t_slip * ROBOT_SPEED / frame_step, 1.0) * frame_step / ROBOT_SPEED
     else:
         t_frames = (np.arange(cfg.n_frames_engaged) + 0.3) * t_slip / cfg.n_frames_engaged
+    D_frames = np.interp(t_frames * ROBOT_SPEED, robot_dense, D_dense)
+    nd = eff.nondim(L, EI0)
+    # A frame before the slip whose solve fails lies where the branch's end is flat or folds (e.g. the stem
+    # bent over until it is nearly horizontal at the sensor: the force is flat to 1e-8 over the last cm and
+    # the contact ill-conditioned, scripts/sbc_geometry.py seed 57). It steps back like the force samples;
+    # left as it was, its shape would be the unloaded stem's while its time said engaged.
+    D_frames, _ = _step_back(
+        D_frames, L, lambda d: force_from_displacement_nd(d / L, h / L, p, nd), lambda r: r["slipped"]
+    )
+    keep = np.ones(D_frames.size, bool)
+    keep[1:] = np.diff(D_frames) > 0  # one stepped back behind the frame before it: the camera's clock ran forward
+    t_frames, D_frames = t_frames[keep], D_frames[keep]
     nf = t_frames.size
     t_after = t_slip + (np.arange(1, cfg.n_frames_after + 1)) * 2 * step / ROBOT_SPEED
     t_all = np.concatenate([t_frames, t_after])
-    D_frames = np.interp(t_frames * ROBOT_SPEED, robot_dense, D_dense)
     D_all = np.concatenate([D_frames, np.zeros(t_after.size)])
-    frames = force_from_displacement_nd(D_all / L, h / L, p, eff.nondim(L, EI0), keep_shape=True)
+    frames = force_from_displacement_nd(D_all / L, h / L, p, nd, keep_shape=True)
     grid_nd = frames["grid"]
     # each frame's exact time for its exact contact displacement (the camera clock, off uniform by the
     # placement table's error only)
     F_frames = frames["f"][:nf] * EI0 / L**2
-    exact = np.isfinite(F_frames)
-    t_all[:nf][exact] = (D_frames[exact] + wire_deflection(F_frames[exact])) / ROBOT_SPEED
+    if not np.all(np.isfinite(F_frames)):
+        raise RuntimeError(f"simulate: {int(np.sum(~np.isfinite(F_frames)))} frames past the slip at h = {h:g} m")
+    t_all[:nf] = (D_frames + wire_deflection(F_frames)) / ROBOT_SPEED
     s = np.linspace(0.0, L, cfg.n_points)
     true = np.moveaxis(centerline_at(grid_nd, s / L), -1, 0) * L  # (frames, 2, points)
     obs = true + rng.normal(0.0, cfg.noise.shape_sd_m, true.shape)
