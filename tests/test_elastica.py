@@ -283,6 +283,45 @@ def test_centerline_at_heights_matches_a_fine_resampling(case):
     assert (z[None, :] > grid[:, 1].max(axis=0)[:, None]).any()  # some heights lie above a bent stem's top
 
 
+@pytest.mark.parametrize("case", ["elastica", "curled"])
+def test_normal_offsets_match_the_nearest_point_of_a_fine_resampling(case):
+    """The Newton-on-Hermite nearest point against the obvious one: resample the same Hermite centerline
+    at 20001 arc lengths, take the nearest sample and project the gap on its normal. Points up to 0.05 L
+    off every part of the curve, near its top where it curls over too; and against the horizontal gap
+    at the point's height, (x - x(z)) cos phi, for small horizontal offsets of an upright stem."""
+    from bayesrod.physics.elastica import centerline_at, centerline_normal_offsets, centerline_x_at_heights
+
+    rng = np.random.default_rng(3)
+    if case == "elastica":
+        p = np.linspace(0.0, 1.5, 4)[:, None]
+        r = contact_from_force_nd(np.linspace(0.2, 2.5, 3)[None, :], 0.56, p, keep_shape=True)
+        grid = r["grid"].reshape(r["grid"].shape[0], 3, -1)[..., r["found"].ravel()]
+    else:
+        grid = _curled_arc()
+    sig = np.linspace(0.0, 1.0, 20001)
+    xz = centerline_at(grid, sig)  # (2, 20001, C)
+    tx, tz = (np.gradient(xz[i], sig, axis=0) for i in (0, 1))
+    norm = np.hypot(tx, tz)
+    for j in range(grid.shape[-1]):
+        on = rng.uniform(0.02, 0.98, 200)  # points beside the curve, away from its two ends
+        base = centerline_at(grid[..., j : j + 1], on)[:, :, 0]
+        ang = rng.uniform(0, 2 * np.pi, on.size)
+        px, pz = base + rng.uniform(0.0, 0.05, on.size) * np.array([np.cos(ang), np.sin(ang)])
+        got = centerline_normal_offsets(grid[..., j : j + 1], px, pz)[0]
+        d2 = (xz[0, :, j, None] - px) ** 2 + (xz[1, :, j, None] - pz) ** 2
+        k = np.argmin(d2, axis=0)
+        ref = ((px - xz[0, k, j]) * tz[k, j] - (pz - xz[1, k, j]) * tx[k, j]) / norm[k, j]
+        np.testing.assert_allclose(got, ref, rtol=0, atol=2e-6)
+        assert np.all(np.abs(got) <= np.sqrt(d2[k, np.arange(on.size)]) + 1e-12)  # never beyond the nearest sample
+    if case == "elastica":  # small horizontal offsets: the horizontal gap at the height, to second order
+        z = np.linspace(0.05, 0.5, 40)
+        x, c = centerline_x_at_heights(grid, z)
+        dx = rng.uniform(-2e-3, 2e-3, z.size)
+        for j in range(grid.shape[-1]):
+            got = centerline_normal_offsets(grid[..., j : j + 1], x[j] + dx, z)[0]
+            np.testing.assert_allclose(got, dx * c[j], rtol=0, atol=2e-5)
+
+
 @pytest.mark.parametrize(
     "nd",
     [{"m_yield": 0.35}, {"m_yield": 0.32, "w0": 0.32}, {"m_yield": 0.3, "mu": 0.2}],

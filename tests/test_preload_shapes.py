@@ -45,8 +45,9 @@ def test_a_preload_moves_the_frames_of_its_push_along_the_branch(case):
     for p in (P, 0.5):
         got = lik.residuals(_params(lik, p, DELTAS))["shape"][0]
         want = ref.residuals(_params(ref, p, ()))["shape"][0, idx]
-        # measured 0.9 um (linear in the preload between nodes 2 mm apart); the points move by up to 35 mm
-        np.testing.assert_allclose(got, want, rtol=0, atol=2e-6)
+        # measured 1.8 and 2.2 um (linear in the preload between nodes 2 mm apart; 0.9 um when the table
+        # held x and cos(phi) instead of the normal offsets); the points move by up to 35 mm
+        np.testing.assert_allclose(got, want, rtol=0, atol=3e-6)
         unmoved = lik.residuals(_params(lik, p, np.zeros(3)))["shape"][0]
         assert np.abs(unmoved - want).max() > 0.01
 

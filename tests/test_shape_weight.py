@@ -19,14 +19,15 @@ def _truth(lik):
 
 
 def _with_noise(lik, noise):
-    """The likelihood with ``noise`` [m] added to its observed x (the data are noise-free)."""
-    x0 = lik.x_obs.copy()
-    lik.x_obs = x0 + noise
+    """The likelihood with ``noise`` [m] added to its observed x (the data are noise-free): the table of
+    normal offsets it reads moves by noise x cos(phi), to first order in the noise."""
+    n0 = lik.normal_table
+    lik.normal_table = n0 + noise[None, None, :] * lik.cos_table
     try:
         params = {k: v for k, v in _truth(lik).items() if k in lik.names}
         return effective_shape_weight(lik, params)
     finally:
-        lik.x_obs = x0
+        lik.normal_table = n0
 
 
 def _ar1(lik, rho, rng, shared=None):
