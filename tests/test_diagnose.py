@@ -50,6 +50,41 @@ def datasets(tmp_path_factory):
     return _Lazy(tmp_path_factory.mktemp("diag"))
 
 
+def test_forward_model_reads_centerlines_as_the_fit_does():
+    """The diagnosis's shape residuals are the fit's: the signed normal offset from the centerline's
+    nearest point, compared at nodes of the fit's tables (where those are exact) on a stem that lies
+    flat at the points' heights near its slip (scripts/sbc_geometry.py seed 47, one height), where
+    reading x at each point's height instead differs by 30 mm. The fit reads the force at a frame off a
+    monotone cubic, the diagnosis solves it."""
+    import bayesrod
+    from bayesrod.dataset.simulate import NoiseModel
+    from bayesrod.inference.likelihood import EffectAxis, RodLikelihood
+
+    L, kappa = 1.131084549316038, 1.2025760169036837
+    spec = bayesrod.simulate(
+        {"EI0": 3.3134, "p": 0.00926, "length_m": L, "heights_m": (0.5094491449609528,), "specimen": "flat"},
+        seed=47,
+        noise_model=NoiseModel(force_sd_N=0.0, shape_sd_m=0.0, shape_sd_reported_m=0.0015),
+        effects={"rest_curvature": kappa},
+        config_overrides={"robot_step_m": 0.01 * L},
+    )
+    u = kappa * L  # the rest curvature's table coordinate: a node of this axis
+    lik = RodLikelihood(
+        spec,
+        p_range=(0.0, 0.3),
+        n_p=7,
+        effects=("rest_curvature",),
+        effect_axis=EffectAxis("rest_curvature", np.array([0, u / 2, u, 1.5 * u])),
+    )
+    m = ForwardModel(prepare_data(spec, use_shapes=True), L)
+    for p in (0.0, 0.05):
+        params = {"EI0": 3.3134, "p": p, "rest_curvature": kappa, "sigma_force_N": 0.03, "shape_sd_scale": 1.0}
+        want = lik.residuals({k: np.array([v]) for k, v in params.items()})["shape"][0]
+        got = m.shape_offsets(np.array([np.log(3.3134), p, kappa]), ("rest_curvature",))  # diagnose: in 1/m
+        assert got.size == want.size > 500
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-6)  # measured 0.04 and 0.09 um
+
+
 def test_forward_model_matches_the_physics_and_holds_past_the_slip(datasets):
     m = _model(datasets["clean"])
     F, _, _ = m.predict(np.log(2.63), 0.43, {})

@@ -45,7 +45,7 @@ from scipy.optimize import least_squares, lsq_linear
 
 from ..physics import Effects
 from ..physics.effects import EFFECT_NAMES
-from ..physics.elastica import centerline_x_at_heights, force_from_displacement_nd
+from ..physics.elastica import centerline_normal_offsets, centerline_x_at_heights, force_from_displacement_nd
 from .likelihood import HEIGHT_CUT_SD, PRELOAD_MAX_L, ForceCurves, PushData, ar1_innovations
 
 CATALOG = EFFECT_NAMES  # every effect of the contract's catalog is a candidate
@@ -480,8 +480,17 @@ class ForwardModel:
 
     def shapes(self, x: NDArray, effects: tuple[str, ...]) -> tuple[NDArray, NDArray]:
         """Centerline x (n_points,) and cos(tangent angle) at the observed heights, one parameter set."""
+        return self._shape_parts(x, effects)[:2]
+
+    def shape_offsets(self, x: NDArray, effects: tuple[str, ...]) -> NDArray:
+        """Signed normal offset [m] of every observed point from its frame's centerline (n_points,), one
+        parameter set; NaN on a frame the model has slipped before: the fit's shape residual
+        (:func:`bayesrod.physics.elastica.centerline_normal_offsets`, docs/inference.md)."""
+        return self._shape_parts(x, effects)[2]
+
+    def _shape_parts(self, x: NDArray, effects: tuple[str, ...]) -> tuple[NDArray, NDArray, NDArray]:
         if not self.n_points:
-            return np.zeros(0), np.zeros(0)
+            return np.zeros(0), np.zeros(0), np.zeros(0)
         L = self.length_m
         EI0 = float(np.exp(np.clip(x[0], -60.0, 60.0)))
         eff = effects_from_coords(dict(zip(effects, x[self.n_base :], strict=True)), EI0, L)
@@ -489,13 +498,12 @@ class ForwardModel:
         pre = dict(zip(self.force_pushes, x[2 : 2 + self.n_preloads], strict=True)) if self.preload else {}
         # and its height error moves its frames' contact as it moves its forces'
         hs = dict(zip(self.force_pushes, self.heights(x)[0], strict=True))
-        xs, cs = [], []
-        for k, d in enumerate(self.data):
-            if d.x_m.size:
-                a, c = self._shape(d, EI0, float(x[1]), eff, float(pre.get(k, 0.0)), float(hs.get(k, d.height_m)))
-                xs.append(a)
-                cs.append(c)
-        return np.concatenate(xs), np.concatenate(cs)
+        parts = [
+            self._shape(d, EI0, float(x[1]), eff, float(pre.get(k, 0.0)), float(hs.get(k, d.height_m)))
+            for k, d in enumerate(self.data)
+            if d.x_m.size
+        ]
+        return tuple(np.concatenate(a) for a in zip(*parts, strict=True))
 
     def _shape(self, d: PushData, EI0: float, p: float, eff: Effects, preload_m: float = 0.0, height_m=None):
         L = self.length_m
@@ -507,9 +515,10 @@ class ForwardModel:
         xa, ca = centerline_x_at_heights(np.nan_to_num(grid), d.z_m / L)  # (M, k)
         pts = np.arange(d.x_m.size)
         x, c = xa[d.frame_index, pts] * L, ca[d.frame_index, pts]
+        n = centerline_normal_offsets(np.nan_to_num(grid), d.x_m / L, d.z_m / L)[d.frame_index, pts] * L
         # the model slipped before a frame: no prediction there (residual 0)
         slipped = ~np.all(np.isfinite(grid), axis=(0, 1))[d.frame_index]
-        return np.where(slipped, np.nan, x), np.where(slipped, 1.0, c)
+        return np.where(slipped, np.nan, x), np.where(slipped, 1.0, c), np.where(slipped, np.nan, n)
 
 
 @dataclass
@@ -803,8 +812,7 @@ class Diagnoser:
         rs = np.zeros((K, self.m.n_points))
         for k in range(K if self.m.n_points else 0):
             try:
-                xs, c = self.m.shapes(X[k], effects)
-                rs[k] = np.nan_to_num((self.m.x_obs - xs) * c)
+                rs[k] = np.nan_to_num(self.m.shape_offsets(X[k], effects))
             except ValueError:
                 rs[k] = 1e3 * self.m.length_m
         return rf, rs
