@@ -6,8 +6,11 @@ contact displacement the force is F = EI0/L^2 f(d; p, h/L) and the centerline
 dataset, exact tables over a grid of p:
 
 * ``f[p_k, i]``: nondimensional force at every engaged force sample i;
+* ``normal[p_k, j]``: every observed point j's signed normal offset from the
+  predicted centerline's nearest point (the shape residual);
 * ``x[p_k, j]`` and ``cos(phi)[p_k, j]``: the predicted centerline's
-  horizontal position and tangent at the height of every observed point j.
+  horizontal position and tangent at the height of every observed point j
+  (for predictions).
 
 A log-likelihood evaluation is then a 4-point Lagrange interpolation in p and
 a scale by EI0, batched over walkers. Where the model's branch ends before an
@@ -15,8 +18,10 @@ engaged displacement (it would have slipped), force and shape go on along their
 tangent at the branch end (flat where the branch ends in a fold), and the slip is not
 used as a hard constraint (see ``RodLikelihood.predict_nd_force``).
 
-Shape residuals are the normal distance from each observed point to the
-predicted curve, (x_obs - x_pred(z_obs)) cos(phi_pred(z_obs)).
+Shape residuals are the signed normal distance from each observed point to the
+predicted curve's nearest point; for a small horizontal offset of an upright
+stem, (x_obs - x_pred(z_obs)) cos(phi_pred(z_obs)), which is what the tables
+interpolated before 2026-11-27 (``RodLikelihood._shape_table``).
 
 Extracted centerlines have errors correlated along the stem and between
 consecutive frames (a smoothing spline, the same background and plane depth).
@@ -888,6 +893,12 @@ class RodLikelihood:
         w = weights if weights is not None else self._gather_weights(p, u)
         return self._interp(self.x_table, p, u, w), self._interp(self.cos_table, p, u, w)
 
+    def shape_offsets(self, p: NDArray, u: NDArray | None = None, weights=None) -> NDArray:
+        """Signed normal offset [m] of every observed point from the centerline, (W, M): the shape
+        residual, observed minus model (:meth:`_shape_table`)."""
+        w = weights if weights is not None else self._gather_weights(p, u)
+        return self._interp(self.normal_table, p, u, w)
+
     def residuals(self, params: dict) -> dict:
         """Force and shape residuals (observed - predicted) for parameter arrays of shape (W,)."""
         p = np.atleast_1d(np.asarray(params["p"], float))
@@ -917,12 +928,10 @@ class RodLikelihood:
             out["force"] = self.F_obs[None, :] - F
         if self.n_points:
             if self.preload and all(n in params for n in self.preload_names):
-                plain = self._interp(self.normal_table, p, None)
                 pre = self._per_push(params, self.preload_names, p.size)
-                out["shape"] = self._preloaded(p, pre, {"normal": plain})["normal"]
+                out["shape"] = self._preloaded(p, pre, {"normal": self.shape_offsets(p)})["normal"]
             else:
-                w = weights if weights is not None else self._gather_weights(p, u)
-                out["shape"] = self._interp(self.normal_table, p, u, w)
+                out["shape"] = self.shape_offsets(p, u, weights)
         return out
 
     def _per_push(self, params: dict, names: list[str], W: int) -> NDArray:

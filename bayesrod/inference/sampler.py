@@ -104,8 +104,7 @@ def find_start(post, rng: np.random.Generator, init: dict | None = None) -> np.n
             EI0 = EI0_init if EI0_init is not None else post.priors[0].quantile(0.5)
         nat.update(EI0=EI0, p=p)
         if lik.n_points:
-            x, c = lik.predict_shape_x(np.array([p]))
-            rms = float(np.sqrt(np.mean(((lik.x_obs - x[0]) * c[0]) ** 2)))
+            rms = float(np.sqrt(np.mean(lik.shape_offsets(np.array([p]))[0] ** 2)))
             if lik.shape_has_sd:
                 nat["shape_sd_scale"] = max(rms / float(np.sqrt(np.mean(lik.sd_obs**2))), 1e-3)
             else:
