@@ -110,6 +110,36 @@ def test_shape_tables_hold_a_noise_free_centerline_where_the_stem_lies_flat_betw
     assert np.abs(r).max() < 0.5e-3 and np.sqrt(np.mean(r**2)) < 0.05e-3
 
 
+def test_the_compliance_axis_covers_a_stem_whose_base_spring_dominates():
+    """scripts/sbc_geometry.py seed 86: a soft base (k 0.37 N m/rad) under a stiff stem (EI0 4.13 N m^2). The
+    plain model reads the apparent stiffness, EI0 0.069; an axis covering the prior only within a factor
+    2 of that stopped at u 0.879, below the truth's 0.924: zero density at the truth, a certain miss."""
+    from pathlib import Path
+
+    from bayesrod.dataset.simulate import NoiseModel
+    from bayesrod.inference.likelihood import EffectAxis, effect_axis_ei0_range, scale_estimate
+
+    L, EI0_, k = 0.9189152236300698, 4.131247764645854, 0.3690956890987371
+    ds = bayesrod.simulate(
+        {"EI0": EI0_, "p": 0.8245165321672869, "length_m": L, "specimen": "soft-base"}
+        | {"heights_m": (0.39610164147976495, 0.617247708706133, 0.7231389493459947)},
+        seed=86,
+        noise_model=NoiseModel(force_sd_N=0.0, shape_sd_m=0.0, shape_sd_reported_m=0.0015),
+        effects={"base_compliance": k},
+        config_overrides={"robot_step_m": 0.01 * L},
+    )
+    prior = load_prior(str(Path(__file__).resolve().parents[1] / "scripts" / "sbc_prior.json"))
+    EI0_hat = scale_estimate(RodLikelihood(ds, use_shapes=False))
+    assert EI0_hat < EI0_ / 30  # the base spring carries the bending
+    axis = EffectAxis.from_prior(
+        "base_compliance", prior.get("base_compliance"), effect_axis_ei0_range("base_compliance", EI0_hat, prior), L
+    )
+    u = axis.coordinate(np.array([k]), np.array([EI0_]), L)[0]
+    assert axis.grid[0] <= u <= axis.grid[-1] and u > 0.9
+    # the other effects' coordinates do not depend on EI0: their range stays near the estimate
+    assert effect_axis_ei0_range("rest_curvature", 2.0, prior) == (1.0, 4.0)
+
+
 def test_likelihood_peaks_near_truth(twig_lik):
     post = LogPosterior(twig_lik, load_prior("default"))
     base = {"EI0": 2.63, "p": 0.43, "sigma_force_N": 0.03, "shape_sd_scale": 1.0}

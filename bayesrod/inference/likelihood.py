@@ -1333,6 +1333,24 @@ def scale_estimate(lik: RodLikelihood) -> float | None:
     return min(fits, key=lambda er: er[1])[0] if fits else None
 
 
+def effect_axis_ei0_range(effect: str, EI0_hat: float | None, prior) -> tuple[float, float]:
+    """The EI0 [N m^2] over which a tabled effect's axis must cover its prior (:meth:`EffectAxis.from_prior`).
+
+    Within a factor 2 of the plain model's least-squares EI0 ``EI0_hat`` (the EI0 prior's central 99.8%
+    without forces). A base spring only softens the stem, so with base compliance the plain model's EI0
+    is the apparent stiffness and the true EI0 may lie far above it: the range then reaches up to the
+    EI0 prior's 99.9% quantile. Before 2026-11-27 it stopped at 2 ``EI0_hat``, and an SBC case with a
+    soft base (scripts/sbc_geometry.py seed 86: EI0 4.13 N m^2, k 0.37 N m/rad, ``EI0_hat`` 0.069) had
+    its truth outside the table (u 0.924 against the axis's 0.879): zero density there, a certain miss.
+    """
+    top = prior.get("EI0").quantile(0.999)
+    if EI0_hat is None:
+        return prior.get("EI0").quantile(0.001), top
+    if effect == "base_compliance":
+        return EI0_hat / 2.0, max(EI0_hat * 2.0, top)
+    return EI0_hat / 2.0, EI0_hat * 2.0
+
+
 def build_likelihood(
     spec: Specimen,
     prior,
@@ -1373,11 +1391,7 @@ def build_likelihood(
     axis = None
     if tabled:
         plain = RodLikelihood(spec, p_range=p_range, use_forces=use_forces, use_shapes=False)
-        EI0_hat = scale_estimate(plain)
-        if EI0_hat is None:
-            rng = (prior.get("EI0").quantile(0.001), prior.get("EI0").quantile(0.999))
-        else:
-            rng = (EI0_hat / 2.0, EI0_hat * 2.0)
+        rng = effect_axis_ei0_range(tabled[0], scale_estimate(plain), prior)
         axis = EffectAxis.from_prior(tabled[0], prior.get(tabled[0]), rng, float(spec.length_m), n=n_effect)
     if length not in ("known", "unknown", "auto"):
         raise ValueError(f"length: expected 'known', 'unknown' or 'auto', got {length!r}")
