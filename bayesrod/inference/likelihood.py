@@ -1370,8 +1370,9 @@ def build_likelihood(
     """The likelihood for ``effects``; a tabled effect gets its axis from the prior and a plain EI0 estimate.
 
     The effect axis must cover the effect's prior at every plausible EI0 (the axis of compliance,
-    self-weight and yield scales with EI0): EI0 is taken within a factor 2 of the plain model's
-    least-squares scale on the forces, or over the EI0 prior's central 99.8% without forces.
+    self-weight and yield scales with EI0): EI0 over :func:`effect_axis_ei0_range` (within a factor 2
+    of the plain model's least-squares scale on the forces, up to the EI0 prior's 99.9% quantile for
+    base compliance; the EI0 prior's central 99.8% without forces).
     Walkers outside the table get zero density (docs/inference.md). ``length`` ``"unknown"`` samples the
     stem length under the prior's ``length_m`` entry or :func:`default_length_prior`; ``"auto"`` does so
     when the dataset marks its length approximate (``length_m_approximate``). ``n_effect`` nodes on the
