@@ -35,9 +35,9 @@ def main() -> None:
     mode = {k: float(v[0]) for k, v in post.to_natural(theta[None]).items()}
     r = lik.residuals({k: np.atleast_1d(v) for k, v in mode.items()})["shape"][0] / lik.sd_obs
     h = 1e-3
-    xp, c = lik.predict_shape_x(np.array([mode["p"] + h]))
-    xm, _ = lik.predict_shape_x(np.array([mode["p"] - h]))
-    d = (xp - xm)[0] / (2 * h) * c[0] / lik.sd_obs
+    # minus the residual's derivative in p: the model's normal offset moves opposite to the residual
+    up, down = (lik.shape_offsets(np.array([mode["p"] + s])) for s in (h, -h))
+    d = -(up - down)[0] / (2 * h) / lik.sd_obs
     g, H = r * d, np.sum(d**2) * np.mean(r**2)
     print(f"mode: EI0 {mode['EI0']:.4g}, p {mode['p']:.4g}")
     for size in (1, 2, 4, 8, 11, 22):

@@ -251,6 +251,16 @@ def _curled_arc(n=48, sweep=2.6):
     return np.stack([r * (1.0 - np.cos(theta)), r * np.sin(theta), theta], axis=1)[..., None]
 
 
+def _centerline_grids(case: str, n_p: int, n_f: int) -> np.ndarray:
+    """March grids (n + 1, 3, C): "elastica", pushed stems at h/L 0.56 for n_p values of p in [0, 1.5] and
+    n_f forces in [0.2, 2.5] (those with contact); "curled", :func:`_curled_arc`."""
+    if case == "curled":
+        return _curled_arc()
+    p = np.linspace(0.0, 1.5, n_p)[:, None]
+    r = contact_from_force_nd(np.linspace(0.2, 2.5, n_f)[None, :], 0.56, p, keep_shape=True)
+    return r["grid"].reshape(r["grid"].shape[0], 3, -1)[..., r["found"].ravel()]
+
+
 @pytest.mark.parametrize("case", ["elastica", "curled"])
 def test_centerline_at_heights_matches_a_fine_resampling(case):
     """The Newton-on-Hermite reading of x(z) against the obvious one: resample the same Hermite centerline
@@ -258,12 +268,7 @@ def test_centerline_at_heights_matches_a_fine_resampling(case):
     also below the base, above the top, and on a centerline that curls over and comes down."""
     from bayesrod.physics.elastica import centerline_at, centerline_x_at_heights
 
-    if case == "elastica":
-        p = np.linspace(0.0, 1.5, 7)[:, None]
-        r = contact_from_force_nd(np.linspace(0.2, 2.5, 6)[None, :], 0.56, p, keep_shape=True)
-        grid = r["grid"].reshape(r["grid"].shape[0], 3, -1)[..., r["found"].ravel()]
-    else:
-        grid = _curled_arc()
+    grid = _centerline_grids(case, n_p=7, n_f=6)
     z = np.linspace(-0.05, 1.0, 301)  # from below the base to the rest height: bent stems end below it
     x, cos_phi = centerline_x_at_heights(grid, z)
     sig = np.linspace(0.0, 1.0, 20001)
@@ -292,12 +297,7 @@ def test_normal_offsets_match_the_nearest_point_of_a_fine_resampling(case):
     from bayesrod.physics.elastica import centerline_at, centerline_normal_offsets, centerline_x_at_heights
 
     rng = np.random.default_rng(3)
-    if case == "elastica":
-        p = np.linspace(0.0, 1.5, 4)[:, None]
-        r = contact_from_force_nd(np.linspace(0.2, 2.5, 3)[None, :], 0.56, p, keep_shape=True)
-        grid = r["grid"].reshape(r["grid"].shape[0], 3, -1)[..., r["found"].ravel()]
-    else:
-        grid = _curled_arc()
+    grid = _centerline_grids(case, n_p=4, n_f=3)
     sig = np.linspace(0.0, 1.0, 20001)
     xz = centerline_at(grid, sig)  # (2, 20001, C)
     tx, tz = (np.gradient(xz[i], sig, axis=0) for i in (0, 1))

@@ -19,10 +19,10 @@ def _truth(lik):
 
 
 def _with_noise(lik, noise):
-    """The likelihood with ``noise`` [m] added to its observed x (the data are noise-free): the table of
-    normal offsets it reads moves by noise x cos(phi), to first order in the noise."""
+    """The likelihood with ``noise`` [m] added to its observed points along the normal (the data are
+    noise-free): the table of normal offsets it reads moves by the noise."""
     n0 = lik.normal_table
-    lik.normal_table = n0 + noise[None, None, :] * lik.cos_table
+    lik.normal_table = n0 + noise[None, None, :]
     try:
         params = {k: v for k, v in _truth(lik).items() if k in lik.names}
         return effective_shape_weight(lik, params)

@@ -7,10 +7,7 @@ dataset, exact tables over a grid of p:
 
 * ``f[p_k, i]``: nondimensional force at every engaged force sample i;
 * ``normal[p_k, j]``: every observed point j's signed normal offset from the
-  predicted centerline's nearest point (the shape residual);
-* ``x[p_k, j]`` and ``cos(phi)[p_k, j]``: the predicted centerline's
-  horizontal position and tangent at the height of every observed point j
-  (for predictions).
+  predicted centerline's nearest point (the shape residual).
 
 A log-likelihood evaluation is then a 4-point Lagrange interpolation in p and
 a scale by EI0, batched over walkers. Where the model's branch ends before an
@@ -44,7 +41,7 @@ from scipy.interpolate import PchipInterpolator
 
 from ..dataset.engagement import detect_engagement
 from ..dataset.model import Specimen
-from ..physics.elastica import centerline_normal_offsets, centerline_x_at_heights, contact_from_force_nd
+from ..physics.elastica import centerline_normal_offsets, contact_from_force_nd
 from ..physics.lumped import stem_diameter
 from .priors import ParameterSpace
 
@@ -595,14 +592,14 @@ class RodLikelihood:
         if self.axis is None:
             curves = ForceCurves.batch(etas, self.p_grid)
             self._build_tables_at(None, curves)
-            for k in ("f_table", "x_table", "cos_table", "normal_table", "slip_table"):
+            for k in ("f_table", "normal_table", "slip_table"):
                 setattr(self, k, getattr(self, k)[None])
             return
         nodes = [self.axis.nondim(u) for u in self.axis.grid]
         (key,) = nodes[0]
         vals = np.repeat([float(e[key]) for e in nodes], J)
         curves = ForceCurves.batch(np.tile(etas, len(nodes)), self.p_grid, effects_nd={key: vals})
-        stacks = {"f_table": [], "x_table": [], "cos_table": [], "normal_table": [], "slip_table": []}
+        stacks = {"f_table": [], "normal_table": [], "slip_table": []}
         for i, eff in enumerate(nodes):
             self._build_tables_at(eff, curves[i * J : (i + 1) * J])
             for k in stacks:
@@ -614,7 +611,7 @@ class RodLikelihood:
         L, pg = self.L, self.p_grid
         self._preload_tables = []
         self._preload_shapes = []
-        fF, fobs, fh, xs, cs, ns, xobs, zobs, sd, pid, fid = [], [], [], [], [], [], [], [], [], [], []
+        fF, fobs, fh, ns, xobs, zobs, sd, pid, fid = [], [], [], [], [], [], [], [], []
         ends = []
         for d, curves in zip(self.data, all_curves, strict=True):
             eta = d.height_m / L
@@ -630,13 +627,10 @@ class RodLikelihood:
                 fh.append(np.full(d.F_N.size, d.height_m))
             if d.x_m.size:
                 if self.preload and d.D_m.size:
-                    first = sum(x.shape[1] for x in xs)  # the push's first point among all observed points
+                    first = sum(x.shape[1] for x in ns)  # the push's first point among all observed points
                     table = self._preload_shape_table(d, eta, curves, len(fobs) - 1)
                     self._preload_shapes.append(table | {"points": slice(first, first + d.x_m.size)})
-                xp, cp, npt = self._shape_table(d, eta, curves)
-                xs.append(xp)
-                cs.append(cp)
-                ns.append(npt)
+                ns.append(self._shape_table(d, eta, curves))
                 xobs.append(d.x_m)
                 zobs.append(d.z_m)
                 pid.append(np.full(d.x_m.size, len(pid)))
@@ -652,8 +646,6 @@ class RodLikelihood:
         self.F_push = np.concatenate([np.full(f.size, k) for k, f in enumerate(fobs)]) if fobs else np.zeros(0, int)
         self.F_first = _chain_starts(self.F_push)
         self.F_height = np.concatenate(fh) if fh else np.zeros(0)
-        self.x_table = np.concatenate(xs, axis=1) if xs else np.zeros((P, 0))
-        self.cos_table = np.concatenate(cs, axis=1) if cs else np.zeros((P, 0))
         self.normal_table = np.concatenate(ns, axis=1) if ns else np.zeros((P, 0))  # obs minus model, normal
         self.x_obs = np.concatenate(xobs) if xobs else np.zeros(0)
         self.z_obs = np.concatenate(zobs) if zobs else np.zeros(0)
@@ -713,15 +705,15 @@ class RodLikelihood:
         return np.concatenate(out, axis=1)
 
     def _shape_table(self, d: PushData, eta: float, curves: ForceCurves):
-        """x [m], cos(tangent angle) and the signed normal offset [m] of every observed point of the push
-        from the centerline at each p node, (P, k) each.
+        """The signed normal offset [m] of every observed point of the push from the centerline at each p
+        node, (P, k).
 
         The likelihood interpolates the offsets (:func:`centerline_normal_offsets`), not x and cos(phi)
         apart: where the stem is nearly horizontal at a point's height, or its top passes through it,
         x(z) jumps by centimetres between neighbouring nodes while the offset moves smoothly. Read as
         (x_obs - x) cos(phi), a noise-free centerline lay 20 sds off its own curve between nodes
         (scripts/sbc_geometry.py seed 47: p 0.009, rest curvature 1.2 1/m, the last frames before the
-        slip; docs/validation.md). x and cos(phi) stay for predictions.
+        slip; docs/validation.md).
         """
         L, pg = self.L, self.p_grid
         d_nd = d.frame_D_m / L
@@ -734,40 +726,34 @@ class RodLikelihood:
         P, M = f_t.shape[0], d_nd.size
         r = contact_from_force_nd(f_t, eta, pg[:, None], curves.effects_nd, keep_shape=True)
         grid = r["grid"]  # (n + 1, 3, P, M + 2)
-        xp, cp, npt = (np.empty((P, d.x_m.size)) for _ in range(3))
+        npt = np.empty((P, d.x_m.size))
         for m in range(M):
             sel = d.frame_index == m
             z, xo = d.z_m[sel] / L, d.x_m[sel] / L
-            x, c = centerline_x_at_heights(grid[:, :, :, m], z)  # (P, k_m): exact Hermite, no resampling
-            xp[:, sel], cp[:, sel] = x * L, c
-            npt[:, sel] = centerline_normal_offsets(grid[:, :, :, m], xo, z) * L
+            npt[:, sel] = centerline_normal_offsets(grid[:, :, :, m], xo, z) * L  # exact Hermite, no resampling
             past = d_nd[m] - d_end
             go_on = (past > 0.0) & (step > 0.0)
             if go_on.any():
-                x1, c1 = centerline_x_at_heights(grid[:, :, go_on, M], z)
-                x0, c0 = centerline_x_at_heights(grid[:, :, go_on, M + 1], z)
                 n1 = centerline_normal_offsets(grid[:, :, go_on, M], xo, z)
                 n0 = centerline_normal_offsets(grid[:, :, go_on, M + 1], xo, z)
                 r_ = (past[go_on] / step[go_on])[:, None]
-                xp[np.ix_(go_on, sel)] += r_ * (x1 - x0) * L
-                cp[np.ix_(go_on, sel)] += r_ * (c1 - c0)
                 npt[np.ix_(go_on, sel)] += r_ * (n1 - n0) * L
-        return xp, cp, npt
+        return npt
 
     def _preload_shape_table(self, d: PushData, eta: float, curves: ForceCurves, column: int) -> dict:
-        """A preloaded push's shapes for any preload (:meth:`predict_shape_x_preloaded`).
+        """A preloaded push's shape residuals for any preload (:meth:`shape_offsets_preloaded`).
 
         A preload moves every frame of the push further along the branch by one unknown displacement.
-        The table holds x [m] and cos(tangent angle) at every observed point of the push with its frames
-        moved by each of :data:`PRELOAD_SHAPE_NODES` preloads spread evenly over the prior's [0, PRELOAD_MAX_L L],
-        (G, P, k) each, from :meth:`_shape_table` (so past the slip as it continues them). Linear in the
-        preload between nodes: a point's x at fixed height has kinks in the displacement (where the stem's
-        top passes below it, at the slip) that a higher-order rule spreads over neighbouring nodes.
+        The table holds the normal offset [m] of every observed point of the push with its frames moved
+        by each of :data:`PRELOAD_SHAPE_NODES` preloads spread evenly over the prior's [0, PRELOAD_MAX_L L],
+        (G, P, k), from :meth:`_shape_table` (so past the slip as it continues them). Linear in the preload
+        between nodes: a point's x at fixed height has kinks in the displacement (where the stem's top
+        passes below it, at the slip) that a higher-order rule spreads over neighbouring nodes.
         """
         grid = np.linspace(0.0, PRELOAD_MAX_L * self.L, PRELOAD_SHAPE_NODES)
         P, M, K = self.p_grid.size, d.frame_D_m.size, d.x_m.size
         per = max(1, PRELOAD_SHAPE_COLUMNS // (P * M))  # preload nodes solved together (one batched march)
-        xs, cs, ns = [], [], []
+        ns = []
         for start in range(0, grid.size, per):
             g = grid[start : start + per]
             n = g.size
@@ -779,12 +765,10 @@ class RodLikelihood:
                 z_m=np.tile(d.z_m, n),
                 sd_m=None,
             )
-            for out, tab in zip((xs, cs, ns), self._shape_table(tiled, eta, curves), strict=True):  # (P, n K)
-                out.append(tab.reshape(P, n, K).transpose(1, 0, 2))
+            normal = self._shape_table(tiled, eta, curves)  # (P, n K)
+            ns.append(normal.reshape(P, n, K).transpose(1, 0, 2))
         return {
             "step_m": grid[1] - grid[0],
-            "x": np.concatenate(xs),
-            "cos": np.concatenate(cs),
             "normal": np.concatenate(ns),
             "column": column,  # the push's index among the pushes with forces (its preload)
         }
@@ -849,33 +833,25 @@ class RodLikelihood:
             out.append(np.einsum("wa,wan->wn", wp, g0 + t[:, None, :] * (g1 - g0)))
         return np.concatenate(out, axis=1)
 
-    def predict_shape_x_preloaded(self, p: NDArray, preload_m: NDArray) -> tuple[NDArray, NDArray]:
-        """Centerline x [m] and cos(tangent angle) at every observed point with each push's frames moved
-        by its preload along the branch, (W, k) each.
+    def shape_offsets_preloaded(self, p: NDArray, preload_m: NDArray) -> NDArray:
+        """:meth:`shape_offsets` with each push's frames moved by its preload along the branch, (W, k) [m].
 
         ``p`` (W,), ``preload_m`` (W, J) [m] (one per push with forces). Linear in the preload between
         the nodes of :meth:`_preload_shape_table`, 4-point Lagrange in p. A push with frames but no
         forces has no preload: its points come from the plain shape table.
         """
         p = np.atleast_1d(np.asarray(p, float))
-        x, c = self.predict_shape_x(p)
-        return tuple(self._preloaded(p, preload_m, {"x": x, "cos": c}).values())
-
-    def _preloaded(self, p: NDArray, preload_m: NDArray, plain: dict) -> dict:
-        """The preload shape tables named by ``plain``'s keys at p (W,) and preloads (W, J), over copies of
-        ``plain`` (W, k) each: the plain tables' values, kept for pushes without forces."""
         W = p.size
         pre = np.asarray(preload_m, float).reshape(W, -1)
         ip, wp = _lagrange4(self.p_grid, p)  # (W, 4)
-        out = {k: v.copy() for k, v in plain.items()}
+        out = self.shape_offsets(p).copy()
         for t in self._preload_shapes:
-            G = t["x"].shape[0]
+            G = t["normal"].shape[0]
             v = np.clip(pre[:, t["column"]] / t["step_m"], 0.0, G - 1.000001)
             g = np.floor(v).astype(int)
             w = np.stack([1.0 - (v - g), v - g], axis=1)[:, :, None] * wp[:, None, :]  # (W, 2, 4)
             rows = (g[:, None, None] + np.arange(2)[None, :, None], ip[:, None, :])  # (W, 2, 4) each
-            for k, a in out.items():
-                a[:, t["points"]] = np.matmul(w.reshape(W, 1, 8), t[k][rows].reshape(W, 8, -1))[:, 0, :]
+            out[:, t["points"]] = np.matmul(w.reshape(W, 1, 8), t["normal"][rows].reshape(W, 8, -1))[:, 0, :]
         return out
 
     def predict_nd_force(self, p: NDArray, u: NDArray | None = None) -> NDArray:
@@ -887,11 +863,6 @@ class RodLikelihood:
         "not yet slipped" for engaged samples and bias p toward late slips when a push stops at its slip.
         """
         return self._interp(self.f_table, p, u)
-
-    def predict_shape_x(self, p: NDArray, u: NDArray | None = None, weights=None) -> tuple[NDArray, NDArray]:
-        """Centerline x and cos(tangent angle) at every observed point, (W, M) each (nondimensional x)."""
-        w = weights if weights is not None else self._gather_weights(p, u)
-        return self._interp(self.x_table, p, u, w), self._interp(self.cos_table, p, u, w)
 
     def shape_offsets(self, p: NDArray, u: NDArray | None = None, weights=None) -> NDArray:
         """Signed normal offset [m] of every observed point from the centerline, (W, M): the shape
@@ -928,8 +899,7 @@ class RodLikelihood:
             out["force"] = self.F_obs[None, :] - F
         if self.n_points:
             if self.preload and all(n in params for n in self.preload_names):
-                pre = self._per_push(params, self.preload_names, p.size)
-                out["shape"] = self._preloaded(p, pre, {"normal": self.shape_offsets(p)})["normal"]
+                out["shape"] = self.shape_offsets_preloaded(p, self._per_push(params, self.preload_names, p.size))
             else:
                 out["shape"] = self.shape_offsets(p, u, weights)
         return out
@@ -963,7 +933,7 @@ class RodLikelihood:
         if self.axis is not None:
             if self.axis.grid[0] != 0.0:
                 raise ValueError(f"effect {self.axis.name}: expected a table axis starting at the neutral value 0")
-            for k in ("f_table", "x_table", "cos_table", "normal_table", "slip_table"):
+            for k in ("f_table", "normal_table", "slip_table"):
                 setattr(new, k, getattr(self, k)[:1])
             new.axis = None
         new.effects = tuple(e for e in self.effects if e not in TABLE_EFFECTS)

@@ -1099,7 +1099,7 @@ def centerline_normal_offsets(grid: ArrayLike, xi: ArrayLike, zeta: ArrayLike) -
         j[:, b] = np.argmin(d2, axis=2)
     best_d2 = np.full(j.shape, np.inf)
     out = np.zeros(j.shape)
-    for seg in (j - 1, j):  # the segments on either side of the nearest node
+    for seg, t_start in ((j - 1, 1.0), (j, 0.0)):  # the segments on either side of the nearest node, from it
         i = np.clip(seg, 0, n - 1)
 
         def at(a, shift=0, i=i):
@@ -1108,7 +1108,7 @@ def centerline_normal_offsets(grid: ArrayLike, xi: ArrayLike, zeta: ArrayLike) -
         x0, x1, z0, z1 = at(gx), at(gx, 1), at(gz), at(gz, 1)
         s0, s1 = np.sin(at(gp)) * h, np.sin(at(gp, 1)) * h
         c0, c1 = np.cos(at(gp)) * h, np.cos(at(gp, 1)) * h
-        t = np.where(seg < j, 1.0, 0.0)  # start at the nearest node
+        t = np.full(i.shape, t_start)
         for _ in range(6):  # Newton on d/dt |C(t) - P|^2 / 2 = (C - P) . C'
             x, dx = _hermite(t, x0, s0, x1, s1)
             z, dz = _hermite(t, z0, c0, z1, c1)
