@@ -3,7 +3,7 @@
 Run:  python benchmarks/bench_shape_tables.py [--repeat 3]
 
 The likelihood's shape tables hold each observed point's signed normal offset from the centerline
-(``centerline_normal_offsets``, since 2026-11-27) beside x(z) and cos(phi). This builds the likelihood
+(``centerline_normal_offsets``, since 2026-11-27; until 9679df5 beside x(z) and cos(phi)). This builds the likelihood
 of two datasets ``--repeat`` times each way, alternating: as it is, and with the normal offsets
 replaced by a function that returns zeros (the cost of the build without them; the force curves'
 cache is cleared before every build). Prints the medians and their ratio.
