@@ -128,6 +128,39 @@ TARGETS: dict[str, tuple[str, list[str], list[str] | None]] = {
         ]
         + ["*.xǁDiagnoserǁstructure__mutmut_*"],
     ),
+    "centerline": (  # added in session 31: the centerline term's normal offsets (session 30)
+        "bayesrod/physics/elastica.py",
+        [
+            "tests/test_elastica.py::test_normal_offsets_match_the_nearest_point_of_a_fine_resampling",
+            "tests/test_inference.py::test_shape_tables_hold_a_noise_free_centerline_where_the_stem_lies_flat_between_nodes",
+            "tests/test_diagnose.py::test_forward_model_reads_centerlines_as_the_fit_does",
+            "tests/test_preload_shapes.py",
+            "tests/test_shape_weight.py",
+        ],
+        ["*.x_centerline_normal_offsets__mutmut_*"],
+    ),
+    "shape_tables": (  # added in session 31: the likelihood's centerline tables and the compliance axis's range
+        "bayesrod/inference/likelihood.py",
+        [
+            "tests/test_inference.py::test_shape_tables_hold_a_noise_free_centerline_where_the_stem_lies_flat_between_nodes",
+            "tests/test_inference.py::test_the_compliance_axis_covers_a_stem_whose_base_spring_dominates",
+            "tests/test_inference.py::test_likelihood_peaks_near_truth",
+            "tests/test_inference.py::test_forces_only_and_shapes_only",
+            "tests/test_preload_shapes.py",
+            "tests/test_shape_weight.py",
+        ],
+        [
+            "*.x_effect_axis_ei0_range__mutmut_*",
+            "*.xǁRodLikelihoodǁ_shape_table__mutmut_*",
+            "*.xǁRodLikelihoodǁshape_offsets__mutmut_*",
+            "*.xǁRodLikelihoodǁshape_offsets_preloaded__mutmut_*",
+        ],
+    ),
+    "step_back": (  # added in session 31: the simulator's step back from a failed solve (session 30)
+        "bayesrod/dataset/simulate.py",
+        ["tests/test_simulate.py"],
+        ["*.x__step_back__mutmut_*"],
+    ),
     "sampler": (  # added in session 25 with the restart of stuck walkers; run in session 26 (docs/validation.md)
         "bayesrod/inference/sampler.py",
         ["tests/test_sampler.py", "tests/test_inference.py::test_sampler_resumes_from_checkpoint"],

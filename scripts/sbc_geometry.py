@@ -269,9 +269,9 @@ def main(argv=None) -> None:
     )
     ap.add_argument(
         "--only",
-        choices=["all", "one-height-forces"],
+        choices=["all", "forces", "one-height-forces"],
         default="all",
-        help="replicates to run: all, or only the one-height forces-only ones",
+        help="replicates to run: all, only the forces-only ones, or only the one-height forces-only ones",
     )
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
@@ -281,9 +281,9 @@ def main(argv=None) -> None:
     bad = [e for e in effects[1:] if e not in EFFECTS]
     if bad:
         ap.error(f"--effects: expected names among {', '.join(EFFECTS[1:])}, got {', '.join(bad)}")
-    if args.only == "one-height-forces":
+    if args.only != "all":
         cases = {s: draw_case(s, effects) for s in seeds}
-        seeds = [s for s, c in cases.items() if len(c["heights_m"]) == 1 and not c["shapes"]]
+        seeds = [s for s, c in cases.items() if not c["shapes"] and (args.only == "forces" or len(c["heights_m"]) == 1)]
     from bayesrod.dataset.io import read_rows
 
     fn = partial(replicate, cap_l=args.cap_l, slip=args.slip, step_l=args.step_l or None, effects=effects)
