@@ -292,8 +292,10 @@ def test_centerline_at_heights_matches_a_fine_resampling(case):
 def test_normal_offsets_match_the_nearest_point_of_a_fine_resampling(case):
     """The Newton-on-Hermite nearest point against the obvious one: resample the same Hermite centerline
     at 20001 arc lengths, take the nearest sample and project the gap on its normal. Points up to 0.05 L
-    off every part of the curve, near its top where it curls over too; and against the horizontal gap
-    at the point's height, (x - x(z)) cos phi, for small horizontal offsets of an upright stem."""
+    off every part of the curve, near its top where it curls over too, some 0.15 L off (where Newton's
+    second-order term matters), some beyond the tip and below the base (the nearest point is the end);
+    and against the horizontal gap at the point's height, (x - x(z)) cos phi, for small horizontal
+    offsets of an upright stem."""
     from bayesrod.physics.elastica import centerline_at, centerline_normal_offsets, centerline_x_at_heights
 
     rng = np.random.default_rng(3)
@@ -303,14 +305,22 @@ def test_normal_offsets_match_the_nearest_point_of_a_fine_resampling(case):
     tx, tz = (np.gradient(xz[i], sig, axis=0) for i in (0, 1))
     norm = np.hypot(tx, tz)
     for j in range(grid.shape[-1]):
-        on = rng.uniform(0.02, 0.98, 200)  # points beside the curve, away from its two ends
+        # beside the curve (its last segment too), a few farther off, then beyond the tip and below the base
+        on = np.concatenate([rng.uniform(0.0, 1.0, 200), rng.uniform(0.2, 0.8, 30), np.ones(15), np.zeros(5)])
         base = centerline_at(grid[..., j : j + 1], on)[:, :, 0]
         ang = rng.uniform(0, 2 * np.pi, on.size)
-        px, pz = base + rng.uniform(0.0, 0.05, on.size) * np.array([np.cos(ang), np.sin(ang)])
+        r = np.concatenate([rng.uniform(0.0, 0.05, 200), rng.uniform(0.1, 0.15, 30), rng.uniform(0.0, 0.05, 20)])
+        ang[-20:-5] = grid[-1, 2, j] + rng.uniform(-0.3, 0.3, 15)  # beyond the tip, along its tangent
+        ang[-20:-5] = np.pi / 2 - ang[-20:-5]  # phi from the vertical, as an angle from the x axis
+        ang[-5:] = -np.pi / 2 + rng.uniform(-0.3, 0.3, 5)  # below the base
+        px, pz = base + r * np.array([np.cos(ang), np.sin(ang)])
         got = centerline_normal_offsets(grid[..., j : j + 1], px, pz)[0]
         d2 = (xz[0, :, j, None] - px) ** 2 + (xz[1, :, j, None] - pz) ** 2
         k = np.argmin(d2, axis=0)
-        ref = ((px - xz[0, k, j]) * tz[k, j] - (pz - xz[1, k, j]) * tx[k, j]) / norm[k, j]
+        ux, uz = tx[k, j] / norm[k, j], tz[k, j] / norm[k, j]
+        for end, node in ((0, 0), (sig.size - 1, -1)):  # at the ends, the exact tangent (one-sided: 3e-5 off)
+            ux[k == end], uz[k == end] = np.sin(grid[node, 2, j]), np.cos(grid[node, 2, j])
+        ref = (px - xz[0, k, j]) * uz - (pz - xz[1, k, j]) * ux
         np.testing.assert_allclose(got, ref, rtol=0, atol=2e-6)
         assert np.all(np.abs(got) <= np.sqrt(d2[k, np.arange(on.size)]) + 1e-12)  # never beyond the nearest sample
     if case == "elastica":  # small horizontal offsets: the horizontal gap at the height, to second order
@@ -320,6 +330,22 @@ def test_normal_offsets_match_the_nearest_point_of_a_fine_resampling(case):
         for j in range(grid.shape[-1]):
             got = centerline_normal_offsets(grid[..., j : j + 1], x[j] + dx, z)[0]
             np.testing.assert_allclose(got, dx * c[j], rtol=0, atol=2e-5)
+
+
+def test_normal_offsets_of_many_centerlines_at_once_are_those_of_each_alone():
+    """Batched over 1200 centerlines the nearest nodes are searched in chunks of points (a memory bound);
+    every point of every chunk gets the offset it gets from its centerline alone."""
+    from bayesrod.physics.elastica import centerline_normal_offsets
+
+    grid = _centerline_grids("elastica", n_p=4, n_f=3)
+    many = np.repeat(grid, -(-1200 // grid.shape[-1]), axis=2)[..., :1200]
+    many = many * (1.0 + 1e-3 * np.arange(1200))[None, None, :]  # 1200 different centerlines
+    rng = np.random.default_rng(5)
+    px, pz = rng.uniform(0.0, 0.6, 400), rng.uniform(0.0, 0.9, 400)
+    assert 4_000_000 // (1200 * many.shape[0]) < px.size / 3  # several chunks
+    got = centerline_normal_offsets(many, px, pz)
+    for c in range(0, 1200, 97):
+        np.testing.assert_array_equal(got[c], centerline_normal_offsets(many[..., c : c + 1], px, pz)[0])
 
 
 @pytest.mark.parametrize(

@@ -225,3 +225,27 @@ def test_every_engaged_frame_shows_the_stem_at_its_contact_even_where_the_branch
         # nearest point, not the crossing of z = h: near horizontal at the sensor, the crossing is ill-posed
         gap = np.min(np.hypot(x - (x_rest + sim.frame_contact_x_m[k]), z - h))
         assert gap < 2e-3, (k, gap)
+
+
+def test_step_back_moves_each_failed_displacement_back_by_1e6_L_then_4x_more_per_try_and_gives_up_after_12():
+    """The schedule the simulator's docstring states (dataset/simulate.py, ``_step_back``): a displacement
+    whose solve fails moves back by 1e-6 L, then 4x more per try, never below 0, others stay; after 12
+    tries the last solve is returned as failed."""
+    from bayesrod.dataset.simulate import _step_back
+
+    L = 0.8
+    D0 = np.array([0.10, 0.30, 0.5, 20.0])
+    step = 1e-6 * L * np.cumsum(4.0 ** np.arange(13))  # total move after 1, 2, ... tries
+    limit = np.array([0.2, 0.30 - step[1] - 1e-9, -1.0, 10.0])  # 3 tries; never; the 13th try would hold
+    assert 20.0 - step[11] > 10.0 > 20.0 - step[12]
+    calls = []
+
+    def solve(D):
+        calls.append(D.copy())
+        return D
+
+    D, sol = _step_back(D0.copy(), L, solve, lambda d: d > limit)
+    np.testing.assert_allclose(D, [0.10, 0.30 - step[2], 0.0, 20.0 - step[11]], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(sol > limit, [False, False, True, True])
+    assert len(calls) == 13  # the first solve and 12 tries
+    assert all(c[0] == 0.10 for c in calls)
