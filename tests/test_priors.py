@@ -367,3 +367,61 @@ def test_prior_files_are_found_from_a_source_tree_without_the_installed_package(
     folder = P._priors_dir()
     assert folder == Path(P.__file__).resolve().parents[2] / "priors"  # the checkout's top-level priors/
     assert (folder / "woody.json").is_file() or not folder.exists()  # (a copy of the package alone has none)
+
+
+EI0_PRIOR = ParamPrior("EI0", "lognormal", (3.0, 1.5))
+K_PRIOR = ParamPrior("base_compliance", "lognormal", (10.0, 2.0))
+
+
+def _base_space(length_m):
+    space = _noise_space(["EI0", "p", "sigma_force_N", "base_compliance"], [EI0_PRIOR, RHO, SD, K_PRIOR])
+    space.base_length_m = length_m
+    return space
+
+
+def test_a_base_spring_is_sampled_by_its_table_coordinate_with_the_jacobian_of_that_map():
+    """u = c / (1 + c), c = EI0 / (k L), in the sampling space; log k back in the prior's coordinates; the log
+    determinant of that map (finite differences of prior_coordinates) is log_jacobian."""
+    L = 0.8
+    space = _base_space(L)
+    assert space.base_pair() == (0, 3)
+    nat = {
+        "EI0": np.array([2.0, 9.9, 0.3]),
+        "p": np.array([0.5, 1.0, 0.1]),
+        "sigma_force_N": np.array([0.02, 0.05, 0.1]),
+        "base_compliance": np.array([400.0, 3.0, 0.01]),
+    }
+    theta = space.to_sample(nat)
+    c = nat["EI0"] / (nat["base_compliance"] * L)
+    np.testing.assert_allclose(theta[:, 3], c / (1 + c), rtol=1e-14)
+    np.testing.assert_allclose(theta[:, [0, 2]], np.log(np.column_stack([nat["EI0"], nat["sigma_force_N"]])))
+    before = theta.copy()
+    back = space.to_natural(theta)
+    np.testing.assert_array_equal(theta, before)  # the caller's array is not changed in place
+    for n, v in nat.items():
+        np.testing.assert_allclose(back[n], v, rtol=1e-12)
+    for t in theta:  # the Jacobian: d(log EI0, p, log sd, log k) / d(log EI0, p, log sd, u)
+        h = 1e-7
+        J = np.column_stack(
+            [(space.prior_coordinates(t + h * e) - space.prior_coordinates(t - h * e)) / (2 * h) for e in np.eye(4)]
+        )
+        assert space.log_jacobian(t) == pytest.approx(np.log(abs(np.linalg.det(J))), abs=1e-6)
+        assert space.log_jacobian(t) == pytest.approx(-np.log(t[3] * (1 - t[3])), rel=1e-12)
+    # u outside (0, 1) has no spring: zero density, no number
+    out = np.array([[0.0, 0.5, -3.0, 0.0], [0.0, 0.5, -3.0, 1.0], [0.0, 0.5, -3.0, -0.2]])
+    assert np.all(space.log_jacobian(out) == -np.inf)
+    assert np.all(np.isnan(space.prior_coordinates(out)[:, 3]))
+    np.testing.assert_array_equal(space.log_jacobian(theta[:2]), -np.log(theta[:2, 3] * (1 - theta[:2, 3])))
+
+
+@pytest.mark.parametrize(
+    "length_m, k_prior",
+    [(None, K_PRIOR), (0.8, ParamPrior("base_compliance", "normal", (10.0, 2.0)))],  # unset; k's prior not in log
+)
+def test_a_base_spring_stays_in_its_prior_coordinate_without_a_length_or_a_log_prior(length_m, k_prior):
+    space = _noise_space(["EI0", "p", "sigma_force_N", "base_compliance"], [EI0_PRIOR, RHO, SD, k_prior])
+    space.base_length_m = length_m
+    assert space.base_pair() is None
+    theta = np.array([[0.5, 0.4, -3.0, 2.0]])
+    np.testing.assert_array_equal(space.prior_coordinates(theta), theta)
+    np.testing.assert_array_equal(space.log_jacobian(theta), [0.0])

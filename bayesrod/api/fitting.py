@@ -64,6 +64,7 @@ _RESUME_KEYS = (
     "height_sd_m",
     "force_offsets",
     "noise_coordinates",
+    "base_coordinates",
     "slip",
 )
 #: what a checkpoint written before an option existed meant by it
@@ -75,6 +76,8 @@ _RESUME_DEFAULTS = {
     "force_offsets": False,
     # before 2026-11-26 an AR(1) noise was sampled by its marginal sd; its chains cannot be resumed
     "noise_coordinates": "marginal_sd",
+    # before 2026-11-27 a base spring was sampled in log k; its chains cannot be resumed
+    "base_coordinates": "log_k",
     # before 2026-11-26 the likelihood had no slip term
     "slip": False,
 }
@@ -804,6 +807,8 @@ def fit(
         "diameter": diameter,
         # the sampling coordinates of the force noise (ParameterSpace): a checkpoint stores chains in them
         "noise_coordinates": "innovation_sd" if force_noise == "ar1" else "marginal_sd",
+        # and of a base spring (ParameterSpace): its table coordinate u since 2026-11-27
+        "base_coordinates": "table_u" if "base_compliance" in effects else "log_k",
         "slip": bool(slip),
         "bayesrod": __version__,
     }

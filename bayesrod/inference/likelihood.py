@@ -1226,8 +1226,11 @@ class PosteriorBase(ParameterSpace):
     _p_bounds: tuple
 
     def log_prior(self, theta) -> NDArray:
-        theta = self.prior_coordinates(np.atleast_2d(theta))  # unit Jacobian (ParameterSpace)
-        return sum(pr.logpdf_sample(theta[:, i]) for i, pr in enumerate(self.priors))
+        theta = np.atleast_2d(theta)
+        jac = self.log_jacobian(theta)  # ParameterSpace: 0 but for a base spring sampled by its u
+        theta = self.prior_coordinates(theta)
+        lp = sum(pr.logpdf_sample(theta[:, i]) for i, pr in enumerate(self.priors)) + jac
+        return np.where(np.isfinite(jac), lp, -np.inf)  # nan coordinates outside u's (0, 1)
 
     def _in_support(self, natural: dict) -> NDArray:
         return np.ones(np.atleast_1d(next(iter(natural.values()))).shape, bool)
@@ -1269,6 +1272,8 @@ class LogPosterior(PosteriorBase):
             raise ValueError(f"prior p: expected support within the table range [{lo}, {hi}], got [{plo}, {phi}]")
         self._p_bounds = (max(lo, plo), min(hi, phi))
         self._p_idx = [1]
+        # a base spring is sampled by its table coordinate u (ParameterSpace); any fixed L serves
+        self.base_length_m = float(likelihood.L) if "base_compliance" in self.names else None
 
     def _in_support(self, natural: dict) -> NDArray:
         return self.likelihood.in_table(natural)  # a tabled effect's coordinate inside its table

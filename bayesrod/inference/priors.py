@@ -141,10 +141,20 @@ class ParameterSpace:
     (log sigma, rho) the posterior is a curved ridge the ensemble moves cross slowly. The map
     (log innovation sd, rho) -> (log sigma, rho) is a shear of unit Jacobian: the prior stays on sigma,
     the target is unchanged (docs/inference.md, "Correlated force noise").
+
+    A second exception when ``base_length_m`` is set (a single fit with ``base_compliance``, both it and
+    EI0 with log-space priors): the base spring k is sampled by its table coordinate u = c / (1 + c),
+    c = EI0 / (k L), in (0, 1). Forces that see EI0 and the spring in series pin a curve along which
+    log EI0 and p move with c, nearly straight in u, sharply bent in log k (an L: a stiff clamp's long,
+    prior-limited arm and the soft spring's branch), which the ensemble crossed slowly: R-hat 1.07-1.2
+    after 8000 steps on one-height pushes (docs/inference.md, "Sampling coordinates"). This map is not
+    of unit Jacobian; :meth:`log_jacobian` holds its log determinant.
     """
 
     names: list
     priors: list
+    #: the length L [m] in the base spring's coordinate c = EI0 / (k L); None: k is sampled in log k
+    base_length_m: float | None = None
 
     @property
     def ndim(self) -> int:
@@ -170,10 +180,39 @@ class ParameterSpace:
             out[..., s] = out[..., s] - sign * 0.5 * np.log1p(-(rho**2))
         return out
 
+    def base_pair(self) -> tuple[int, int] | None:
+        """(EI0 column, base spring column) when the spring is sampled by its table coordinate u, else None."""
+        if self.base_length_m is None or "base_compliance" not in self.names or "EI0" not in self.names:
+            return None
+        i, j = self.names.index("EI0"), self.names.index("base_compliance")
+        return (i, j) if self.priors[i].log_space and self.priors[j].log_space else None
+
     def prior_coordinates(self, theta) -> NDArray:
-        """``theta`` (..., ndim) in the sampling space mapped to each prior's own transform (the log of
-        the marginal noise sd in place of the innovation sd); a shear of unit Jacobian."""
-        return self._shear(theta, +1.0)
+        """``theta`` (..., ndim) in the sampling space mapped to each prior's own transform: the log of
+        the marginal noise sd in place of the innovation sd (a shear of unit Jacobian), log k in place of
+        the base spring's u (Jacobian :meth:`log_jacobian`; u outside (0, 1) maps to nan)."""
+        out = self._shear(theta, +1.0)
+        pair = self.base_pair()
+        if pair is not None:
+            i, j = pair
+            u = out[..., j]
+            inside = (u > 0.0) & (u < 1.0)
+            us = np.where(inside, u, 0.5)
+            logc = np.log(us) - np.log1p(-us)
+            out[..., j] = np.where(inside, out[..., i] - math.log(self.base_length_m) - logc, np.nan)
+        return out
+
+    def log_jacobian(self, theta) -> NDArray:
+        """log |d(prior coordinates) / d(sampling coordinates)| at ``theta`` (..., ndim): 0 but for the base
+        spring's u, where d log k / du = -1 / (u (1 - u)); -inf for u outside (0, 1)."""
+        theta = np.asarray(theta, float)
+        pair = self.base_pair()
+        if pair is None:
+            return np.zeros(theta.shape[:-1])
+        u = theta[..., pair[1]]
+        inside = (u > 0.0) & (u < 1.0)
+        us = np.where(inside, u, 0.5)
+        return np.where(inside, -np.log(us) - np.log1p(-us), -np.inf)
 
     def to_natural(self, theta) -> dict:
         theta = self.prior_coordinates(np.atleast_2d(theta))
@@ -181,7 +220,12 @@ class ParameterSpace:
 
     def to_sample(self, natural: dict) -> NDArray:
         each = [pr.to_sample(np.atleast_1d(natural[n])) for n, pr in zip(self.names, self.priors, strict=True)]
-        return self._shear(np.stack(each, axis=-1), -1.0)
+        out = self._shear(np.stack(each, axis=-1), -1.0)
+        pair = self.base_pair()
+        if pair is not None:
+            c = np.exp(out[..., pair[0]] - out[..., pair[1]]) / self.base_length_m  # EI0 / (k L)
+            out[..., pair[1]] = c / (1.0 + c)
+        return out
 
 
 def _parse_param(name: str, spec: dict, source: str) -> ParamPrior:
