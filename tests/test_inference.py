@@ -408,3 +408,26 @@ def test_a_checkpoint_of_an_ar1_run_in_the_old_noise_coordinates_is_refused(tmp_
     with h5py.File(path, "w") as f:
         f.attrs["bayesrod_config"] = json.dumps({k: v for k, v in iid.items() if k != "noise_coordinates"})
     _check_checkpoint(path, iid)  # an iid run's checkpoint still resumes
+
+
+def test_a_checkpoint_of_a_base_spring_run_in_log_k_is_refused_and_other_runs_still_resume(tmp_path):
+    """Before 2026-11-27 a base spring was sampled in log k: such chains cannot be resumed in u."""
+    import h5py
+
+    from bayesrod.api.fitting import _RESUME_KEYS, _check_checkpoint, sampling_coordinates
+
+    assert sampling_coordinates("iid", ("force_offset", "base_compliance"))["base_coordinates"] == "table_u"
+    assert sampling_coordinates("ar1", ("rest_curvature",)) == {
+        "noise_coordinates": "innovation_sd",
+        "base_coordinates": "log_k",
+    }
+    config = {k: None for k in _RESUME_KEYS} | {"effects": ["base_compliance"], "base_coordinates": "table_u"}
+    path = tmp_path / "chains.h5"
+    with h5py.File(path, "w") as f:
+        f.attrs["bayesrod_config"] = json.dumps({k: v for k, v in config.items() if k != "base_coordinates"})
+    with pytest.raises(ValueError, match="base_coordinates"):
+        _check_checkpoint(path, config)
+    plain = config | {"effects": [], "base_coordinates": "log_k"}
+    with h5py.File(path, "w") as f:
+        f.attrs["bayesrod_config"] = json.dumps({k: v for k, v in plain.items() if k != "base_coordinates"})
+    _check_checkpoint(path, plain)  # a run without a base spring still resumes

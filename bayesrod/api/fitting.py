@@ -641,6 +641,16 @@ def _two_stage(spec, use_shapes: bool) -> tuple[dict | None, object]:
     return ts.to_dict(), ts.direct
 
 
+def sampling_coordinates(force_noise: str, effects) -> dict:
+    """The coordinates the sampler moves the force noise and a base spring in (ParameterSpace): an AR(1)
+    noise by its innovation sd (since 2026-11-26), a base spring by its table coordinate u (since
+    2026-11-27). A checkpoint records them; chains in others cannot be resumed."""
+    return {
+        "noise_coordinates": "innovation_sd" if force_noise == "ar1" else "marginal_sd",
+        "base_coordinates": "table_u" if "base_compliance" in effects else "log_k",
+    }
+
+
 def _check_checkpoint(checkpoint: Path, config: dict) -> None:
     """A checkpoint resumes only the run that made it: same data, prior, effects, seed, weighting."""
     import h5py
@@ -805,10 +815,7 @@ def fit(
         "height_sd_m": height_sd_m,
         "force_offsets": bool(force_offsets),
         "diameter": diameter,
-        # the sampling coordinates of the force noise (ParameterSpace): a checkpoint stores chains in them
-        "noise_coordinates": "innovation_sd" if force_noise == "ar1" else "marginal_sd",
-        # and of a base spring (ParameterSpace): its table coordinate u since 2026-11-27
-        "base_coordinates": "table_u" if "base_compliance" in effects else "log_k",
+        **sampling_coordinates(force_noise, effects),  # a checkpoint stores chains in them
         "slip": bool(slip),
         "bayesrod": __version__,
     }
