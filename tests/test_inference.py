@@ -106,8 +106,14 @@ def test_shape_tables_hold_a_noise_free_centerline_where_the_stem_lies_flat_betw
     axis = EffectAxis("rest_curvature", np.linspace(0.0, 1.6, 9))  # kappa L = 1.36: between two nodes
     lik = RodLikelihood(ds, p_range=(0.0, 0.3), n_p=7, effects=("rest_curvature",), effect_axis=axis)
     one = {"EI0": EI0_, "p": p, "rest_curvature": kappa, "sigma_force_N": 0.03, "shape_sd_scale": 1.0}
-    r = lik.residuals({k: np.array([v]) for k, v in one.items()})["shape"][0]
+    params = {k: np.array([v]) for k, v in one.items()}
+    r = lik.residuals(params)["shape"][0]
     assert np.abs(r).max() < 0.5e-3 and np.sqrt(np.mean(r**2)) < 0.05e-3
+    # shape_offsets read alone (its own interpolation weights) give the same residuals, and the plain
+    # rod's (u = 0: no rest curvature) centimetres more
+    u = lik.effect_coordinate(params)
+    np.testing.assert_allclose(lik.shape_offsets(np.array([p]), u)[0], r, rtol=0, atol=1e-12)
+    assert np.abs(lik.shape_offsets(np.array([p]))[0]).max() > 0.05
 
 
 def test_the_compliance_axis_covers_a_stem_whose_base_spring_dominates():
@@ -138,6 +144,26 @@ def test_the_compliance_axis_covers_a_stem_whose_base_spring_dominates():
     assert axis.grid[0] <= u <= axis.grid[-1] and u > 0.9
     # the other effects' coordinates do not depend on EI0: their range stays near the estimate
     assert effect_axis_ei0_range("rest_curvature", 2.0, prior) == (1.0, 4.0)
+
+
+def test_the_ei0_range_of_an_effect_axis_is_the_estimate_within_a_factor_2_or_the_prior_without_forces():
+    from pathlib import Path
+
+    from bayesrod.inference.likelihood import effect_axis_ei0_range
+
+    prior = load_prior(str(Path(__file__).resolve().parents[1] / "scripts" / "sbc_prior.json"))
+    q = prior.get("EI0").quantile
+    lo, hi = q(0.001), q(0.999)  # lognormal, median 3, log sd 1.5
+    assert lo == pytest.approx(3.0 * np.exp(-3.0902 * 1.5), rel=1e-4) and hi == pytest.approx(9.0 / lo, rel=1e-9)
+    for effect in ("base_compliance", "rest_curvature", "base_tilt", "contact_friction"):
+        assert effect_axis_ei0_range(effect, None, prior) == (lo, hi)  # no forces: the prior's central 99.8%
+    for effect in ("rest_curvature", "base_tilt", "contact_friction"):
+        assert effect_axis_ei0_range(effect, 2.0, prior) == (1.0, 4.0)
+        assert effect_axis_ei0_range(effect, 1e4, prior) == (5e3, 2e4)
+    # a base spring only softens: from half the estimate up to the prior's 99.9% quantile, or twice the
+    # estimate where that is higher
+    assert effect_axis_ei0_range("base_compliance", 2.0, prior) == (1.0, hi)
+    assert effect_axis_ei0_range("base_compliance", 1e4, prior) == (5e3, 2e4)
 
 
 def _stiff_base_push():
@@ -431,3 +457,40 @@ def test_a_checkpoint_of_a_base_spring_run_in_log_k_is_refused_and_other_runs_st
     with h5py.File(path, "w") as f:
         f.attrs["bayesrod_config"] = json.dumps({k: v for k, v in plain.items() if k != "base_coordinates"})
     _check_checkpoint(path, plain)  # a run without a base spring still resumes
+
+
+def test_shape_offsets_past_a_nodes_slip_go_on_along_the_secant_of_its_last_step():
+    """Past a p node's branch end d_end the shape tables go on linearly in the contact displacement, along
+    the secant of the last step (min(SHAPE_END_STEP, d_end / 2)) before it, as the forces go on along
+    their end tangent (``RodLikelihood._shape_table``): frames of the same points at d_end - step, d_end
+    and past it, at a node whose slip comes before the data's."""
+    from bayesrod.dataset.simulate import NoiseModel
+    from bayesrod.inference.likelihood import SHAPE_END_STEP, ForceCurves, PushData
+
+    L = 0.9
+    ds = bayesrod.simulate(
+        {"EI0": 2.6, "p": 0.43, "length_m": L, "heights_m": (0.5,), "specimen": "past-slip"},
+        seed=3,
+        noise_model=NoiseModel(force_sd_N=0.0, shape_sd_m=0.0, shape_sd_reported_m=0.0015),
+        config_overrides={"robot_step_m": 0.01 * L},
+    )
+    lik = RodLikelihood(ds, p_range=(0.0, 1.5), n_p=13)
+    (d,) = lik.data
+    eta = d.height_m / L
+    curves = ForceCurves(eta, lik.p_grid)
+    i = 10  # p 1.25: its slip (d_end 0.50) comes before the data's last frames (0.70)
+    de = curves.d_end[i]
+    assert de < d.frame_D_m.max() / L
+    step = min(SHAPE_END_STEP, 0.5 * de)
+    last = d.frame_index == d.frame_index.max()
+    x, z, k = d.x_m[last], d.z_m[last], int(last.sum())
+    past = np.array([0.02, 0.05])
+    D = np.concatenate([[de - step, de], de + past]) * L
+    frames = PushData(d.id, d.height_m, d.D_m, d.F_N, D, np.repeat(np.arange(4), k), np.tile(x, 4), np.tile(z, 4), None)
+    n = lik._shape_table(frames, eta, curves).reshape(-1, 4, k)
+    slope = (n[i, 1] - n[i, 0]) / (step * L)  # [m / m]
+    assert np.abs(n[i, 1] - n[i, 0]).max() > 1e-5  # the shape still moves over the last step
+    for j, a in enumerate(past, start=2):
+        np.testing.assert_allclose(n[i, j], n[i, 1] + a * L * slope, rtol=0, atol=1e-12)
+    # a node that has not slipped reads each frame's own shape: no two frames alike
+    assert curves.d_end[0] > D.max() / L and np.abs(n[0, 3] - n[0, 2]).max() > 1e-4

@@ -867,8 +867,7 @@ class RodLikelihood:
     def shape_offsets(self, p: NDArray, u: NDArray | None = None, weights=None) -> NDArray:
         """Signed normal offset [m] of every observed point from the centerline, (W, M): the shape
         residual, observed minus model (:meth:`_shape_table`)."""
-        w = weights if weights is not None else self._gather_weights(p, u)
-        return self._interp(self.normal_table, p, u, w)
+        return self._interp(self.normal_table, p, u, weights)
 
     def residuals(self, params: dict) -> dict:
         """Force and shape residuals (observed - predicted) for parameter arrays of shape (W,)."""
