@@ -132,6 +132,7 @@ TARGETS: dict[str, tuple[str, list[str], list[str] | None]] = {
         "bayesrod/physics/elastica.py",
         [
             "tests/test_elastica.py::test_normal_offsets_match_the_nearest_point_of_a_fine_resampling",
+            "tests/test_elastica.py::test_normal_offsets_of_many_centerlines_at_once_are_those_of_each_alone",
             "tests/test_inference.py::test_shape_tables_hold_a_noise_free_centerline_where_the_stem_lies_flat_between_nodes",
             "tests/test_diagnose.py::test_forward_model_reads_centerlines_as_the_fit_does",
             "tests/test_preload_shapes.py",
@@ -144,6 +145,8 @@ TARGETS: dict[str, tuple[str, list[str], list[str] | None]] = {
         [
             "tests/test_inference.py::test_shape_tables_hold_a_noise_free_centerline_where_the_stem_lies_flat_between_nodes",
             "tests/test_inference.py::test_the_compliance_axis_covers_a_stem_whose_base_spring_dominates",
+            "tests/test_inference.py::test_the_ei0_range_of_an_effect_axis_is_the_estimate_within_a_factor_2_or_the_prior_without_forces",
+            "tests/test_inference.py::test_shape_offsets_past_a_nodes_slip_go_on_along_the_secant_of_its_last_step",
             "tests/test_inference.py::test_likelihood_peaks_near_truth",
             "tests/test_inference.py::test_forces_only_and_shapes_only",
             "tests/test_preload_shapes.py",
