@@ -1,14 +1,15 @@
-"""One SBC base-compliance case fitted with the spring sampled in u (the fit's coordinates) or in log k.
+"""One SBC base-compliance case fitted with the spring sampled in u, in log k, or as the fit chooses.
 
     python scripts/base_spring_mixing.py --seed 121 --coordinates u --max-steps 60000 --target-ess 4000
     python scripts/base_spring_mixing.py --seed 121 --coordinates log_k --max-steps 60000 --target-ess 4000
 
-Since 2026-11-27 a fit samples a base spring by its table coordinate u = c / (1 + c), c = EI0 / (k L)
-(bayesrod.inference.priors.ParameterSpace, docs/inference.md "Sampling"). ``--coordinates log_k`` samples
-it in log k as before, by unsetting the posterior's ``base_length_m``: the same posterior, other
-coordinates. The case is scripts/sbc_geometry.py's (``draw_case``: stem, heights, effect value, noise;
-forces only, the fixed robot step of 0.01 L) on the simulator's data; the script prints the convergence
-and the 5/50/95% quantiles (docs/validation.md, "Sampling a base spring").
+Since 2026-11-27 a fit samples a base spring by its table coordinate u = c / (1 + c), c = EI0 / (k L),
+where its start is a stiff spring (u <= 0.5), else in log k (bayesrod.inference.priors.ParameterSpace,
+``settle_base_coordinates``; docs/inference.md "Sampling"): ``--coordinates fit``. ``u`` and ``log_k``
+force one or the other: the same posterior, other coordinates. The case is scripts/sbc_geometry.py's
+(``draw_case``: stem, heights, effect value, noise; forces only, the fixed robot step of 0.01 L) on the
+simulator's data; the script prints the convergence and the 5/50/95% quantiles (docs/validation.md,
+"Sampling a base spring").
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from bayesrod.dataset.simulate import NoiseModel
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=121)
-    ap.add_argument("--coordinates", choices=["u", "log_k"], default="u")
+    ap.add_argument("--coordinates", choices=["fit", "u", "log_k"], default="fit")
     ap.add_argument("--max-steps", type=int, default=8000)
     ap.add_argument("--target-ess", type=float, default=400.0)
     ap.add_argument("--fit-seed", type=int, default=None, help="the sampler's seed (default: the case's + 1000)")
@@ -43,6 +44,8 @@ def main(argv=None) -> None:
             self.base_length_m = None
 
         LK.LogPosterior.__init__ = in_log_k
+    elif a.coordinates == "u":
+        LK.LogPosterior.settle_base_coordinates = lambda self, theta: theta
     noise = NoiseModel(force_sd_N=case["sigma_force_N"], shape_sd_m=0.0015, shape_sd_reported_m=0.0015)
     stem = {k: case[k] for k in ("EI0", "p", "length_m", "heights_m")} | {"specimen": f"sbcg-{a.seed}"}
     ds = simulate(

@@ -442,12 +442,12 @@ def test_a_checkpoint_of_a_base_spring_run_in_log_k_is_refused_and_other_runs_st
 
     from bayesrod.api.fitting import _RESUME_KEYS, _check_checkpoint, sampling_coordinates
 
-    assert sampling_coordinates("iid", ("force_offset", "base_compliance"))["base_coordinates"] == "table_u"
+    assert sampling_coordinates("iid", ("force_offset", "base_compliance"))["base_coordinates"] == "u_if_stiff_start"
     assert sampling_coordinates("ar1", ("rest_curvature",)) == {
         "noise_coordinates": "innovation_sd",
         "base_coordinates": "log_k",
     }
-    config = {k: None for k in _RESUME_KEYS} | {"effects": ["base_compliance"], "base_coordinates": "table_u"}
+    config = {k: None for k in _RESUME_KEYS} | {"effects": ["base_compliance"], "base_coordinates": "u_if_stiff_start"}
     path = tmp_path / "chains.h5"
     with h5py.File(path, "w") as f:
         f.attrs["bayesrod_config"] = json.dumps({k: v for k, v in config.items() if k != "base_coordinates"})

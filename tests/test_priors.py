@@ -425,3 +425,25 @@ def test_a_base_spring_stays_in_its_prior_coordinate_without_a_length_or_a_log_p
     theta = np.array([[0.5, 0.4, -3.0, 2.0]])
     np.testing.assert_array_equal(space.prior_coordinates(theta), theta)
     np.testing.assert_array_equal(space.log_jacobian(theta), [0.0])
+
+
+@pytest.mark.parametrize("u", [0.02, 0.5, 0.51, 0.93])
+def test_a_base_spring_stays_in_u_from_a_stiff_start_and_moves_to_log_k_from_a_soft_one(u):
+    """u straightens a stiff clamp's arm of the posterior, log k a soft spring's: the start decides
+    (ParameterSpace.settle_base_coordinates, BASE_U_SWITCH 0.5); the start's natural values are kept."""
+    from bayesrod.inference.priors import BASE_U_SWITCH
+
+    assert BASE_U_SWITCH == 0.5
+    space = _base_space(0.8)
+    theta = np.array([np.log(3.0), 0.4, np.log(0.03), u])
+    before = space.to_natural(theta[None])
+    got = space.settle_base_coordinates(theta)
+    if u <= 0.5:
+        assert space.base_pair() == (0, 3) and np.array_equal(got, theta)
+    else:
+        assert space.base_pair() is None
+        k = 3.0 * (1 - u) / (u * 0.8)  # c = u / (1 - u) = EI0 / (k L)
+        np.testing.assert_allclose(got, [np.log(3.0), 0.4, np.log(0.03), np.log(k)], rtol=1e-12)
+    after = space.to_natural(got[None])
+    for n in before:
+        np.testing.assert_allclose(after[n], before[n], rtol=1e-12)

@@ -643,11 +643,12 @@ def _two_stage(spec, use_shapes: bool) -> tuple[dict | None, object]:
 
 def sampling_coordinates(force_noise: str, effects) -> dict:
     """The coordinates the sampler moves the force noise and a base spring in (ParameterSpace): an AR(1)
-    noise by its innovation sd (since 2026-11-26), a base spring by its table coordinate u (since
-    2026-11-27). A checkpoint records them; chains in others cannot be resumed."""
+    noise by its innovation sd (since 2026-11-26), a base spring by its table coordinate u where the
+    start's spring is stiff (since 2026-11-27; ``ParameterSpace.settle_base_coordinates``). A checkpoint
+    records them; chains in others cannot be resumed."""
     return {
         "noise_coordinates": "innovation_sd" if force_noise == "ar1" else "marginal_sd",
-        "base_coordinates": "table_u" if "base_compliance" in effects else "log_k",
+        "base_coordinates": "u_if_stiff_start" if "base_compliance" in effects else "log_k",
     }
 
 
@@ -870,6 +871,9 @@ def fit(
                 theta0 = find_start(post, rng, init=two_stage)
         else:
             lik.shape_weight = float(shape_weight)
+    theta0 = post.settle_base_coordinates(theta0)
+    if "base_compliance" in post.names:
+        log.info("%s: base spring sampled in %s", spec.specimen, "u" if post.base_pair() else "log k")
     res = run_ensembles(
         post,
         theta0,

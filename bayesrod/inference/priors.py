@@ -130,6 +130,11 @@ class ParamPrior:
         return np.where(q <= 0.5, width * (2.0 * q - 1.0), np.maximum(2.0 * q - 1.0, 0.0) * u_max / scale)
 
 
+#: the base spring's table coordinate u at the start above which it is sampled in log k
+#: (:meth:`ParameterSpace.settle_base_coordinates`)
+BASE_U_SWITCH = 0.5
+
+
 class ParameterSpace:
     """Named parameters with their priors (``names``, ``priors``): maps between natural units and the
     sampling space, shared by the posteriors emcee sees.
@@ -143,7 +148,8 @@ class ParameterSpace:
     the target is unchanged (docs/inference.md, "Correlated force noise").
 
     A second exception when ``base_length_m`` is set (a single fit with ``base_compliance``, both it and
-    EI0 with log-space priors): the base spring k is sampled by its table coordinate u = c / (1 + c),
+    EI0 with log-space priors, its start a stiff spring: :meth:`settle_base_coordinates`): the base
+    spring k is sampled by its table coordinate u = c / (1 + c),
     c = EI0 / (k L), in (0, 1). Forces that see EI0 and the spring in series pin a curve along which
     log EI0 and p move with c, nearly straight in u, sharply bent in log k (an L: a stiff clamp's long,
     prior-limited arm and the soft spring's branch), which the ensemble crossed slowly: R-hat 1.07-1.2
@@ -201,6 +207,25 @@ class ParameterSpace:
             logc = np.log(us) - np.log1p(-us)
             out[..., j] = np.where(inside, out[..., i] - math.log(self.base_length_m) - logc, np.nan)
         return out
+
+    def settle_base_coordinates(self, theta) -> NDArray:
+        """The start ``theta`` (ndim,) in the coordinates the base spring will be sampled in: u where the
+        start's spring is stiff (u <= :data:`BASE_U_SWITCH`), else log k (``base_length_m`` unset).
+
+        u straightens the stiff clamp's arm of the posterior (k free, EI0 and p moving with c) but bends
+        the soft spring's (k pinned, EI0 free: log EI0 grows as -log(1 - u) up to the table's cap), where
+        log k is straight: on a soft base (scripts/sbc_geometry.py seed 11, u 0.93) sampling in u left
+        R-hat at 1.59-1.63 after 8000 steps against 1.007 in log k (docs/validation.md, "Sampling a base
+        spring"). Both are the same posterior; the rule depends only on the start, so a resumed run
+        makes the same choice.
+        """
+        pair = self.base_pair()
+        theta = np.asarray(theta, float)
+        if pair is None or theta[pair[1]] <= BASE_U_SWITCH:
+            return theta
+        natural = self.to_natural(theta[None])
+        self.base_length_m = None
+        return self.to_sample(natural)[0]
 
     def log_jacobian(self, theta) -> NDArray:
         """log |d(prior coordinates) / d(sampling coordinates)| at ``theta`` (..., ndim): 0 but for the base
