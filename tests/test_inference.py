@@ -185,7 +185,7 @@ def _stiff_base_push():
     return ds, str(Path(__file__).resolve().parents[1] / "scripts" / "sbc_prior.json")
 
 
-def test_a_base_spring_sampled_by_its_table_coordinate_is_the_same_posterior_and_mixes():
+def test_a_base_spring_sampled_by_its_table_coordinate_is_the_same_posterior_and_mixes(monkeypatch):
     """The spring is sampled by u = c / (1 + c) (ParameterSpace): at every point the density in u is the
     density in log k times |d log k / du|, and on one push, where forces alone pin a curve along which
     log EI0 and p move with c (an L in log k), the fit converges: in log k it had R-hat 1.12 after 8000
@@ -210,6 +210,7 @@ def test_a_base_spring_sampled_by_its_table_coordinate_is_the_same_posterior_and
     lp_u, lp_k = post.log_prob(theta_u), in_log_k.log_prob(theta_k)
     assert np.all(np.isfinite(lp_k))
     np.testing.assert_allclose(lp_u, lp_k - np.log(theta_u[:, 3] * (1 - theta_u[:, 3])), rtol=0, atol=1e-9)
+    monkeypatch.setattr("bayesrod.api.fitting.TABLE_SHIFT_WARN_SD", -1.0)  # every table check says so
     fitted = bayesrod.fit(
         ds,
         prior_file,
@@ -221,6 +222,9 @@ def test_a_base_spring_sampled_by_its_table_coordinate_is_the_same_posterior_and
         max_steps=3000,
     )
     assert fitted.doc["convergence"]["converged"], fitted.doc["convergence"]["message"]
+    check = fitted.doc["table_check"]  # the force tables at the posterior median against exact solves
+    assert check["n_samples"] > 50 and max(abs(v) for v in check["shift_in_sd"].values()) < 0.1
+    assert "the force tables" in check["message"]
     q = {k: np.quantile(v, [0.05, 0.95]) for k, v in fitted.samples.items()}
     assert q["EI0"][0] < 9.895 < q["EI0"][1] and q["p"][0] < 1.023 < q["p"][1]
 
@@ -494,3 +498,34 @@ def test_shape_offsets_past_a_nodes_slip_go_on_along_the_secant_of_its_last_step
         np.testing.assert_allclose(n[i, j], n[i, 1] + a * L * slope, rtol=0, atol=1e-12)
     # a node that has not slipped reads each frame's own shape: no two frames alike
     assert curves.d_end[0] > D.max() / L and np.abs(n[0, 3] - n[0, 2]).max() > 1e-4
+
+
+@pytest.mark.parametrize("effect, value, nodes", [(None, 0.0, None), ("rest_curvature", 0.3, 5)])
+def test_the_fits_table_check_is_the_mle_shift_of_noise_free_exact_forces(effect, value, nodes):
+    """table_force_check (one Gauss-Newton step from the point, forces-only Laplace sds) against its slow
+    reference, table_shift_on (the table likelihood maximised on noise-free exact forces): the plain
+    rod, and rest curvature on a 5-node axis, where the tables move the estimate by 1.5 sd (measured
+    -0.153, 1.550, -1.495 against -0.155, 1.586, -1.527)."""
+    from bayesrod.api.calibration import table_shift_on
+    from bayesrod.dataset.simulate import NoiseModel
+    from bayesrod.inference.likelihood import build_likelihood, table_force_check
+
+    L, truth = 0.9, {"EI0": 2.6, "p": 0.43}
+    switched = {effect: value} if effect else {}
+    ds = bayesrod.simulate(
+        {**truth, "length_m": L, "heights_m": (0.4, 0.55), "specimen": "check"},
+        seed=3,
+        noise_model=NoiseModel(force_sd_N=0.0, shape_sd_m=0.0, shape_sd_reported_m=0.0015),
+        effects=switched,
+        config_overrides={"robot_step_m": 0.01 * L, "n_frames_engaged": 2},
+    )
+    prior = load_prior("woody")
+    fitted = (effect,) if effect else ()
+    lik = build_likelihood(ds, prior, fitted, use_shapes=False, n_effect=nodes)
+    got = table_force_check(lik, truth | {"sigma_force_N": 0.03} | switched)
+    ref = table_shift_on(ds, prior, truth | switched, noise=(0.03, 0.0015), n_effect=nodes)
+    shifts = np.array(list(got["shift_in_sd"].values()))
+    np.testing.assert_allclose(shifts, ref["shift_in_sd"], rtol=0.05, atol=0.002)
+    assert got["n_samples"] > 100 and got["max_error_over_sigma"] < (0.01 if effect is None else 1.0)
+    if effect:
+        assert np.abs(shifts).max() > 1.0  # a coarse axis is seen

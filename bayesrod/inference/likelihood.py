@@ -41,7 +41,7 @@ from scipy.interpolate import PchipInterpolator
 
 from ..dataset.engagement import detect_engagement
 from ..dataset.model import Specimen
-from ..physics.elastica import centerline_normal_offsets, contact_from_force_nd
+from ..physics.elastica import centerline_normal_offsets, contact_from_force_nd, force_from_displacement_nd
 from ..physics.lumped import stem_diameter
 from .priors import ParameterSpace
 
@@ -1276,6 +1276,69 @@ class LogPosterior(PosteriorBase):
 
     def _in_support(self, natural: dict) -> NDArray:
         return self.likelihood.in_table(natural)  # a tabled effect's coordinate inside its table
+
+
+def table_force_check(lik: RodLikelihood, point: dict) -> dict | None:
+    """How far the force tables lie from exact solves at one parameter point, and how far that error
+    would move the maximum-likelihood estimate, in forces-only Laplace sds.
+
+    The forces the tables give at ``point`` (natural units, scalars: ``EI0``, ``p``, ``sigma_force_N``,
+    the tabled effect, offsets) are compared with exact solves (:func:`force_from_displacement_nd`) at
+    every engaged sample the point has not slipped past. With J the tables' derivatives in (log EI0,
+    p, the effect's table coordinate u, any force offsets) and delta = table - exact, data equal to the
+    exact forces would move the table MLE by -(J'J)^-1 J' delta (one Gauss-Newton step); each shift is
+    divided by its Laplace sd, sigma sqrt((J'J)^-1)_ii. Forces only, iid noise: with centerlines or an
+    AR(1) noise the posterior sd differs, and the shift is a guide, not the posterior's. The reference
+    is :func:`bayesrod.api.calibration.table_shift_on` (the MLE on noise-free exact data); tests check
+    that they agree. None where the forces are not read from the plain tables (preloads, a sampled
+    length or height errors, yield).
+
+    Returns
+    -------
+    dict or None
+        ``max_error_over_sigma`` (largest |table - exact| over sigma), ``shift_in_sd`` (name -> shift),
+        ``n_samples`` (samples compared).
+    """
+    if not lik.n_force or lik.preload or lik.geometry or "yield" in lik.effects:
+        return None
+    one = {k: np.atleast_1d(np.asarray(v, float))[:1] for k, v in point.items()}
+    EI0, p, sigma = float(one["EI0"][0]), float(one["p"][0]), float(one["sigma_force_N"][0])
+    u = lik.effect_coordinate(one)
+    weights = lik._gather_weights(one["p"], u)
+    f_tab = lik._interp(lik.f_table, one["p"], u, weights)[0]  # (N,) nondimensional
+    eff = {} if lik.axis is None else {k: float(v) for k, v in lik.axis.nondim(u[0]).items()}
+    d_nd = np.concatenate([d.D_m for d in lik.force_data]) / lik.L
+    exact = force_from_displacement_nd(d_nd, lik.F_height / lik.L, p, eff or None)["f"]
+    ok = np.isfinite(exact)
+    if ok.sum() < 3:
+        return None
+    scale = EI0 / lik.L**2
+    delta = scale * (f_tab - exact)[ok]  # [N]
+    cols, names = [scale * f_tab], ["log EI0"]  # dF / d log EI0
+    h = 1e-4
+    up, dn = (lik._interp(lik.f_table, np.array([p + s]), u)[0] for s in (h, -h))
+    cols.append(scale * (up - dn) / (2 * h))
+    names.append("p")
+    if lik.axis is not None:
+        up = lik._interp(lik.f_table, one["p"], u + h)[0]
+        dn = lik._interp(lik.f_table, one["p"], u - h)[0]
+        cols.append(scale * (up - dn) / (2 * h))
+        names.append(f"{lik.axis.name} (table coordinate u)")
+    if "force_offset" in lik.effects:
+        cols.append(np.ones_like(f_tab))
+        names.append("force_offset")
+    for j, n in enumerate(lik.offset_names):
+        cols.append((lik.F_push == j).astype(float))
+        names.append(n)
+    J = np.column_stack(cols)[ok] / sigma
+    cov = np.linalg.pinv(J.T @ J)
+    shift = -cov @ (J.T @ (delta / sigma))
+    sd = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+    return {
+        "max_error_over_sigma": float(np.max(np.abs(delta)) / sigma),
+        "shift_in_sd": {n: float(v) for n, v in zip(names, shift / sd, strict=True)},
+        "n_samples": int(ok.sum()),
+    }
 
 
 def force_scale_fit(lik: RodLikelihood, p: float, EI0: float | None = None) -> tuple[float, float]:
