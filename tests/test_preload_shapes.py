@@ -52,6 +52,22 @@ def test_a_preload_moves_the_frames_of_its_push_along_the_branch(case):
         assert np.abs(unmoved - want).max() > 0.01
 
 
+def test_preloaded_offsets_of_many_walkers_at_once_are_those_of_each_alone_up_to_the_tables_top(case):
+    """shape_offsets_preloaded batched over walkers with their own p and preloads (one near the top of
+    the preload table, PRELOAD_MAX_L) equals each walker alone; the offsets move with the preload."""
+    from bayesrod.inference.likelihood import PRELOAD_MAX_L
+
+    _, _, lik = case
+    top = 0.98 * PRELOAD_MAX_L * lik.L
+    p = np.array([P, 0.5, 0.35])
+    pre = np.array([DELTAS, [0.0, 0.0, 0.0], [top, 0.01, top]])
+    got = lik.shape_offsets_preloaded(p, pre)
+    for w in range(3):
+        alone = lik.shape_offsets_preloaded(p[w : w + 1], pre[w : w + 1])[0]
+        np.testing.assert_array_equal(got[w], alone)
+    assert np.abs(got[2] - lik.shape_offsets_preloaded(p[2:], pre[1:2])[0]).max() > 1e-3
+
+
 def test_the_start_of_a_preloaded_fit_with_centerlines_reads_the_preloads_from_the_data(case):
     """Before the preloads were profiled, Nelder-Mead from preloads near zero ended with EI0 in the mode
     where the forces are all noise (EI0 0.015 N m^2 with a force noise of 6 N)."""
