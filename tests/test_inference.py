@@ -446,12 +446,18 @@ def test_a_checkpoint_of_a_base_spring_run_in_log_k_is_refused_and_other_runs_st
 
     from bayesrod.api.fitting import _RESUME_KEYS, _check_checkpoint, sampling_coordinates
 
-    assert sampling_coordinates("iid", ("force_offset", "base_compliance"))["base_coordinates"] == "u_if_stiff_start"
+    assert (
+        sampling_coordinates("iid", ("force_offset", "base_compliance"))["base_coordinates"]
+        == "u_forces_only_stiff_start"
+    )
     assert sampling_coordinates("ar1", ("rest_curvature",)) == {
         "noise_coordinates": "innovation_sd",
         "base_coordinates": "log_k",
     }
-    config = {k: None for k in _RESUME_KEYS} | {"effects": ["base_compliance"], "base_coordinates": "u_if_stiff_start"}
+    config = {k: None for k in _RESUME_KEYS} | {
+        "effects": ["base_compliance"],
+        "base_coordinates": "u_forces_only_stiff_start",
+    }
     path = tmp_path / "chains.h5"
     with h5py.File(path, "w") as f:
         f.attrs["bayesrod_config"] = json.dumps({k: v for k, v in config.items() if k != "base_coordinates"})
@@ -529,3 +535,15 @@ def test_the_fits_table_check_is_the_mle_shift_of_noise_free_exact_forces(effect
     assert got["n_samples"] > 100 and got["max_error_over_sigma"] < (0.01 if effect is None else 1.0)
     if effect:
         assert np.abs(shifts).max() > 1.0  # a coarse axis is seen
+
+
+def test_a_base_spring_is_sampled_in_u_only_on_forces_alone():
+    """With centerlines the fit keeps log k (LogPosterior leaves base_length_m unset): they pin EI0 and p
+    apart from the spring, and in u a stiff clamp's prior-limited tail in k is a spike at u = 0."""
+    from types import SimpleNamespace
+
+    prior = load_prior("woody")
+    names = ["EI0", "p", "sigma_force_N", "base_compliance"]
+    for n_points, want in ((0, (0, 3)), (500, None)):
+        lik = SimpleNamespace(names=names, p_grid=np.linspace(0.0, 3.0, 61), L=0.8, n_points=n_points)
+        assert LogPosterior(lik, prior).base_pair() == want

@@ -648,12 +648,12 @@ TABLE_SHIFT_WARN_SD = 0.1
 
 def sampling_coordinates(force_noise: str, effects) -> dict:
     """The coordinates the sampler moves the force noise and a base spring in (ParameterSpace): an AR(1)
-    noise by its innovation sd (since 2026-11-26), a base spring by its table coordinate u where the
-    start's spring is stiff (since 2026-11-27; ``ParameterSpace.settle_base_coordinates``). A checkpoint
+    noise by its innovation sd (since 2026-11-26), a base spring on forces alone by its table coordinate u
+    where the start's spring is stiff (since 2026-11-27; ``ParameterSpace.settle_base_coordinates``). A checkpoint
     records them; chains in others cannot be resumed."""
     return {
         "noise_coordinates": "innovation_sd" if force_noise == "ar1" else "marginal_sd",
-        "base_coordinates": "u_if_stiff_start" if "base_compliance" in effects else "log_k",
+        "base_coordinates": "u_forces_only_stiff_start" if "base_compliance" in effects else "log_k",
     }
 
 

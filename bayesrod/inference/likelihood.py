@@ -1271,8 +1271,10 @@ class LogPosterior(PosteriorBase):
             raise ValueError(f"prior p: expected support within the table range [{lo}, {hi}], got [{plo}, {phi}]")
         self._p_bounds = (max(lo, plo), min(hi, phi))
         self._p_idx = [1]
-        # a base spring is sampled by its table coordinate u (ParameterSpace); any fixed L serves
-        self.base_length_m = float(likelihood.L) if "base_compliance" in self.names else None
+        # a base spring is sampled by its table coordinate u (ParameterSpace; any fixed L serves) on forces
+        # alone: centerlines pin EI0 and p apart from the spring, and then log k is the better coordinate
+        forces_only = not getattr(likelihood, "n_points", 0)
+        self.base_length_m = float(likelihood.L) if "base_compliance" in self.names and forces_only else None
 
     def _in_support(self, natural: dict) -> NDArray:
         return self.likelihood.in_table(natural)  # a tabled effect's coordinate inside its table
