@@ -21,8 +21,7 @@ import numpy as np
 import sbc_geometry as S
 
 import bayesrod.inference.likelihood as LK
-from bayesrod import fit, simulate
-from bayesrod.dataset.simulate import NoiseModel
+from bayesrod import fit
 
 
 def main(argv=None) -> None:
@@ -46,15 +45,7 @@ def main(argv=None) -> None:
         LK.LogPosterior.__init__ = in_log_k
     elif a.coordinates == "u":
         LK.LogPosterior.settle_base_coordinates = lambda self, theta: theta
-    noise = NoiseModel(force_sd_N=case["sigma_force_N"], shape_sd_m=0.0015, shape_sd_reported_m=0.0015)
-    stem = {k: case[k] for k in ("EI0", "p", "length_m", "heights_m")} | {"specimen": f"sbcg-{a.seed}"}
-    ds = simulate(
-        stem,
-        seed=a.seed,
-        noise_model=noise,
-        effects={"base_compliance": case["effect_value"]},
-        config_overrides={"n_frames_engaged": 2, "robot_step_m": 0.01 * case["length_m"]},
-    )
+    ds = S.simulate_case(a.seed, case, frames=2)  # forces only: two frames a push, as the SBC's
     print(
         f"seed {a.seed}: EI0 {case['EI0']:.4g} N m^2, p {case['p']:.4g}, k {case['effect_value']:.4g} N m/rad, "
         f"L {case['length_m']:.3f} m, heights/L {[round(h / case['length_m'], 3) for h in case['heights_m']]}"

@@ -20,9 +20,6 @@ import numpy as np
 import sbc_geometry as S
 from _study import seeds as parse_seeds
 
-from bayesrod import simulate
-from bayesrod.dataset.simulate import NoiseModel
-
 
 def largest_gap(sim) -> float:
     """Largest distance [m] from an engaged frame's true centerline to its contact point, one push."""
@@ -47,12 +44,8 @@ def main(argv=None) -> None:
     bad = []
     for seed in parse_seeds(a.seeds):
         case = S.draw_case(seed, effects)
-        noise = NoiseModel(force_sd_N=case["sigma_force_N"], shape_sd_m=0.0015, shape_sd_reported_m=0.0015)
-        stem = {k: case[k] for k in ("EI0", "p", "length_m", "heights_m")} | {"specimen": f"check-{seed}"}
-        switched = {case["effect"]: case["effect_value"]} if case["effect"] else {}
         try:
-            step = {"robot_step_m": 0.01 * case["length_m"]}
-            ds = simulate(stem, seed=seed, noise_model=noise, effects=switched, config_overrides=step)
+            ds = S.simulate_case(seed, case, prefix="check")
         except ValueError as e:  # a case the simulator refuses (e.g. a height the stem slips at at once)
             print(f"seed {seed}: refused ({e})", flush=True)
             continue

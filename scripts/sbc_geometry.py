@@ -82,6 +82,38 @@ def draw_case(seed: int, effects: tuple = EFFECTS) -> dict:
     return case
 
 
+#: the case's own force noise, centerlines at 1.5 mm (simulate_case's default)
+CASE_NOISE = "case"
+
+
+def simulate_case(
+    seed: int,
+    case: dict,
+    *,
+    prefix: str = "sbcg",
+    noise=CASE_NOISE,
+    frames: int | None = None,
+    step_l: float | None = 0.01,
+    cap_l: float | None = None,
+):
+    """The simulator's dataset of a case from :func:`draw_case`: its stem, heights, effect and value.
+
+    ``noise``: a :class:`NoiseModel`, or the case's force sd with centerlines at 1.5 mm; ``frames``: engaged
+    frames per push (None: the simulator's default); ``step_l``: the robot's step as a fraction of L (None:
+    60 samples spread knowing the slip); ``cap_l``: every push stops at this fraction of L (None: at its
+    slip). The specimen is named ``{prefix}-{seed}``."""
+    if noise is CASE_NOISE:
+        noise = NoiseModel(force_sd_N=case["sigma_force_N"], shape_sd_m=0.0015, shape_sd_reported_m=0.0015)
+    stem = {k: case[k] for k in ("EI0", "p", "length_m", "heights_m")} | {"specimen": f"{prefix}-{seed}"}
+    switched = {case["effect"]: case["effect_value"]} if case["effect"] else {}
+    extra = {} if frames is None else {"n_frames_engaged": frames}
+    if cap_l is not None:  # a stop at a fixed fraction of L tells nothing about the stem; a stop at the slip does
+        extra["max_contact_displacement_m"] = cap_l * case["length_m"]
+    if step_l is not None:
+        extra["robot_step_m"] = step_l * case["length_m"]
+    return simulate(stem, seed=seed, noise_model=noise, effects=switched, config_overrides=extra)
+
+
 def reference_dataset(ds, case: dict):
     """The simulated dataset with every force and centerline solved again by the reference solver."""
     cfg, sim = ds.simulation
@@ -132,18 +164,10 @@ def replicate(
     ``step_l``: the robot's step between samples as a fraction of L (None: the simulator's default, 60
     samples spread over each push knowing where it will slip, a design that depends on the stem)."""
     case = draw_case(seed, effects)
-    noise = NoiseModel(force_sd_N=case["sigma_force_N"], shape_sd_m=0.0015, shape_sd_reported_m=0.0015)
-    switched = {case["effect"]: case["effect_value"]} if case["effect"] else {}
-    stem = {k: case[k] for k in ("EI0", "p", "length_m", "heights_m")} | {"specimen": f"sbcg-{seed}"}
-    extra = {} if case["shapes"] else {"n_frames_engaged": 2}
-    if cap_l is not None:  # a stop at a fixed fraction of L tells nothing about the stem; a stop at the slip does
-        extra["max_contact_displacement_m"] = cap_l * case["length_m"]
-    if step_l is not None:
-        extra["robot_step_m"] = step_l * case["length_m"]
     row = {"seed": seed, "length_m": case["length_m"], "n_heights": len(case["heights_m"])}
     row |= {"shapes": case["shapes"], "effect": case["effect"] or "none"}
     try:
-        ds = simulate(stem, seed=seed, noise_model=noise, effects=switched, config_overrides=extra)
+        ds = simulate_case(seed, case, frames=None if case["shapes"] else 2, step_l=step_l, cap_l=cap_l)
         ds, worst, n_fallback = reference_dataset(ds, case)
         res = fit_for_calibration(
             ds,

@@ -17,7 +17,6 @@ import argparse
 
 import sbc_geometry as S
 
-from bayesrod import simulate
 from bayesrod.api.calibration import table_shift_on
 from bayesrod.dataset.simulate import NoiseModel
 from bayesrod.inference.priors import load_prior
@@ -34,14 +33,7 @@ def main(argv=None) -> None:
     case = S.draw_case(a.seed, (None, *a.effects.split(",")))
     effect = case["effect"]
     noise = NoiseModel(force_sd_N=0.0, shape_sd_m=0.0, shape_sd_reported_m=0.0015)
-    stem = {k: case[k] for k in ("EI0", "p", "length_m", "heights_m")} | {"specimen": f"table-{a.seed}"}
-    ds = simulate(
-        stem,
-        seed=a.seed,
-        noise_model=noise,
-        effects={effect: case["effect_value"]} if effect else {},
-        config_overrides={"robot_step_m": 0.01 * case["length_m"]},
-    )
+    ds = S.simulate_case(a.seed, case, prefix="table", noise=noise)
     if not a.fast:
         ds, _, _ = S.reference_dataset(ds, case | {"shapes": True})
     out = table_shift_on(

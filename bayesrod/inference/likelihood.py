@@ -1306,8 +1306,7 @@ def table_force_check(lik: RodLikelihood, point: dict) -> dict | None:
     one = {k: np.atleast_1d(np.asarray(v, float))[:1] for k, v in point.items()}
     EI0, p, sigma = float(one["EI0"][0]), float(one["p"][0]), float(one["sigma_force_N"][0])
     u = lik.effect_coordinate(one)
-    weights = lik._gather_weights(one["p"], u)
-    f_tab = lik._interp(lik.f_table, one["p"], u, weights)[0]  # (N,) nondimensional
+    f_tab = lik._interp(lik.f_table, one["p"], u)[0]  # (N,) nondimensional
     eff = {} if lik.axis is None else {k: float(v) for k, v in lik.axis.nondim(u[0]).items()}
     d_nd = np.concatenate([d.D_m for d in lik.force_data]) / lik.L
     exact = force_from_displacement_nd(d_nd, lik.F_height / lik.L, p, eff or None)["f"]
@@ -1317,14 +1316,16 @@ def table_force_check(lik: RodLikelihood, point: dict) -> dict | None:
     scale = EI0 / lik.L**2
     delta = scale * (f_tab - exact)[ok]  # [N]
     cols, names = [scale * f_tab], ["log EI0"]  # dF / d log EI0
-    h = 1e-4
-    up, dn = (lik._interp(lik.f_table, np.array([p + s]), u)[0] for s in (h, -h))
-    cols.append(scale * (up - dn) / (2 * h))
+
+    def slope(dp: float, du: float) -> NDArray:  # [N] per unit step, central differences of the table
+        up = lik._interp(lik.f_table, one["p"] + dp, None if u is None else u + du)[0]
+        dn = lik._interp(lik.f_table, one["p"] - dp, None if u is None else u - du)[0]
+        return scale * (up - dn) / (2 * max(dp, du))
+
+    cols.append(slope(1e-4, 0.0))
     names.append("p")
     if lik.axis is not None:
-        up = lik._interp(lik.f_table, one["p"], u + h)[0]
-        dn = lik._interp(lik.f_table, one["p"], u - h)[0]
-        cols.append(scale * (up - dn) / (2 * h))
+        cols.append(slope(0.0, 1e-4))
         names.append(f"{lik.axis.name} (table coordinate u)")
     if "force_offset" in lik.effects:
         cols.append(np.ones_like(f_tab))

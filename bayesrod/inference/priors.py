@@ -135,6 +135,12 @@ class ParamPrior:
 BASE_U_SWITCH = 0.5
 
 
+def _open_unit(u) -> tuple[NDArray, NDArray]:
+    """Where ``u`` lies in (0, 1), and ``u`` with 0.5 elsewhere (finite logs to mask afterwards)."""
+    inside = (u > 0.0) & (u < 1.0)
+    return inside, np.where(inside, u, 0.5)
+
+
 class ParameterSpace:
     """Named parameters with their priors (``names``, ``priors``): maps between natural units and the
     sampling space, shared by the posteriors emcee sees.
@@ -152,8 +158,8 @@ class ParameterSpace:
     :meth:`settle_base_coordinates`): the base spring k is sampled by its table coordinate u = c / (1 + c),
     c = EI0 / (k L), in (0, 1). Forces that see EI0 and the spring in series pin a curve along which
     log EI0 and p move with c, nearly straight in u, sharply bent in log k (an L: a stiff clamp's long,
-    prior-limited arm and the soft spring's branch), which the ensemble crossed slowly: R-hat 1.07-1.2
-    after 8000 steps on one-height pushes (docs/inference.md, "Sampling coordinates"). This map is not
+    prior-limited arm and the soft spring's branch), which the ensembles crossed slowly: R-hat up to 1.21
+    after 8000 steps, 6 of 12 forces-only SBC cases unconverged (docs/inference.md, "Sampling"). This map is not
     of unit Jacobian; :meth:`log_jacobian` holds its log determinant.
     """
 
@@ -201,10 +207,8 @@ class ParameterSpace:
         pair = self.base_pair()
         if pair is not None:
             i, j = pair
-            u = out[..., j]
-            inside = (u > 0.0) & (u < 1.0)
-            us = np.where(inside, u, 0.5)
-            logc = np.log(us) - np.log1p(-us)
+            inside, u = _open_unit(out[..., j])
+            logc = np.log(u) - np.log1p(-u)
             out[..., j] = np.where(inside, out[..., i] - math.log(self.base_length_m) - logc, np.nan)
         return out
 
@@ -237,10 +241,8 @@ class ParameterSpace:
         pair = self.base_pair()
         if pair is None:
             return np.zeros(theta.shape[:-1])
-        u = theta[..., pair[1]]
-        inside = (u > 0.0) & (u < 1.0)
-        us = np.where(inside, u, 0.5)
-        return np.where(inside, -np.log(us) - np.log1p(-us), -np.inf)
+        inside, u = _open_unit(theta[..., pair[1]])
+        return np.where(inside, -np.log(u) - np.log1p(-u), -np.inf)
 
     def to_natural(self, theta) -> dict:
         theta = self.prior_coordinates(np.atleast_2d(theta))
