@@ -224,7 +224,7 @@ def test_a_base_spring_sampled_by_its_table_coordinate_is_the_same_posterior_and
     assert fitted.doc["convergence"]["converged"], fitted.doc["convergence"]["message"]
     check = fitted.doc["table_check"]  # the force tables at the posterior median against exact solves
     assert check["n_samples"] > 50 and max(abs(v) for v in check["shift_in_sd"].values()) < 0.1
-    assert "the force tables" in check["message"]
+    assert "the likelihood tables" in check["message"]
     q = {k: np.quantile(v, [0.05, 0.95]) for k, v in fitted.samples.items()}
     assert q["EI0"][0] < 9.895 < q["EI0"][1] and q["p"][0] < 1.023 < q["p"][1]
 
@@ -506,15 +506,24 @@ def test_shape_offsets_past_a_nodes_slip_go_on_along_the_secant_of_its_last_step
     assert curves.d_end[0] > D.max() / L and np.abs(n[0, 3] - n[0, 2]).max() > 1e-4
 
 
-@pytest.mark.parametrize("effect, value, nodes", [(None, 0.0, None), ("rest_curvature", 0.3, 5)])
-def test_the_fits_table_check_is_the_mle_shift_of_noise_free_exact_forces(effect, value, nodes):
-    """table_force_check (one Gauss-Newton step from the point, forces-only Laplace sds) against its slow
-    reference, table_shift_on (the table likelihood maximised on noise-free exact forces): the plain
-    rod, and rest curvature on a 5-node axis, where the tables move the estimate by 1.5 sd (measured
-    -0.153, 1.550, -1.495 against -0.155, 1.586, -1.527)."""
+@pytest.mark.parametrize(
+    "effect, value, nodes, shapes",
+    [
+        (None, 0.0, None, False),
+        ("rest_curvature", 0.3, 5, False),
+        (None, 0.0, None, True),
+        ("rest_curvature", 0.3, 5, True),
+    ],
+)
+def test_the_fits_table_check_is_the_mle_shift_of_noise_free_exact_data(effect, value, nodes, shapes):
+    """table_check (one Gauss-Newton step from the point, Laplace sds) against its slow reference,
+    table_shift_on (the table likelihood maximised on noise-free exact forces, and centerlines): the plain
+    rod, and rest curvature on a 5-node axis, where the tables move the estimate by sds (forces only:
+    measured -0.153, 1.550, -1.495 against -0.155, 1.586, -1.527; with centerlines 5.417, 2.910, 16.60
+    against 5.427, 2.919, 16.57)."""
     from bayesrod.api.calibration import table_shift_on
     from bayesrod.dataset.simulate import NoiseModel
-    from bayesrod.inference.likelihood import build_likelihood, table_force_check
+    from bayesrod.inference.likelihood import build_likelihood, table_check
 
     L, truth = 0.9, {"EI0": 2.6, "p": 0.43}
     switched = {effect: value} if effect else {}
@@ -527,12 +536,24 @@ def test_the_fits_table_check_is_the_mle_shift_of_noise_free_exact_forces(effect
     )
     prior = load_prior("woody")
     fitted = (effect,) if effect else ()
-    lik = build_likelihood(ds, prior, fitted, use_shapes=False, n_effect=nodes)
-    got = table_force_check(lik, truth | {"sigma_force_N": 0.03} | switched)
-    ref = table_shift_on(ds, prior, truth | switched, noise=(0.03, 0.0015), n_effect=nodes)
+    lik = build_likelihood(ds, prior, fitted, use_shapes=shapes, n_effect=nodes)
+    noise = {"sigma_force_N": 0.03, "sigma_shape_m": 0.0015, "shape_sd_scale": 1.0}
+    got = table_check(lik, truth | noise | switched)
+    ref = table_shift_on(ds, prior, truth | switched, noise=(0.03, 0.0015), use_shapes=shapes, n_effect=nodes)
     shifts = np.array(list(got["shift_in_sd"].values()))
     np.testing.assert_allclose(shifts, ref["shift_in_sd"], rtol=0.05, atol=0.002)
     assert got["n_samples"] > 100 and got["max_error_over_sigma"] < (0.01 if effect is None else 1.0)
+    if shapes:  # every frame is compared: none of these pushes slips
+        assert got["n_points"] == lik.n_points and got["max_shape_error_over_sd"] < (0.01 if effect is None else 3.0)
+        # the shape term's weight (effective_shape_weight) enters: near zero, the centerlines drop out
+        lik.shape_weight = 1e-12
+        alone = table_check(
+            build_likelihood(ds, prior, fitted, use_shapes=False, n_effect=nodes), truth | noise | switched
+        )
+        weightless = table_check(lik, truth | noise | switched)["shift_in_sd"]
+        np.testing.assert_allclose(list(weightless.values()), list(alone["shift_in_sd"].values()), rtol=1e-4, atol=1e-6)
+    else:
+        assert "n_points" not in got
     if effect:
         assert np.abs(shifts).max() > 1.0  # a coarse axis is seen
 

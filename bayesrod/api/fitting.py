@@ -33,7 +33,7 @@ from ..inference.likelihood import (
     effective_shape_weight,
     geometry_blocker,
     length_is_approximate,
-    table_force_check,
+    table_check,
 )
 from ..inference.priors import load_prior
 from ..inference.sampler import convergence_message, find_start, run_ensembles
@@ -642,7 +642,7 @@ def _two_stage(spec, use_shapes: bool) -> tuple[dict | None, object]:
     return ts.to_dict(), ts.direct
 
 
-#: table_check: the largest shift [forces-only sd] the force tables may cause before a fit warns
+#: table_check: the largest shift [Laplace sd] the likelihood tables may cause before a fit warns
 TABLE_SHIFT_WARN_SD = 0.1
 
 
@@ -935,17 +935,17 @@ def fit(
         extra["model_check"]["pushes_starting_loaded"] = loaded
     if misfit:
         log.warning("warning: %s: %s", spec.specimen, extra["model_check"]["message"])
-    table_check = table_force_check(lik, median)
-    if table_check is not None:
-        extra["table_check"] = table_check
-        worst = max(abs(v) for v in table_check["shift_in_sd"].values())
+    tables = table_check(lik, median)
+    if tables is not None:
+        extra["table_check"] = tables
+        worst = max(abs(v) for v in tables["shift_in_sd"].values())
         if worst > TABLE_SHIFT_WARN_SD:
-            table_check["message"] = (
-                f"the force tables, against exact solves at the posterior median, would move the estimate by "
-                f"{worst:.2g} forces-only sd (at most {TABLE_SHIFT_WARN_SD:g} expected): the intervals are "
+            tables["message"] = (
+                f"the likelihood tables, against exact solves at the posterior median, would move the estimate "
+                f"by {worst:.2g} sd (at most {TABLE_SHIFT_WARN_SD:g} expected): the intervals are "
                 "less exact than they look; report it (docs/validation.md, 'Likelihood tables against exact solves')"
             )
-            log.warning("warning: %s: %s", spec.specimen, table_check["message"])
+            log.warning("warning: %s: %s", spec.specimen, tables["message"])
     doc = build_summary(spec, post, samples, res.diagnostics, lik.fit_error(median), effects, extra)
     not_converged = convergence_message(res, max_steps, target_ess)
     doc["convergence"]["converged"] = not_converged is None

@@ -1280,68 +1280,105 @@ class LogPosterior(PosteriorBase):
         return self.likelihood.in_table(natural)  # a tabled effect's coordinate inside its table
 
 
-def table_force_check(lik: RodLikelihood, point: dict) -> dict | None:
-    """How far the force tables lie from exact solves at one parameter point, and how far that error
-    would move the maximum-likelihood estimate, in forces-only Laplace sds.
+def table_check(lik: RodLikelihood, point: dict) -> dict | None:
+    """How far the likelihood tables lie from exact solves at one parameter point, and how far that error
+    would move the maximum-likelihood estimate, in Laplace sds.
 
     The forces the tables give at ``point`` (natural units, scalars: ``EI0``, ``p``, ``sigma_force_N``,
-    the tabled effect, offsets) are compared with exact solves (:func:`force_from_displacement_nd`) at
-    every engaged sample the point has not slipped past. With J the tables' derivatives in (log EI0,
-    p, the effect's table coordinate u, any force offsets) and delta = table - exact, data equal to the
-    exact forces would move the table MLE by -(J'J)^-1 J' delta (one Gauss-Newton step); each shift is
-    divided by its Laplace sd, sigma sqrt((J'J)^-1)_ii. Forces only, iid noise: with centerlines or an
-    AR(1) noise the posterior sd differs, and the shift is a guide, not the posterior's. The reference
-    is :func:`bayesrod.api.calibration.table_shift_on` (the MLE on noise-free exact data); tests check
-    that they agree. None where the forces are not read from the plain tables (preloads, a sampled
-    length or height errors, yield).
+    the tabled effect, offsets, and with centerlines ``shape_sd_scale`` or ``sigma_shape_m``) are
+    compared with exact solves (:func:`force_from_displacement_nd`) at every engaged sample the point has
+    not slipped past; with centerlines, each observed point's normal offset from the tabled centerline
+    (:meth:`RodLikelihood.shape_offsets`) with its offset from the exact centerline of its frame (the
+    exact force at the frame's displacement, :func:`contact_from_force_nd`, then
+    :func:`centerline_normal_offsets`), at every frame the point has not slipped past. With r the
+    residuals the likelihood whitens (forces over sigma, offsets over their sd times the square root of
+    the shape term's weight) and J their derivatives in (log EI0, p, the effect's table coordinate u, any
+    force offsets), delta = r_table - r_exact, data on the exact model would move the table MLE by
+    -(J'J)^-1 J' delta (one Gauss-Newton step); each shift is divided by its Laplace sd, sqrt((J'J)^-1)_ii.
+    Independent noise: with an AR(1) force noise the posterior sd differs, and the shift is a guide, not
+    the posterior's. The reference is :func:`bayesrod.api.calibration.table_shift_on` (the MLE on
+    noise-free exact data); tests check that they agree. None where the forces are not read from the
+    plain tables (preloads, a sampled length or height errors, yield).
 
     Returns
     -------
     dict or None
-        ``max_error_over_sigma`` (largest |table - exact| over sigma), ``shift_in_sd`` (name -> shift),
-        ``n_samples`` (samples compared).
+        ``max_error_over_sigma`` (largest |table - exact| force over sigma; None without forces),
+        ``shift_in_sd`` (name -> shift), ``n_samples`` (force samples compared), and with centerlines
+        ``max_shape_error_over_sd`` (largest |table - exact| offset over its sd) and ``n_points``.
     """
-    if not lik.n_force or lik.preload or lik.geometry or "yield" in lik.effects:
+    if lik.preload or lik.geometry or "yield" in lik.effects:
         return None
     one = {k: np.atleast_1d(np.asarray(v, float))[:1] for k, v in point.items()}
-    EI0, p, sigma = float(one["EI0"][0]), float(one["p"][0]), float(one["sigma_force_N"][0])
+    EI0, p = float(one["EI0"][0]), float(one["p"][0])
     u = lik.effect_coordinate(one)
-    f_tab = lik._interp(lik.f_table, one["p"], u)[0]  # (N,) nondimensional
     eff = {} if lik.axis is None else {k: float(v) for k, v in lik.axis.nondim(u[0]).items()}
-    d_nd = np.concatenate([d.D_m for d in lik.force_data]) / lik.L
-    exact = force_from_displacement_nd(d_nd, lik.F_height / lik.L, p, eff or None)["f"]
-    ok = np.isfinite(exact)
-    if ok.sum() < 3:
+    names = ["log EI0", "p"] + ([f"{lik.axis.name} (table coordinate u)"] if lik.axis is not None else [])
+    names += (["force_offset"] if "force_offset" in lik.effects else []) + list(lik.offset_names)
+    blocks, out = [], {"max_error_over_sigma": None, "n_samples": 0}
+
+    def steps(table: NDArray) -> list[NDArray]:  # central differences of a table in p (and u), per unit step
+        cols = []
+        for dp, du in ((1e-4, 0.0),) + (((0.0, 1e-4),) if lik.axis is not None else ()):
+            up = lik._interp(table, one["p"] + dp, None if u is None else u + du)[0]
+            dn = lik._interp(table, one["p"] - dp, None if u is None else u - du)[0]
+            cols.append((up - dn) / (2 * max(dp, du)))
+        return cols
+
+    if lik.n_force:
+        sigma = float(one["sigma_force_N"][0])
+        f_tab = lik._interp(lik.f_table, one["p"], u)[0]  # (N,) nondimensional
+        d_nd = np.concatenate([d.D_m for d in lik.force_data]) / lik.L
+        exact = force_from_displacement_nd(d_nd, lik.F_height / lik.L, p, eff or None)["f"]
+        ok = np.isfinite(exact)
+        scale = EI0 / lik.L**2
+        cols = [scale * f_tab] + [scale * c for c in steps(lik.f_table)]  # dF / d(log EI0, p, u) [N]
+        if "force_offset" in lik.effects:
+            cols.append(np.ones_like(f_tab))
+        cols += [(lik.F_push == j).astype(float) for j in range(len(lik.offset_names))]
+        # residuals are observed - model: r_table - r_exact = -(F_table - F_exact), dr = -dF
+        blocks.append((-np.column_stack(cols)[ok] / sigma, -scale * (f_tab - exact)[ok] / sigma))
+        if ok.any():
+            out["max_error_over_sigma"] = float(np.max(np.abs(scale * (f_tab - exact)[ok])) / sigma)
+        out["n_samples"] = int(ok.sum())
+    if lik.n_points:
+        sd = (lik.sd_obs * float(one["shape_sd_scale"][0])) if lik.shape_has_sd else None
+        sd = np.full(lik.n_points, float(one["sigma_shape_m"][0])) if sd is None else sd
+        o_tab = lik.shape_offsets(one["p"], u)[0]  # (k,) [m]
+        o_exact = np.full(lik.n_points, np.nan)
+        first = 0
+        for d in lik.data:
+            if not d.x_m.size:
+                continue
+            eta = d.height_m / lik.L
+            f = force_from_displacement_nd(d.frame_D_m / lik.L, eta, p, eff or None)["f"]
+            seen = np.flatnonzero(np.isfinite(f))
+            if seen.size:
+                grid = contact_from_force_nd(f[seen], eta, p, eff or None, keep_shape=True)["grid"]
+                for c, m in enumerate(seen):
+                    sel = np.flatnonzero(d.frame_index == m)
+                    o_exact[first + sel] = (
+                        lik.L
+                        * centerline_normal_offsets(grid[:, :, c : c + 1], d.x_m[sel] / lik.L, d.z_m[sel] / lik.L)[0]
+                    )
+            first += d.x_m.size
+        ok = np.isfinite(o_exact)
+        w = np.sqrt(lik.shape_weight) / sd[ok]
+        cols = [np.zeros(lik.n_points)] + steps(lik.normal_table)  # a centerline does not depend on EI0
+        cols += [np.zeros(lik.n_points)] * (len(names) - len(cols))  # nor on force offsets
+        blocks.append((np.column_stack(cols)[ok] * w[:, None], (o_tab - o_exact)[ok] * w))
+        out["max_shape_error_over_sd"] = float(np.max(np.abs(o_tab - o_exact)[ok] / sd[ok])) if ok.any() else None
+        out["n_points"] = int(ok.sum())
+    if sum(b[1].size for b in blocks) < len(names) + 1:
         return None
-    scale = EI0 / lik.L**2
-    delta = scale * (f_tab - exact)[ok]  # [N]
-    cols, names = [scale * f_tab], ["log EI0"]  # dF / d log EI0
-
-    def slope(dp: float, du: float) -> NDArray:  # [N] per unit step, central differences of the table
-        up = lik._interp(lik.f_table, one["p"] + dp, None if u is None else u + du)[0]
-        dn = lik._interp(lik.f_table, one["p"] - dp, None if u is None else u - du)[0]
-        return scale * (up - dn) / (2 * max(dp, du))
-
-    cols.append(slope(1e-4, 0.0))
-    names.append("p")
-    if lik.axis is not None:
-        cols.append(slope(0.0, 1e-4))
-        names.append(f"{lik.axis.name} (table coordinate u)")
-    if "force_offset" in lik.effects:
-        cols.append(np.ones_like(f_tab))
-        names.append("force_offset")
-    for j, n in enumerate(lik.offset_names):
-        cols.append((lik.F_push == j).astype(float))
-        names.append(n)
-    J = np.column_stack(cols)[ok] / sigma
+    J = np.concatenate([b[0] for b in blocks])
+    delta = np.concatenate([b[1] for b in blocks])
+    seen = np.flatnonzero(np.any(J != 0.0, axis=0))  # centerlines alone say nothing of EI0 or an offset
+    J = J[:, seen]
     cov = np.linalg.pinv(J.T @ J)
-    shift = -cov @ (J.T @ (delta / sigma))
-    sd = np.sqrt(np.maximum(np.diag(cov), 1e-300))
-    return {
-        "max_error_over_sigma": float(np.max(np.abs(delta)) / sigma),
-        "shift_in_sd": {n: float(v) for n, v in zip(names, shift / sd, strict=True)},
-        "n_samples": int(ok.sum()),
-    }
+    shift = -cov @ (J.T @ delta)
+    sd_theta = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+    return out | {"shift_in_sd": {names[i]: float(v) for i, v in zip(seen, shift / sd_theta, strict=True)}}
 
 
 def force_scale_fit(lik: RodLikelihood, p: float, EI0: float | None = None) -> tuple[float, float]:
