@@ -122,3 +122,32 @@ def test_demo_on_a_dataset_with_frames_extracts_then_fits(twig_frames, tmp_path,
     summary = json.loads((out / "fit" / "summary.json").read_text())
     assert summary["data"]["n_shape_points"] > 0  # the fit used the extracted centerlines
     assert abs(summary["parameters"]["EI0"]["median"] / 2.63 - 1) < 0.05
+
+
+def test_arc_length_is_not_lengthened_by_pixel_scale_wiggles():
+    """The extracted centerline's arc length (the width stations' s, the frame's length) runs along chords of
+    ARC_CHORD_PX: a quarter circle of radius 0.3 m keeps its length to 1e-4, and with a radial wiggle of 0.15 px
+    amplitude and 6 px wavelength (the smoothing spline's left-over path noise on the grass) it stays within
+    1e-3, where the finely sampled length is 0.6% long (the grass's stations ran ~1 mm ahead of the material
+    point at mid-stem, their widths read p ds / (L - s) wide: docs/validation.md)."""
+    from bayesrod.vision.extract import ARC_CHORD_PX, _arc_length
+
+    px, R = 1.2e-3, 0.3  # metres per pixel, radius [m]
+    true = 0.5 * np.pi * R
+    fine = np.linspace(0.0, true, 20001)
+
+    def circle(wiggle):
+        def spl(t):
+            r = R + wiggle * px * np.sin(2 * np.pi * t / (6 * px))
+            return np.stack([R - r * np.cos(t / R), r * np.sin(t / R)])
+
+        return spl
+
+    for wiggle, tol in ((0.0, 1e-4), (0.15, 1e-3)):
+        s = _arc_length(circle(wiggle), fine, ARC_CHORD_PX * px)
+        assert np.all(np.diff(s) >= 0) and s[0] == 0.0
+        assert abs(s[-1] / true - 1) < tol, (wiggle, s[-1] / true - 1)
+        mid = np.interp(0.5 * true, fine, s)
+        assert abs(mid / (0.5 * true) - 1) < tol  # along the whole curve, not only at its end
+    xf, zf = circle(0.15)(fine)
+    assert np.sum(np.hypot(np.diff(xf), np.diff(zf))) / true - 1 > 0.005  # what the fine sampling read
