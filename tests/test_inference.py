@@ -469,11 +469,15 @@ def test_a_checkpoint_of_a_base_spring_run_in_log_k_is_refused_and_other_runs_st
     _check_checkpoint(path, plain)  # a run without a base spring still resumes
 
 
-def test_shape_offsets_past_a_nodes_slip_go_on_along_the_secant_of_its_last_step():
+@pytest.mark.parametrize("mu", [None, 0.3])
+def test_shape_offsets_past_a_nodes_slip_go_on_along_the_secant_of_its_last_step(mu):
     """Past a p node's branch end d_end the shape tables go on linearly in the contact displacement, along
     the secant of the last step (min(SHAPE_END_STEP, d_end / 2)) before it, as the forces go on along
     their end tangent (``RodLikelihood._shape_table``): frames of the same points at d_end - step, d_end
-    and past it, at a node whose slip comes before the data's."""
+    and past it, at a node whose slip comes before the data's. With contact friction (mu 0.3) the branch
+    ends with the force still rising (end slope 4-17 in f per unit d here, ~0 for the plain rod's fold),
+    and a shape past it is the one at the end force, never one solved at the force the curve's tangent
+    continues to (``ForceCurves.force(continued=False)``)."""
     from bayesrod.dataset.simulate import NoiseModel
     from bayesrod.inference.likelihood import SHAPE_END_STEP, ForceCurves, PushData
 
@@ -487,10 +491,11 @@ def test_shape_offsets_past_a_nodes_slip_go_on_along_the_secant_of_its_last_step
     lik = RodLikelihood(ds, p_range=(0.0, 1.5), n_p=13)
     (d,) = lik.data
     eta = d.height_m / L
-    curves = ForceCurves(eta, lik.p_grid)
-    i = 10  # p 1.25: its slip (d_end 0.50) comes before the data's last frames (0.70)
+    curves = ForceCurves(eta, lik.p_grid, effects_nd=None if mu is None else {"mu": mu})
+    i = 10  # p 1.25: its slip (d_end 0.50; with friction 0.15) comes before the data's last frames (0.70)
     de = curves.d_end[i]
     assert de < d.frame_D_m.max() / L
+    assert (curves.end_slope[i] > 1.0) if mu else (curves.end_slope[i] < 0.1)
     step = min(SHAPE_END_STEP, 0.5 * de)
     last = d.frame_index == d.frame_index.max()
     x, z, k = d.x_m[last], d.z_m[last], int(last.sum())
@@ -502,8 +507,8 @@ def test_shape_offsets_past_a_nodes_slip_go_on_along_the_secant_of_its_last_step
     assert np.abs(n[i, 1] - n[i, 0]).max() > 1e-5  # the shape still moves over the last step
     for j, a in enumerate(past, start=2):
         np.testing.assert_allclose(n[i, j], n[i, 1] + a * L * slope, rtol=0, atol=1e-12)
-    # a node that has not slipped reads each frame's own shape: no two frames alike
-    assert curves.d_end[0] > D.max() / L and np.abs(n[0, 3] - n[0, 2]).max() > 1e-4
+    if mu is None:  # a node that has not slipped reads each frame's own shape: no two frames alike
+        assert curves.d_end[0] > D.max() / L and np.abs(n[0, 3] - n[0, 2]).max() > 1e-4
 
 
 @pytest.mark.parametrize(
