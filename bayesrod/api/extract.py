@@ -165,7 +165,16 @@ def extract(dataset, *, progress: bool = True, width_colour_model: str = "auto")
     from tqdm.auto import tqdm
 
     from ..vision.extract import ExtractionError, extract_frame
-    from ..vision.width import SPACING_PX, ColourChoice, choose_colour_model, combine_profiles, width_profile
+    from ..vision.width import (
+        BLUR_RATIO_OK,
+        BLUR_WARN_SCALE_SD,
+        SPACING_PX,
+        ColourChoice,
+        blur_scale_sd,
+        choose_colour_model,
+        combine_profiles,
+        width_profile,
+    )
     from ._common import as_dataset, progress_enabled
 
     spec = as_dataset(dataset)
@@ -252,8 +261,21 @@ def extract(dataset, *, progress: bool = True, width_colour_model: str = "auto")
             "contrast_scale": {
                 "median": float(np.median([w.contrast_scale for w in widths])),
                 "sd": float(np.std([w.contrast_scale for w in widths])),
+                # the contrast fit's blur over the width of the profiles it read: above BLUR_RATIO_OK the
+                # contrast, and every narrow station's width, is weakly determined (vision.width)
+                "blur_over_width": None if not np.isfinite(diameters.blur_over_width) else diameters.blur_over_width,
             },
+            "shared_scale_sd": diameters.shared_scale_sd,
         }
+        if blur_scale_sd(diameters.blur_over_width) >= BLUR_WARN_SCALE_SD:
+            blurred = (
+                f"the lens's blur is {diameters.blur_over_width:.2f} of the width of the narrow stations the stem's "
+                f"colour contrast is read from (at most {BLUR_RATIO_OK:g} reads it well): their widths may read "
+                f"several per cent narrow (Young's modulus high by four times that); every width now shares a scale "
+                f"error of sd {100 * diameters.shared_scale_sd:.1f}% (docs/validation.md, 'Blur against width')"
+            )
+            report["diameters"]["warning"] = blurred
+            log.warning("warning: %s: %s", spec.specimen, blurred)
         log.info("diameter profile: %d of %d stations measured", int(diameters.ok.sum()), diameters.s_m.size)
     report = plain_json(report)
     return Extraction(spec, MappingProxyType(columns), MappingProxyType(report), MappingProxyType(examples), diameters)

@@ -84,6 +84,24 @@ AREA_N_MAX = 40
 #: edge) on pixels behind the plane's depth band add up to CLUTTER_PX [px] or more
 CLUTTER_COVERAGE = 0.75
 CLUTTER_PX = 0.5
+#: the contrast is read from the shapes of profiles a few pixels wide (:func:`contrast_scale`); where the
+#: lens's blur is a large share of their width, the shape hardly depends on the contrast and a misfit of a
+#: fraction of a grey level moves it: a synthetic 3.3-px stem under a Gaussian blur of sd 0.6, 0.8, 1.0 and
+#: 1.2 px read -0.0%, -2.1%, -3.6%, -5.0% narrow at ratios (below) of 0.30, 0.38, 0.46, 0.54, and a 5-px
+#: stem within +0.8% at 0.21-0.37 (docs/validation.md, "Blur against width"). The ratio of the fitted blur to
+#: the median width of the profiles it read: at or below BLUR_RATIO_OK the widths are read as measured; above
+#: it every station shares a scale error of sd BLUR_SCALE_SD_SLOPE x (ratio - BLUR_RATIO_OK) (:func:`blur_scale_sd`,
+#: added in combine_profiles: about the 3.3-px stem's error), and extract warns from BLUR_WARN_SCALE_SD on
+BLUR_RATIO_OK = 0.3
+BLUR_SCALE_SD_SLOPE = 0.21
+#: extract warns when the blur's scale error reaches this sd (the rendered grass sits at ratio 0.30)
+BLUR_WARN_SCALE_SD = 0.01
+
+
+def blur_scale_sd(ratio: float) -> float:
+    """Relative sd of the scale error every station shares when the contrast fit's blur is ``ratio`` of the
+    width of the profiles it read (0 at or below :data:`BLUR_RATIO_OK`, and where no ratio was read)."""
+    return BLUR_SCALE_SD_SLOPE * max(ratio - BLUR_RATIO_OK, 0.0) if np.isfinite(ratio) else 0.0
 
 
 @dataclass(frozen=True)
@@ -93,7 +111,8 @@ class WidthProfile:
     ``width_m`` and ``sd_m`` (k,) [m]; ``width_px`` (k,) [px]; ``flag`` (k,) str from :data:`FLAGS`
     (only ``"ok"`` stations are measurements); ``uv`` (k, 2) the stations' pixels; ``contrast_scale`` the
     factor the widths of stations too narrow for a core colour of their own were divided by
-    (:func:`contrast_scale`; 1 where none).
+    (:func:`contrast_scale`; 1 where none); ``blur_over_width`` that fit's blur sd over the median width of
+    the profiles it read (NaN where none: :func:`contrast_fit`).
     """
 
     s_m: NDArray
@@ -103,6 +122,7 @@ class WidthProfile:
     flag: NDArray
     uv: NDArray
     contrast_scale: float = 1.0
+    blur_over_width: float = float("nan")
 
 
 def _sample(img: NDArray, pts: NDArray) -> NDArray:
@@ -258,17 +278,18 @@ def width_profile(
         elif s_m[i] * np.sqrt(fx * fy) / Z < 3 * max(2 * half_mask[i], 1.0) + 2:
             flag[i] = "base"
 
-    def borrowed_scale() -> float:
-        """The contrast scale of the ok stations that borrowed the frame's colour (1 without any)."""
+    def borrowed_fit() -> ContrastFit:
+        """The contrast fit of the ok stations that borrowed the frame's colour (scale 1 without any)."""
         borrowed = [i for i in profiles if not own_core[i] and flag[i] == "ok"]
-        return contrast_scale([profiles[i] for i in borrowed], s_m[borrowed]) if borrowed else 1.0
+        return contrast_fit([profiles[i] for i in borrowed], s_m[borrowed]) if borrowed else ContrastFit()
 
     for i in range(k):
         measure(i, None if own_core[i] else frame_stem)
     # stations without a core of their own used the frame's stem colour, which on a stem a few pixels wide
     # is still mixed with the background (blur): their coverage is scaled by the contrast the profiles'
     # shapes imply (:func:`contrast_scale`)
-    scale = borrowed_scale()
+    fit = borrowed_fit()
+    scale = fit.scale
     if pick_bg is not None and scale != 1.0:
         # the picked colour c is a mix m stem + (1 - m) b with the background b beside the pick, and the scale
         # is 1 / m: the pure colour is b + scale (c - b). Against a background other than b the mixed colour's
@@ -277,7 +298,8 @@ def width_profile(
         stem_pure = np.median(pick_bg + scale * (pick_rgb - pick_bg), axis=0)
         for i in np.flatnonzero(~own_core):
             measure(i, stem_pure)
-        scale = borrowed_scale()
+        fit = borrowed_fit()
+        scale = fit.scale
     width_px[~own_core] /= scale
     sd_px[~own_core] /= scale
     return WidthProfile(
@@ -288,6 +310,7 @@ def width_profile(
         flag=flag.astype(str),
         uv=np.column_stack([u, v]),
         contrast_scale=float(scale),
+        blur_over_width=fit.blur_px / fit.width_px if fit.width_px > 0 else float("nan"),
     )
 
 
@@ -388,9 +411,26 @@ def _blurred_box(t: NDArray, w: NDArray, sigma: float) -> NDArray:
     return ndtr((t + w / 2) / sigma) - ndtr((t - w / 2) / sigma)
 
 
+@dataclass(frozen=True)
+class ContrastFit:
+    """What :func:`contrast_fit` read: the contrast ``scale``, the blur's sd ``blur_px`` [px] and the median
+    width ``width_px`` [px] (integral / scale) of the profiles it read; NaN blur and width where it read none."""
+
+    scale: float = 1.0
+    blur_px: float = float("nan")
+    width_px: float = float("nan")
+
+
 def contrast_scale(
     profiles: list, s: NDArray, n_max: int = AREA_N_MAX, *, loss: str = "soft_l1", f_scale: float = 0.1
 ) -> float:
+    """The contrast scale of :func:`contrast_fit` (its ``scale``)."""
+    return contrast_fit(profiles, s, n_max, loss=loss, f_scale=f_scale).scale
+
+
+def contrast_fit(
+    profiles: list, s: NDArray, n_max: int = AREA_N_MAX, *, loss: str = "soft_l1", f_scale: float = 0.1
+) -> ContrastFit:
     """Contrast of the true stem colour relative to the assumed one, from the shapes of narrow profiles.
 
     Each profile (t, a) of coverage against the assumed colour is modelled as ``k * box(w_i) *
@@ -399,8 +439,9 @@ def contrast_scale(
     spread, so only ``k`` and the centres are fitted; robust least squares over the ``n_max`` widest clean
     profiles, :func:`_clean_profiles`). With each profile's width free as well (the fit before 2026-11-26)
     width and contrast traded off, and on the rendered grass the scale came out 2-12% low, most on frames
-    with clutter near the stem (docs/validation.md). Returns 1 when fewer than 5 clean profiles are
-    ``MIN_AREA_PX`` or wider (no shape to read the contrast from).
+    with clutter near the stem (docs/validation.md). Returns scale 1 (and no blur) when fewer than 5 clean
+    profiles are ``MIN_AREA_PX`` or wider (no shape to read the contrast from). Where the blur is a large
+    share of the profiles' width the scale is weakly determined (:data:`BLUR_RATIO_OK`).
 
     Parameters
     ----------
@@ -419,7 +460,7 @@ def contrast_scale(
     order = np.argsort(trend)[::-1]
     use = [i for i in order if clean[i] and trend[i] >= MIN_AREA_PX][:n_max]
     if len(use) < 5:
-        return 1.0
+        return ContrastFit()
     n = len(use)
     t_all = np.concatenate([profiles[i][0] for i in use])
     y_all = np.concatenate([profiles[i][1] for i in use])
@@ -445,7 +486,10 @@ def contrast_scale(
         f_scale=f_scale,
         jac_sparsity=sparsity,
     )
-    return float(np.exp(fit.x[0])) if fit.success else 1.0
+    if not fit.success:
+        return ContrastFit()
+    k = float(np.exp(fit.x[0]))
+    return ContrastFit(k, float(np.exp(fit.x[1])), float(np.median(area)) / k)
 
 
 def _coverage_integrals(profiles: list) -> NDArray:
@@ -525,8 +569,10 @@ class DiameterProfile:
     they were ``ok`` but too few; ``unresolved`` where their median width is not above zero: a tip
     thinner than the width's noise). ``shared_offset_sd_m`` [m] and ``shared_scale_sd`` (relative): the
     sd of an offset and of a scale error that every station shares (:data:`OFFSET_SD_PX` pixels at the
-    stem's distance; the camera's ``depth_scale_sd`` and the standard error of the frames' mean contrast
-    scale, added in quadrature), which no number of stations averages down.
+    stem's distance; the camera's ``depth_scale_sd``, the standard error of the frames' mean contrast
+    scale and the blur's share of the width (:data:`BLUR_RATIO_OK`), added in quadrature), which no number
+    of stations averages down. ``blur_over_width``: the frames' median of the contrast fit's blur over the
+    width of the profiles it read (NaN where no frame read one).
     """
 
     s_m: NDArray
@@ -536,6 +582,7 @@ class DiameterProfile:
     flag: NDArray
     shared_offset_sd_m: float = 0.0
     shared_scale_sd: float = 0.0
+    blur_over_width: float = float("nan")
 
     @property
     def ok(self) -> NDArray:
@@ -699,6 +746,10 @@ def combine_profiles(
     # docs/validation.md.)
     n_frames = len(profiles)
     contrast_sd = float(np.std([wp.contrast_scale for wp in profiles])) / np.sqrt(n_frames) if n_frames > 1 else 0.0
+    # a blur wide against the stem leaves the contrast weakly determined, the same way in every frame
+    ratios = np.array([wp.blur_over_width for wp in profiles], float)
+    ratio = float(np.median(ratios[np.isfinite(ratios)])) if np.isfinite(ratios).any() else float("nan")
+    blur_sd = blur_scale_sd(ratio)
     return DiameterProfile(
         s_m=s_m,
         d_m=d,
@@ -706,5 +757,6 @@ def combine_profiles(
         n_frames=n.astype(int),
         flag=flag.astype(str),
         shared_offset_sd_m=offset_sd,
-        shared_scale_sd=float(np.hypot(depth_scale_sd, contrast_sd)),
+        shared_scale_sd=float(np.linalg.norm([depth_scale_sd, contrast_sd, blur_sd])),
+        blur_over_width=ratio,
     )
