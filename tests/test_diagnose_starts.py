@@ -174,9 +174,10 @@ def test_the_heldout_gate_runs_in_decreasing_likelihood_ratio_and_keeps_the_firs
 
 
 def test_the_loop_gates_held_out_in_ratio_order_and_adds_the_first_that_passes(monkeypatch):
-    # plumbing of the loop: three candidates pass the likelihood ratio (LR 10, 30, 20); the held-out gate
-    # fails the largest and passes the next, which is added; the smallest is never held out
-    lrs = {"force_offset": 10.0, "yield": 30.0, "base_compliance": 20.0}
+    # plumbing of the loop: three candidates pass the likelihood ratio (LR 18, 30, 20); the held-out gate
+    # fails the largest and passes the next, which is added; the smallest is never held out, and is named as
+    # an alternative the data do not tell apart (LR within 2 ln 10), the rejected larger one is not
+    lrs = {"force_offset": 18.0, "yield": 30.0, "base_compliance": 20.0}
 
     def candidate_lr(dg, cur, effects, starts, grid, level, dof, L):
         return {"lr_statistic": lrs[effects[0]], "fitted": {}}, _fake_fit(effects)
@@ -202,6 +203,8 @@ def test_the_loop_gates_held_out_in_ratio_order_and_adds_the_first_that_passes(m
     assert rows["base_compliance"]["selected"] and rows["yield"]["rejected_because"] == "held-out error not reduced"
     assert rows["force_offset"]["heldout_not_run"] and not rows["yield"].get("heldout_not_run")
     assert rows["force_offset"]["rejected_because"] == "a better-fitting effect was added"
+    assert r["alternatives"] == {"base_compliance": ["force_offset"]}
+    assert rows["force_offset"]["indistinguishable_from_added"] and "indistinguishable_from_added" not in rows["yield"]
 
 
 def test_the_likelihood_ratio_gate_of_a_candidate(monkeypatch):
@@ -240,3 +243,25 @@ def test_the_likelihood_ratio_gate_of_a_candidate(monkeypatch):
     assert row["lr_statistic"] == 0.0 and row["rejected_because"] == "likelihood ratio below the threshold"
     row, _ = D._candidate_lr(FakeDiagnoser(4.0), cur, ("force_offset",), [0.1], None, 1e-3, 1, 0.9)
     assert row["rejected_because"] == "the fit stayed below the current model"
+
+
+def test_candidates_the_data_cannot_tell_from_the_added_one_are_named():
+    """Forces alone hardly tell a rest curvature from a base tilt (the AR study's twig, seed 20: likelihood-
+    ratio statistics 48.70 and 48.79, tilt added). Every candidate of the round within ALTERNATIVE_LR (2 ln 10)
+    of the added one's statistic is named; one further below, or the added row itself, is not."""
+    from bayesrod.report.html import alternatives_text
+
+    added = {"effect": "base_tilt", "lr_statistic": 48.79}
+    rows = [
+        added,
+        {"effect": "rest_curvature", "lr_statistic": 48.70},
+        {"effect": "force_offset", "lr_statistic": 48.79 - 4.5},
+        {"effect": "yield", "lr_statistic": 48.79 - 4.7},
+    ]
+    passed = [((r["effect"],), r, None) for r in rows]
+    near = D._alternatives(passed, added)
+    assert [r["effect"] for r in near] == ["rest_curvature", "force_offset"]
+    assert D.ALTERNATIVE_LR == pytest.approx(2 * np.log(10))
+    text = alternatives_text({"base_tilt": ["rest_curvature", "force_offset"], "yield": []})
+    assert text.startswith("base_tilt fits these data no better than rest_curvature or force_offset")
+    assert alternatives_text({"yield": []}) == ""

@@ -1103,6 +1103,7 @@ def parse_candidates(text: str):
 def cmd_diagnose(args: argparse.Namespace) -> int:
     from ..api import diagnose
     from ..inference.diagnose import CATALOG
+    from ..report.html import alternatives_text
 
     out = _prepare_out(args)
     cands = CATALOG
@@ -1128,6 +1129,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         return 0
     b, a = doc["before"], doc["after"]
     print(f"added effects: {', '.join(doc['added_effects']) or 'none'}")
+    if alt := alternatives_text(doc.get("alternatives", {})):
+        print(f"  {alt.strip()}")
     if doc["fitted"].get("preload_m"):
         print(f"  preload per push [mm]: {', '.join(f'{1000 * v:.3g}' for v in doc['fitted']['preload_m'])}")
     if doc["settings"]["length"] == "unknown":

@@ -102,6 +102,11 @@ MAX_NODES = 32  # force solves per push and parameter set; other samples read of
 P_MAX = 3.0  # the taper exponent's upper bound: the priors' (priors/*.json truncate p to [0, 3]) and the tables'
 RHO_MAX = 0.99  # AR(1) correlation of the force noise is estimated in [-0.5, RHO_MAX]
 BLOCK_TRAIN = 2.0 / 3.0  # one push: the first two thirds of its samples fit, the last third is held out
+#: a candidate of the round an effect was added in whose likelihood ratio falls short of the added one's by
+#: less than this (2 ln 10: a likelihood ratio of 10 between the two models, the same number of parameters)
+#: is an alternative these data do not tell apart (forces alone: rest curvature 0.3 1/m and a base tilt of
+#: 0.076 rad on the twig, seed 20, likelihood-ratio statistics 48.70 and 48.79; docs/diagnose.md)
+ALTERNATIVE_LR = 2.0 * np.log(10.0)
 
 
 def _scale_fit(g: NDArray, F: NDArray) -> tuple[NDArray, NDArray]:
@@ -1416,6 +1421,18 @@ def _heldout_gate(dg, cur, new, row, before_errs, before_rmse, min_gain, heldout
     return new, err, errs
 
 
+def _alternatives(passed: list[tuple], added: dict) -> list[dict]:
+    """The rows of ``passed`` ((effects, row, fit) past the likelihood ratio in the round the row ``added``
+    was accepted in) whose likelihood-ratio statistic falls short of ``added``'s by less than
+    :data:`ALTERNATIVE_LR`: models these data do not tell apart from the one added. A row the held-out gates
+    rejected is not one (its ratio may be larger: the held-out refits said no)."""
+    return [
+        t
+        for _, t, _ in passed
+        if t is not added and "rejected_because" not in t and added["lr_statistic"] - t["lr_statistic"] < ALTERNATIVE_LR
+    ]
+
+
 def _first_passing(candidates: list[tuple], gate) -> tuple | None:
     """The candidate with the largest likelihood ratio among those ``gate`` passes.
 
@@ -1525,6 +1542,7 @@ def _loop(
     before, cur_errs = dg.errors(cur, pool)
     before_struct = dg.structure(cur, ratio=structure_ratio)
     added: list[str] = []
+    alternatives: dict[str, list[str]] = {}  # added effect (or pair "a+b") -> candidates the data do not tell apart
     rows: list[dict] = []
     history = [{"effects": [], "errors": before, "loglik": cur.loglik}]
 
@@ -1609,6 +1627,10 @@ def _loop(
             break
         effs, (cur, err, cur_errs), trow = accepted
         trow["selected"] = True
+        near = _alternatives(passed, trow)
+        for t in near:
+            t["indistinguishable_from_added"] = True
+        alternatives["+".join(effs)] = [t["effect"] for t in near]
         for t in rows:
             if t.get("round") == rnd and "lr_statistic" in t and not t["selected"] and "rejected_because" not in t:
                 t["rejected_because"] = "a better-fitting effect was added"
@@ -1621,6 +1643,7 @@ def _loop(
     struct = dg.structure(cur, ratio=structure_ratio)
     return {
         "added_effects": added,
+        "alternatives": alternatives,
         "candidates": rows,
         "before": before,
         "after": after,

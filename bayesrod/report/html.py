@@ -23,6 +23,18 @@ _STYLE = (
 esc = html.escape
 
 
+def alternatives_text(alternatives: dict) -> str:
+    """One sentence per added effect that the data do not tell apart from other candidates ('' if none)."""
+    out = []
+    for added, alts in alternatives.items():
+        if alts:
+            out.append(
+                f"{added} fits these data no better than {' or '.join(alts)} (likelihood ratios within a factor 10): "
+                "they cannot tell them apart; a push at another height or the centerlines may. "
+            )
+    return "".join(out)
+
+
 def page(title: str, body: str, img_max_width: str = "520px") -> str:
     """A self-contained HTML document with the shared style and a generator line."""
     return (
@@ -209,6 +221,7 @@ def diagnose_report(doc: dict, pngs: Mapping[str, bytes]) -> str:
         else "No material residual structure remains."
     )
     added = ", ".join(doc["added_effects"]) or "none"
+    alt = alternatives_text(doc.get("alternatives", {}))
     nz = doc.get("noise", {})
     noise = (
         f"AR(1) force noise per push, rho = {nz['rho_force']:.3f}, marginal sd {nz['sigma_force_N']:.3g} N"
@@ -218,7 +231,7 @@ def diagnose_report(doc: dict, pngs: Mapping[str, bytes]) -> str:
     truth = doc.get("truth")
     truth_html = f"<p>Simulated; the truth: {esc(json.dumps(truth))}</p>" if truth else ""
     body = f"""<h1>Diagnosis: {esc(doc["specimen"])}</h1>
-<p>Effects added: <b>{esc(added)}</b>. {verdict}</p>
+<p>Effects added: <b>{esc(added)}</b>. {esc(alt)}{verdict}</p>
 <p>Fitted after: {esc(json.dumps({k: _rounded(v) for k, v in doc["fitted"].items()}))}</p>
 <h2>Error before and after</h2>
 <table><tr><th>error</th><th>plain rod</th><th>after</th></tr>{err}</table>
