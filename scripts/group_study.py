@@ -38,9 +38,10 @@ FIELDS += [f"D_{c}_{k}" for c in RATIOS for k in ("med", "q05", "q95", "cover")]
 FIELDS += ["prob_cut3_softer", "sharing", "rmse_joint", "rmse_separate", "apparent_drop_cut3", "rhat", "seconds"]
 
 
-def replicate_data(rep: int, kind: str, heights) -> tuple:
-    """The datasets of replicate ``rep`` (``kind`` base: the anchorage changes; stem: the stem softens),
-    its EI0 and p, and each cut's true base compliance."""
+def stem(rep: int, kind: str = "base") -> tuple[float, float, dict, dict]:
+    """Replicate ``rep``'s stem and anchorage (``kind`` base: the anchorage changes; stem: it does not):
+    EI0, p, the conditions (name -> base spring [N m/rad], inf: a clamp) and each cut's true base
+    compliance [rad/(N m)]."""
     rng = np.random.default_rng(1000 + rep)
     EI0 = 2.63 * math.exp(0.3 * rng.standard_normal())
     p = float(rng.uniform(0.3, 0.6))
@@ -52,6 +53,13 @@ def replicate_data(rep: int, kind: str, heights) -> tuple:
         kb = kx * H_REF**2 * r / (1.0 - r)
         conds[c] = kb if kind == "base" else math.inf
         truth_C[c] = 1.0 / kb if kind == "base" else 0.0
+    return EI0, p, conds, truth_C
+
+
+def replicate_data(rep: int, kind: str, heights) -> tuple:
+    """The datasets of replicate ``rep`` (``kind`` base: the anchorage changes; stem: the stem softens),
+    its EI0 and p, and each cut's true base compliance."""
+    EI0, p, conds, truth_C = stem(rep, kind)
     change = {"cut2": 0.7, "cut3": 0.7} if kind == "stem" else None
     dss = bayesrod.simulate_group(
         "twig",

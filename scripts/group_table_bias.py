@@ -9,29 +9,18 @@ posterior sd in that study is about 0.25%, so a MAP off by much less than that r
 as the cause of the study's misses.
 """
 
-import math
 import sys
 import time
 
-import numpy as np
+from group_study import stem
 
 import bayesrod
 from bayesrod.dataset.simulate import NoiseModel
 from bayesrod.inference.group import GroupLikelihood, GroupPosterior, start_point
 from bayesrod.inference.priors import load_prior
-from bayesrod.physics import k_x
 
-L, H_REF = 0.80, 0.55
-RATIOS = {"cut1": 0.88, "cut2": 0.64, "cut3": 0.49}
 for rep in [int(a) for a in sys.argv[1:]]:
-    rng = np.random.default_rng(1000 + rep)  # the draws of scripts/group_study.py's replicate
-    EI0 = 2.63 * math.exp(0.3 * rng.standard_normal())
-    p = float(rng.uniform(0.3, 0.6))
-    kx = float(k_x(H_REF, EI0, p, L))
-    conds = {"intact": math.inf}
-    for c, r in RATIOS.items():
-        r = r + float(rng.uniform(-0.04, 0.04))
-        conds[c] = kx * H_REF**2 * r / (1.0 - r)
+    EI0, p, conds, _ = stem(rep)  # scripts/group_study.py's replicate
     over = {"n_frames_engaged": 2, "EI0": EI0, "p": p, "noise": NoiseModel.none()}
     dss = bayesrod.simulate_group("twig", conditions=conds, seed=rep, heights_m=[0.45, 0.65], config_overrides=over)
     t = time.time()
