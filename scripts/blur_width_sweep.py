@@ -2,26 +2,24 @@
 
     python scripts/blur_width_sweep.py [--widths 3.27 5 8] [--blurs 0.6 0.8 1.0 1.2] [--seeds 0 1 2]
 
-The synthetic stem of tests/test_width.py (``_synthetic``: a gently curved stem of base width w0 px
-tapering with p 1.6 on a flat background, noise 3 levels) blurred by a Gaussian lens of each sd, then a
-disk of radius 1.5 px and a 3 x 3 box on the first width; ``bayesrod.vision.width.width_profile`` on each
-seed. Prints per case the stations' median relative error against the drawn width (mean over seeds), the
-contrast fit's blur over the profiles' width (``WidthProfile.blur_over_width``, median over seeds) and the
-scale error sd the extraction then declares (``blur_scale_sd``). About a second per image.
+The synthetic stem of the width tests (``bayesrod.vision.render.synthetic_stem_frame``: a gently curved
+stem of base width w0 px tapering with p 1.6 on a flat background, noise 3 levels) blurred by a Gaussian
+lens of each sd, then a disk of radius 1.5 px and a 3 x 3 box on the first width;
+``bayesrod.vision.width.width_profile`` on each seed. Prints per case the stations' median relative error
+against the drawn width (mean over seeds), the contrast fit's blur over the profiles' width
+(``WidthProfile.blur_over_width``, median over seeds) and the scale error sd the extraction then declares
+(``blur_scale_sd``). About a second per image.
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 
 import cv2
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bayesrod.vision.width import blur_scale_sd, width_profile  # noqa: E402
-from tests.test_width import F, _synthetic  # noqa: E402
+from bayesrod.vision.render import SYNTHETIC_CAMERA, synthetic_stem_frame
+from bayesrod.vision.width import blur_scale_sd, width_profile
 
 
 def _disk(r: float) -> np.ndarray:
@@ -35,15 +33,14 @@ def _disk(r: float) -> np.ndarray:
 
 def case(w0: float, seeds, lens) -> tuple[float, float]:
     """(mean stations' median relative error, median blur / width) over ``seeds``."""
-    cam = {"fx": F, "fy": F, "base_px": [128, 441.6]}
     errors, ratios = [], []
     for seed in seeds:
         if isinstance(lens, float):
-            img, line, truth = _synthetic(w0, 1.6, 3.0, seed, blur=lens)
+            img, line, truth = synthetic_stem_frame(w0, 1.6, 3.0, seed, blur=lens)
         else:  # another lens: the synthetic's own 0.6-px blur is replaced by it
-            img, line, truth = _synthetic(w0, 1.6, 3.0, seed, blur=1e-3)
+            img, line, truth = synthetic_stem_frame(w0, 1.6, 3.0, seed, blur=1e-3)
             img = lens(img)
-        wp = width_profile(img, None, line, cam)
+        wp = width_profile(img, None, line, SYNTHETIC_CAMERA)
         ok = wp.flag == "ok"
         errors.append(np.median(wp.width_px[ok] / truth(wp.s_m[ok]) - 1.0))
         ratios.append(wp.blur_over_width)

@@ -7,7 +7,6 @@ import functools
 import json
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pytest
 
@@ -15,12 +14,12 @@ import bayesrod
 from bayesrod.dataset.model import Diameters
 from bayesrod.dataset.reader import read_dataset, validate_dataset
 from bayesrod.inference.likelihood import RodLikelihood
-from bayesrod.vision.extract import Centerline
-from bayesrod.vision.render import stem_coverage
+from bayesrod.vision.render import STEM_RGB, SYNTHETIC_BG_RGB, SYNTHETIC_DEPTH_M, stem_coverage
+from bayesrod.vision.render import synthetic_stem_frame as _synthetic
 from bayesrod.vision.width import WidthProfile, combine_profiles, width_profile
 
-F, Z = 600.0, 0.734
-BG, STEM = np.array([155.0, 168.0, 146.0]), np.array([112.0, 118.0, 62.0])
+F, Z = 600.0, SYNTHETIC_DEPTH_M  # the synthetic frame's camera (bayesrod.vision.render.SYNTHETIC_CAMERA)
+BG, STEM = SYNTHETIC_BG_RGB, STEM_RGB
 
 
 def test_rendered_coverage_sums_to_the_drawn_width_for_every_width():
@@ -39,28 +38,6 @@ def test_rendered_coverage_sums_to_the_drawn_width_for_every_width():
         for off in (0.0, 0.25, 0.5):
             a = stem_coverage(np.full(50, 100.0 + off), np.linspace(400, 100, 50), np.full(50, w0), (480, 640))
             assert a[250].sum() == pytest.approx(w0, abs=1e-3), (w0, off, a[250].sum())
-
-
-def _synthetic(
-    w0: float, p: float, noise: float, seed: int = 1, shaded: bool = False, ramp: float = 0.0, blur: float = 0.6
-):
-    """A gently curved stem of width w0 (1 - s/L)^p [px] on a flat background, blurred like a camera
-    (Gaussian of sd ``blur`` [px]; the renderer's 3 x 3 kernel at 0.6); ``shaded``: a round stem lit from
-    the camera, its colour falling to 55% of the core's at the limbs; ``ramp``: the background brightens by
-    this many levels from the bottom of the image to the top."""
-    H, W, n = 480, 640, 400
-    s = np.linspace(0, 0.4, n)
-    x, z = 0.15 * s**2, s
-    u, v = 128 + F * x / Z, 441.6 - F * z / Z
-    wpx = w0 * (1 - s / 0.47) ** p
-    a, limb = stem_coverage(u, v, wpx, (H, W), return_limb=True)
-    rng = np.random.default_rng(seed)
-    img = BG + rng.normal(0, noise, (H, W, 3)) + ramp * (1 - np.arange(H) / H)[:, None, None]
-    col = STEM * ((0.55 + 0.45 * limb)[..., None] if shaded else 1.0)
-    img = img * (1 - a[..., None]) + col * a[..., None]
-    img = cv2.GaussianBlur(np.clip(img, 0, 255).astype(np.uint8), (3, 3) if blur == 0.6 else (0, 0), blur)
-    line = Centerline(x, z, np.full(n, 1e-4), s, np.zeros((0, 2)), a > 0.5, a > 0.5, Z, 0.4, np.ones(n, bool))
-    return img, line, (lambda ss: np.interp(ss, s, wpx))
 
 
 @pytest.mark.parametrize("w0", [3.27, 8.0])

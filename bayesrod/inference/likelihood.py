@@ -1342,8 +1342,10 @@ def table_check(lik: RodLikelihood, point: dict) -> dict | None:
             out["max_error_over_sigma"] = float(np.max(np.abs(scale * (f_tab - exact)[ok])) / sigma)
         out["n_samples"] = int(ok.sum())
     if lik.n_points:
-        sd = (lik.sd_obs * float(one["shape_sd_scale"][0])) if lik.shape_has_sd else None
-        sd = np.full(lik.n_points, float(one["sigma_shape_m"][0])) if sd is None else sd
+        if lik.shape_has_sd:  # each point's sd, as the likelihood reads it
+            sd = lik.sd_obs * float(one["shape_sd_scale"][0])
+        else:
+            sd = np.full(lik.n_points, float(one["sigma_shape_m"][0]))
         o_tab = lik.shape_offsets(one["p"], u)[0]  # (k,) [m]
         o_exact = np.full(lik.n_points, np.nan)
         first = 0

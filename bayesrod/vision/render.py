@@ -121,6 +121,47 @@ def stem_coverage(u, v, width_px, shape, step_px: float = 0.2, return_limb: bool
     return alpha, limb
 
 
+#: the synthetic width scene of :func:`synthetic_stem_frame`: its camera (focal length [px], base pixel), the
+#: bending plane's depth [m] and the flat background's colour
+SYNTHETIC_CAMERA = {"fx": FOCAL, "fy": FOCAL, "base_px": [128.0, 441.6]}
+SYNTHETIC_DEPTH_M = 0.734
+SYNTHETIC_BG_RGB = np.array([155.0, 168.0, 146.0])
+
+
+def synthetic_stem_frame(
+    w0: float, p: float, noise: float, seed: int = 1, shaded: bool = False, ramp: float = 0.0, blur: float = 0.6
+):
+    """One synthetic frame for the width measurement: a gently curved stem of width w0 (1 - s/L)^p [px]
+    (x = 0.15 s^2, s up to 0.4 m, L 0.47 m) on a flat background with per-pixel noise of sd ``noise``
+    [levels], blurred like a camera (Gaussian of sd ``blur`` [px]; the renderer's 3 x 3 kernel at 0.6);
+    ``shaded``: a round stem lit from the camera, its colour falling to 55% of the core's at the limbs;
+    ``ramp``: the background brightens by this many levels from the bottom of the image to the top.
+    Seen by :data:`SYNTHETIC_CAMERA` at :data:`SYNTHETIC_DEPTH_M`.
+
+    Returns
+    -------
+    (rgb (480, 640, 3) uint8, the drawn centerline (:class:`~bayesrod.vision.extract.Centerline`), a function
+    of arc length s [m] giving the drawn width [px])
+    """
+    from .extract import Centerline
+
+    H, W, n = HEIGHT, WIDTH, 400
+    F, Z = SYNTHETIC_CAMERA["fx"], SYNTHETIC_DEPTH_M
+    u0, v0 = SYNTHETIC_CAMERA["base_px"]
+    s = np.linspace(0, 0.4, n)
+    x, z = 0.15 * s**2, s
+    u, v = u0 + F * x / Z, v0 - F * z / Z
+    wpx = w0 * (1 - s / 0.47) ** p
+    a, limb = stem_coverage(u, v, wpx, (H, W), return_limb=True)
+    rng = np.random.default_rng(seed)
+    img = SYNTHETIC_BG_RGB + rng.normal(0, noise, (H, W, 3)) + ramp * (1 - np.arange(H) / H)[:, None, None]
+    col = STEM_RGB * ((0.55 + 0.45 * limb)[..., None] if shaded else 1.0)
+    img = img * (1 - a[..., None]) + col * a[..., None]
+    img = cv2.GaussianBlur(np.clip(img, 0, 255).astype(np.uint8), (3, 3) if blur == 0.6 else (0, 0), blur)
+    line = Centerline(x, z, np.full(n, 1e-4), s, np.zeros((0, 2)), a > 0.5, a > 0.5, Z, 0.4, np.ones(n, bool))
+    return img, line, (lambda ss: np.interp(ss, s, wpx))
+
+
 ARMS = ("trailing", "leading")
 STYLES = ("flat", "shaded")
 
