@@ -42,7 +42,7 @@ EFFECTS = {
 }
 FIELDS = ["case", "effect", "value", "seed", "added", "fitted", "force_before", "force_after"]
 FIELDS += ["heldout_before", "heldout_after", "shape_before", "shape_after", "unexplained", "top_statistic"]
-FIELDS += ["noise_rho", "rho_fitted", "seconds"]
+FIELDS += ["noise_rho", "rho_fitted", "seconds", "alternatives"]
 
 
 def one(job) -> dict:
@@ -82,7 +82,22 @@ def one(job) -> dict:
         "noise_rho": rho,
         "rho_fitted": r["noise"].get("rho_force", 0.0),
         "seconds": round(seconds, 1),
+        # added effect (or pair) -> candidates the data cannot tell from it (diagnose.json `alternatives`)
+        "alternatives": json.dumps(r.get("alternatives", {})),
     }
+
+
+def alternatives_named(rows) -> str:
+    """How many rows' diagnoses named a candidate the data cannot tell from the added effect, and which.
+
+    Counted over the rows that recorded the column (studies before session 33 did not): "-" when none did.
+    """
+    known = [json.loads(r["alternatives"]) for r in rows if r.get("alternatives")]
+    if not known:
+        return "-"
+    named = sorted({x for a in known for v in a.values() for x in v})
+    hits = sum(any(a.values()) for a in known)
+    return f"{hits}/{len(known)}" + (f" ({', '.join(named)})" if named else "")
 
 
 def tables(rows) -> str:
@@ -107,8 +122,8 @@ def tables(rows) -> str:
     out += [
         "",
         "| effect | replicates | attributed | added exactly it | false attributions | "
-        "median held-out change | unexplained | median s |",
-        "|---|---|---|---|---|---|---|---|",
+        "median held-out change | unexplained | alternatives named | median s |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for e in sorted({r["effect"] for r in eff}):
         rr = [r for r in eff if r["effect"] == e]
@@ -119,6 +134,7 @@ def tables(rows) -> str:
         out.append(
             f"| {e} | {len(rr)} | {hit}/{len(rr)} | {exact}/{len(rr)} | {', '.join(wrong) or 'none'} | "
             f"{sorted(ch)[len(ch) // 2]:+.0f}% | {sum(int(r['unexplained']) for r in rr)}/{len(rr)} | "
+            f"{alternatives_named(rr)} | "
             f"{sorted(float(r.get('seconds') or 0) for r in rr)[len(rr) // 2]:.0f} |"
         )
     if outside:

@@ -230,3 +230,18 @@ def test_bridged_points_are_kept_apart_from_the_data(twig_copy):
     xs = np.array([float(lines[i].split(",")[1]) for i in first])
     np.testing.assert_array_equal(frame.bridge[0], xs[2:5])
     assert not np.isin(frame.x_m, xs[2:5]).any()
+
+
+def test_append_rows_resumes_a_file_written_before_a_column_was_added(tmp_path):
+    """A study resumed after its script gained a column keeps its old rows (new cells empty)."""
+    from bayesrod.dataset.io import append_rows, read_rows
+
+    path = tmp_path / "study.csv"
+    list(append_rows(path, ["case", "x"], [{"case": "a", "x": 1}], new_file=True))
+    list(append_rows(path, ["case", "x", "extra"], [{"case": "b", "x": 2, "extra": "e"}], new_file=False))
+    rows = read_rows(path)
+    assert [r["case"] for r in rows] == ["a", "b"]
+    assert list(rows[0]) == ["case", "x", "extra"]
+    assert rows[0]["extra"] == "" and rows[1]["extra"] == "e"
+    with pytest.raises(ValueError, match="gone"):
+        list(append_rows(path, ["case", "x"], [], new_file=False))

@@ -119,10 +119,25 @@ def read_rows(path: str | os.PathLike) -> list[dict]:
 def append_rows(path: str | os.PathLike, fields: list[str], rows, new_file: bool):
     """Append each row of the iterable ``rows`` to a CSV as it arrives (flushed), header first when new.
 
-    For long studies that resume: finished rows survive an interruption. Yields the rows.
+    For long studies that resume: finished rows survive an interruption. Yields the rows. A file
+    written before a column was added is first rewritten (atomically) with the new header, its old
+    rows keeping empty cells in the new columns.
     """
     import csv
 
+    old = read_rows(path) if not new_file else []
+    if old and list(old[0]) != list(fields):
+        missing = [f for f in old[0] if f not in fields]
+        if missing:
+            raise ValueError(
+                f"{path}: columns {missing} are gone from the study's fields {fields}; expected a superset"
+            )
+        tmp = Path(path).with_suffix(".tmp")
+        with tmp.open("w", newline="") as fh:
+            w = csv.DictWriter(fh, fields)
+            w.writeheader()
+            w.writerows(old)
+        os.replace(tmp, path)
     with Path(path).open("a", newline="") as fh:
         w = csv.DictWriter(fh, fields)
         if new_file:
