@@ -50,11 +50,15 @@ COLOUR_MODELS = ("projection", "unmixing")
 #: what ``bayesrod extract`` takes: either model, or ``auto`` (:func:`choose_colour_model`, per push)
 COLOUR_CHOICES = ("auto", *COLOUR_MODELS)
 #: ``auto`` picks unmixing when the two models' widths differ by more than this [px] at a frame's wide
-#: stations (and by more than SHADING_Z of its standard error): flat synthetic stems read within 0.03 px
-#: alike, shaded ones 0.33-0.58 px apart (tests/test_width.py); the rendered shaded twig 0.45 px apart
-#: (docs/validation.md, "Shaded stems")
+#: stations (naming it shading when by more than SHADING_Z of its standard error too): flat synthetic stems
+#: read within 0.03 px alike, shaded ones 0.33-0.58 px apart (tests/test_width.py); the rendered shaded
+#: twig 0.45 px apart (docs/validation.md, "Shaded stems")
 SHADING_PX = 0.15
 SHADING_Z = 4.0
+#: ... or by more than this share of those stations' median width, if that is less: on a 3-px stem 0.15 px is
+#: 5%, and the rendered shaded grass (seed 5) whose models differed by +0.145 px kept projection and read
+#: +0.30 px wide (docs/validation.md, "Thin stems: unmixing")
+SHADING_REL = 0.03
 #: unmixing needs stem and background of different chromaticity: cosine of their RGB angle below this
 UNMIX_MAX_COS = 0.998
 #: ``auto`` compares the models at stations at least this wide [px]: narrower ones are mostly limb and blur
@@ -80,6 +84,12 @@ PEAK_MAX = 1.25
 AREA_REL = 0.3
 MIN_AREA_PX = 2.0
 AREA_N_MAX = 40
+#: and up to THIN_N clean profiles from THIN_MIN_AREA_PX to MIN_AREA_PX wide, evenly spread over that range:
+#: their shape is mostly the blur's, so they pin the blur the wide profiles' contrast trades off against. With
+#: the wide profiles alone, a 3.1-px stem under a lens blur of sd 1.2 px read 10-20% narrow (flat) or 12-18%
+#: (shaded, unmixed); with the thin ones -1% to -10% (docs/validation.md, "Thin profiles pin the blur")
+THIN_MIN_AREA_PX = 0.5
+THIN_N = 20
 #: a station is ``cluttered`` when its samples of coverage above CLUTTER_COVERAGE (stem, not the blurred
 #: edge) on pixels behind the plane's depth band add up to CLUTTER_PX [px] or more
 CLUTTER_COVERAGE = 0.75
@@ -96,12 +106,25 @@ BLUR_RATIO_OK = 0.3
 BLUR_SCALE_SD_SLOPE = 0.21
 #: extract warns when the blur's scale error reaches this sd (the rendered grass sits at ratio 0.30)
 BLUR_WARN_SCALE_SD = 0.01
+#: the contrast fit models the lens as a Gaussian; under other lenses (a Gaussian cut to a 7 x 7 kernel,
+#: disks of radius 1.5 and 2 px, a 3 x 3 box) the 3.3- and 5-px synthetic stems, flat and shaded, read
+#: -3.4% to +2.9% (rms 1.7%) at any blur / width: a scale error of this sd, times the share of the ok
+#: stations the fit read (:func:`lens_scale_sd`), makes those 32 cases' errors over their declared sd rms
+#: 1.01, 94% within 1.645 (``python scripts/blur_width_sweep.py``; docs/validation.md, "Thin profiles pin
+#: the blur")
+LENS_SCALE_SD = 0.01
 
 
 def blur_scale_sd(ratio: float) -> float:
     """Relative sd of the scale error every station shares when the contrast fit's blur is ``ratio`` of the
     width of the profiles it read (0 at or below :data:`BLUR_RATIO_OK`, and where no ratio was read)."""
     return BLUR_SCALE_SD_SLOPE * max(ratio - BLUR_RATIO_OK, 0.0) if np.isfinite(ratio) else 0.0
+
+
+def lens_scale_sd(borrowed_share: float) -> float:
+    """Relative sd of the scale error the lens's shape leaves when a share ``borrowed_share`` (0-1) of the
+    ok stations took their width from the contrast fit (:data:`LENS_SCALE_SD`)."""
+    return LENS_SCALE_SD * float(np.clip(borrowed_share, 0.0, 1.0)) if np.isfinite(borrowed_share) else 0.0
 
 
 @dataclass(frozen=True)
@@ -112,7 +135,8 @@ class WidthProfile:
     (only ``"ok"`` stations are measurements); ``uv`` (k, 2) the stations' pixels; ``contrast_scale`` the
     factor the widths of stations too narrow for a core colour of their own were divided by
     (:func:`contrast_scale`; 1 where none); ``blur_over_width`` that fit's blur sd over the median width of
-    the profiles it read (NaN where none: :func:`contrast_fit`).
+    the profiles it read (NaN where none: :func:`contrast_fit`); ``borrowed_share`` the share of the ok
+    stations divided by that scale (0 where the fit read none).
     """
 
     s_m: NDArray
@@ -123,6 +147,7 @@ class WidthProfile:
     uv: NDArray
     contrast_scale: float = 1.0
     blur_over_width: float = float("nan")
+    borrowed_share: float = 0.0
 
 
 def _sample(img: NDArray, pts: NDArray) -> NDArray:
@@ -302,6 +327,8 @@ def width_profile(
         scale = fit.scale
     width_px[~own_core] /= scale
     sd_px[~own_core] /= scale
+    ok = flag == "ok"
+    borrowed_share = float(np.mean(~own_core[ok])) if fit.width_px > 0 and ok.any() else 0.0
     return WidthProfile(
         s_m=s_m,
         width_m=width_px * metres_per_px,
@@ -311,6 +338,7 @@ def width_profile(
         uv=np.column_stack([u, v]),
         contrast_scale=float(scale),
         blur_over_width=fit.blur_px / fit.width_px if fit.width_px > 0 else float("nan"),
+        borrowed_share=borrowed_share,
     )
 
 
@@ -349,39 +377,55 @@ def choose_colour_model(
     stations at least ``WIDE_PX`` wide, the two models' widths are compared:
     unmixing is chosen when their median difference exceeds ``SHADING_PX`` and ``SHADING_Z`` standard
     errors, and the stem's and background's colours differ in chromaticity enough to unmix
-    (``UNMIX_MAX_COS``). A stem too narrow to show shading keeps projection (the default).
+    (``UNMIX_MAX_COS``). A stem too narrow to show shading (fewer than ``min_stations`` wide stations) is
+    unmixed where its colours allow: unmixing reads a flat stem as projection does and a shaded one without
+    projection's bias (the rendered grass, flat: +0.029 vs +0.025 px; shaded: +0.105 vs +0.216 px;
+    docs/validation.md, "Thin stems: unmixing"); without a chromaticity of its own it keeps projection.
 
     Returns
     -------
     ColourChoice
     """
     proj = width_profile(rgb, depth_mm, line, camera, direction=direction, colour_model="projection")
-    wide = (proj.flag == "ok") & (proj.width_px >= WIDE_PX)
+    ok = proj.flag == "ok"
+    wide = ok & (proj.width_px >= WIDE_PX)
     if wide.sum() < min_stations:
-        return ColourChoice(
-            "projection",
-            np.nan,
-            np.nan,
-            int(wide.sum()),
-            f"fewer than {min_stations} stations {WIDE_PX:g} px wide or wider: too narrow to show shading",
-        )
-    stem, bg = _wide_colours(rgb, proj, wide)
-    cos = float(stem @ bg / max(np.linalg.norm(stem) * np.linalg.norm(bg), 1e-12))
+        narrow = f"fewer than {min_stations} stations {WIDE_PX:g} px wide or wider: too narrow to show shading"
+        if ok.sum() < min_stations:
+            return ColourChoice("projection", np.nan, np.nan, int(wide.sum()), narrow)
+        # the widest third of the stem: its colour on the centerline (mixed with the background by the blur;
+        # the pure colour unmixes at least as well)
+        widest = ok & (proj.width_px >= np.quantile(proj.width_px[ok], 2 / 3))
+        cos = _cosine(*_wide_colours(rgb, proj, widest))
+        if cos > UNMIX_MAX_COS:
+            return ColourChoice(
+                "projection",
+                np.nan,
+                np.nan,
+                int(wide.sum()),
+                f"{narrow}; stem and background share their chromaticity (cos {cos:.4f}): cannot unmix",
+            )
+        return ColourChoice("unmixing", np.nan, np.nan, int(wide.sum()), f"{narrow}; unmixing reads either")
+    cos = _cosine(*_wide_colours(rgb, proj, wide))
     unmix = width_profile(rgb, depth_mm, line, camera, direction=direction, colour_model="unmixing")
     both = wide & (unmix.flag == "ok")
-    return colour_verdict(proj.width_px[both] - unmix.width_px[both], cos, min_stations)
+    d_px = proj.width_px[both] - unmix.width_px[both]
+    return colour_verdict(
+        d_px, cos, min_stations, width_px=float(np.median(unmix.width_px[both])) if both.any() else np.inf
+    )
 
 
-def colour_verdict(d_px: NDArray, cos: float, min_stations: int = 10) -> ColourChoice:
+def colour_verdict(d_px: NDArray, cos: float, min_stations: int = 10, width_px: float = np.inf) -> ColourChoice:
     """The rule of :func:`choose_colour_model` from the stations' width differences ``d_px`` (n,) [px]
-    (projection - unmixing) and the cosine ``cos`` of the stem's and background's colours in RGB."""
+    (projection - unmixing), the cosine ``cos`` of the stem's and background's colours in RGB and the
+    stations' median width ``width_px`` [px] (:data:`SHADING_REL`; inf: the absolute bound alone)."""
     d = np.asarray(d_px, float)
     n = int(d.size)
     if n < min_stations:
         return ColourChoice("projection", np.nan, np.nan, n, "too few stations read by both models")
     med = float(np.median(d))
     se = float(np.sqrt(np.pi / 2) * 1.4826 * np.median(np.abs(d - med)) / np.sqrt(n))  # the median's se
-    if abs(med) <= SHADING_PX or abs(med) <= SHADING_Z * se:
+    if abs(med) <= min(SHADING_PX, SHADING_REL * width_px):
         return ColourChoice("projection", med, se, n, f"the models agree ({med:+.3f} px): a stem of one colour")
     if cos > UNMIX_MAX_COS:
         return ColourChoice(
@@ -391,7 +435,20 @@ def colour_verdict(d_px: NDArray, cos: float, min_stations: int = 10) -> ColourC
             n,
             f"shading ({med:+.3f} px) but stem and background share their chromaticity (cos {cos:.4f}): cannot unmix",
         )
+    if abs(med) <= SHADING_Z * se:  # a difference too noisy to call shading, too large to call agreement
+        return ColourChoice(
+            "unmixing",
+            med,
+            se,
+            n,
+            f"the models differ by {med:+.3f} +- {se:.3f} px, not clearly: unmixing reads either",
+        )
     return ColourChoice("unmixing", med, se, n, f"shaded stem: projection reads {med:+.3f} px wider than unmixing")
+
+
+def _cosine(a: NDArray, b: NDArray) -> float:
+    """Cosine of the angle between two colours (3,) in RGB."""
+    return float(a @ b / max(np.linalg.norm(a) * np.linalg.norm(b), 1e-12))
 
 
 def _wide_colours(rgb: NDArray, prof: WidthProfile, wide: NDArray) -> tuple[NDArray, NDArray]:
@@ -437,7 +494,8 @@ def contrast_fit(
     Gaussian(sigma)``, the contrast ``k`` and the blur ``sigma`` shared by the frame and each box's width
     tied to its profile's coverage integral, ``w_i = A_i / k`` (the integral is ``k w`` whatever the point
     spread, so only ``k`` and the centres are fitted; robust least squares over the ``n_max`` widest clean
-    profiles, :func:`_clean_profiles`). With each profile's width free as well (the fit before 2026-11-26)
+    profiles, :func:`_clean_profiles`; where the blur is a large share of their width, with up to ``THIN_N``
+    thin ones that pin it). With each profile's width free as well (the fit before 2026-11-26)
     width and contrast traded off, and on the rendered grass the scale came out 2-12% low, most on frames
     with clutter near the stem (docs/validation.md). Returns scale 1 (and no blur) when fewer than 5 clean
     profiles are ``MIN_AREA_PX`` or wider (no shape to read the contrast from). Where the blur is a large
@@ -454,13 +512,25 @@ def contrast_fit(
         The robust loss of the fit and its scale (``scipy.optimize.least_squares``); the defaults are the
         extraction's (scripts/contrast_scale_passes.py compares others).
     """
-    from scipy.optimize import least_squares
-
     clean, trend = _clean_profiles(profiles, s)
     order = np.argsort(trend)[::-1]
-    use = [i for i in order if clean[i] and trend[i] >= MIN_AREA_PX][:n_max]
-    if len(use) < 5:
+    wide = [i for i in order if clean[i] and trend[i] >= MIN_AREA_PX][:n_max]
+    if len(wide) < 5:
         return ContrastFit()
+    fit = _box_fit(profiles, wide, loss, f_scale)
+    if fit.width_px > 0 and fit.blur_px / fit.width_px > BLUR_RATIO_OK:
+        # the blur a large share of the width: the thin profiles pin it (THIN_N)
+        thin = [i for i in order if clean[i] and THIN_MIN_AREA_PX <= trend[i] < MIN_AREA_PX]
+        if thin and THIN_N > 0:
+            fit = _box_fit(profiles, wide + thin[:: max(1, len(thin) // THIN_N)][:THIN_N], loss, f_scale, len(wide))
+    return fit
+
+
+def _box_fit(profiles: list, use: list, loss: str, f_scale: float, n_wide: int | None = None) -> ContrastFit:
+    """The fit of :func:`contrast_fit` over the profiles ``use`` (indices), the first ``n_wide`` (all) of them
+    the wide ones whose median width it reports."""
+    from scipy.optimize import least_squares
+
     n = len(use)
     t_all = np.concatenate([profiles[i][0] for i in use])
     y_all = np.concatenate([profiles[i][1] for i in use])
@@ -489,7 +559,7 @@ def contrast_fit(
     if not fit.success:
         return ContrastFit()
     k = float(np.exp(fit.x[0]))
-    return ContrastFit(k, float(np.exp(fit.x[1])), float(np.median(area)) / k)
+    return ContrastFit(k, float(np.exp(fit.x[1])), float(np.median(area[:n_wide])) / k)
 
 
 def _coverage_integrals(profiles: list) -> NDArray:
@@ -750,6 +820,9 @@ def combine_profiles(
     ratios = np.array([wp.blur_over_width for wp in profiles], float)
     ratio = float(np.median(ratios[np.isfinite(ratios)])) if np.isfinite(ratios).any() else float("nan")
     blur_sd = blur_scale_sd(ratio)
+    # the lens's shape, which the contrast fit takes for a Gaussian, in the frames' median share of fitted stations
+    shares = np.array([wp.borrowed_share for wp in profiles], float)
+    lens_sd = lens_scale_sd(float(np.median(shares))) if shares.size else 0.0
     return DiameterProfile(
         s_m=s_m,
         d_m=d,
@@ -757,6 +830,6 @@ def combine_profiles(
         n_frames=n.astype(int),
         flag=flag.astype(str),
         shared_offset_sd_m=offset_sd,
-        shared_scale_sd=float(np.linalg.norm([depth_scale_sd, contrast_sd, blur_sd])),
+        shared_scale_sd=float(np.linalg.norm([depth_scale_sd, contrast_sd, blur_sd, lens_sd])),
         blur_over_width=ratio,
     )
