@@ -57,7 +57,7 @@ SHADING_PX = 0.15
 SHADING_Z = 4.0
 #: ... or by more than this share of those stations' median width, if that is less: on a 3-px stem 0.15 px is
 #: 5%, and the rendered shaded grass (seed 5) whose models differed by +0.145 px kept projection and read
-#: +0.30 px wide (docs/validation.md, "Thin stems: unmixing")
+#: +0.30 px wide (docs/validation.md, "Thin stems")
 SHADING_REL = 0.03
 #: unmixing needs stem and background of different chromaticity: cosine of their RGB angle below this
 UNMIX_MAX_COS = 0.998
@@ -87,7 +87,7 @@ AREA_N_MAX = 40
 #: and up to THIN_N clean profiles from THIN_MIN_AREA_PX to MIN_AREA_PX wide, evenly spread over that range:
 #: their shape is mostly the blur's, so they pin the blur the wide profiles' contrast trades off against. With
 #: the wide profiles alone, a 3.1-px stem under a lens blur of sd 1.2 px read 10-20% narrow (flat) or 12-18%
-#: (shaded, unmixed); with the thin ones -1% to -10% (docs/validation.md, "Thin profiles pin the blur")
+#: (shaded, unmixed); with the thin ones -1% to -10% (docs/validation.md, "Thin stems")
 THIN_MIN_AREA_PX = 0.5
 THIN_N = 20
 #: a station is ``cluttered`` when its samples of coverage above CLUTTER_COVERAGE (stem, not the blurred
@@ -97,21 +97,22 @@ CLUTTER_PX = 0.5
 #: the contrast is read from the shapes of profiles a few pixels wide (:func:`contrast_scale`); where the
 #: lens's blur is a large share of their width, the shape hardly depends on the contrast and a misfit of a
 #: fraction of a grey level moves it: a synthetic 3.3-px stem under a Gaussian blur of sd 0.6, 0.8, 1.0 and
-#: 1.2 px read -0.0%, -2.1%, -3.6%, -5.0% narrow at ratios (below) of 0.30, 0.38, 0.46, 0.54, and a 5-px
-#: stem within +0.8% at 0.21-0.37 (docs/validation.md, "Blur against width"). The ratio of the fitted blur to
+#: 1.2 px reads -0.7%, -1.8%, -3.9%, -3.6% narrow at ratios (below) of 0.30, 0.37, 0.46, 0.52, and a 5-px
+#: stem within +0.7% at 0.21-0.37 (docs/validation.md, "Thin stems"). The ratio of the fitted blur to
 #: the median width of the profiles it read: at or below BLUR_RATIO_OK the widths are read as measured; above
 #: it every station shares a scale error of sd BLUR_SCALE_SD_SLOPE x (ratio - BLUR_RATIO_OK) (:func:`blur_scale_sd`,
-#: added in combine_profiles: about the 3.3-px stem's error), and extract warns from BLUR_WARN_SCALE_SD on
+#: added in combine_profiles; with the lens term, the 32 lenses and stems of scripts/blur_width_sweep.py read
+#: within 1.645 sd in 94%), and extract warns from BLUR_WARN_SCALE_SD on
 BLUR_RATIO_OK = 0.3
-BLUR_SCALE_SD_SLOPE = 0.21
+BLUR_SCALE_SD_SLOPE = 0.3
 #: extract warns when the blur's scale error reaches this sd (the rendered grass sits at ratio 0.30)
 BLUR_WARN_SCALE_SD = 0.01
 #: the contrast fit models the lens as a Gaussian; under other lenses (a Gaussian cut to a 7 x 7 kernel,
 #: disks of radius 1.5 and 2 px, a 3 x 3 box) the 3.3- and 5-px synthetic stems, flat and shaded, read
-#: -3.4% to +2.9% (rms 1.7%) at any blur / width: a scale error of this sd, times the share of the ok
-#: stations the fit read (:func:`lens_scale_sd`), makes those 32 cases' errors over their declared sd rms
-#: 1.01, 94% within 1.645 (``python scripts/blur_width_sweep.py``; docs/validation.md, "Thin profiles pin
-#: the blur")
+#: -5.2% to +0.7% at any blur / width, -1.4% to -2.8% at ratios near 0.3: a scale error of this sd, times
+#: the share of the ok stations the fit read (:func:`lens_scale_sd`), with the blur term, makes those 32
+#: cases' errors over their declared sd rms 1.04, 94% within 1.645 (``python scripts/blur_width_sweep.py``;
+#: docs/validation.md, "Thin stems")
 LENS_SCALE_SD = 0.01
 
 
@@ -374,13 +375,13 @@ def choose_colour_model(
 
     Both models read the same width from a stem of one colour; a round stem lit from the camera, darker
     at its limbs, reads wider (or narrower) by projection, by about half a pixel on a 4-8 px twig. At the
-    stations at least ``WIDE_PX`` wide, the two models' widths are compared:
-    unmixing is chosen when their median difference exceeds ``SHADING_PX`` and ``SHADING_Z`` standard
-    errors, and the stem's and background's colours differ in chromaticity enough to unmix
+    stations at least ``WIDE_PX`` wide, the two models' widths are compared: projection where their median
+    difference is within ``SHADING_PX`` and ``SHADING_REL`` of the width (:func:`colour_verdict`), else
+    unmixing where the stem's and background's colours differ in chromaticity enough to unmix
     (``UNMIX_MAX_COS``). A stem too narrow to show shading (fewer than ``min_stations`` wide stations) is
     unmixed where its colours allow: unmixing reads a flat stem as projection does and a shaded one without
     projection's bias (the rendered grass, flat: +0.029 vs +0.025 px; shaded: +0.105 vs +0.216 px;
-    docs/validation.md, "Thin stems: unmixing"); without a chromaticity of its own it keeps projection.
+    docs/validation.md, "Thin stems"); without a chromaticity of its own it keeps projection.
 
     Returns
     -------
@@ -492,14 +493,16 @@ def contrast_fit(
 
     Each profile (t, a) of coverage against the assumed colour is modelled as ``k * box(w_i) *
     Gaussian(sigma)``, the contrast ``k`` and the blur ``sigma`` shared by the frame and each box's width
-    tied to its profile's coverage integral, ``w_i = A_i / k`` (the integral is ``k w`` whatever the point
-    spread, so only ``k`` and the centres are fitted; robust least squares over the ``n_max`` widest clean
-    profiles, :func:`_clean_profiles`; where the blur is a large share of their width, with up to ``THIN_N``
-    thin ones that pin it). With each profile's width free as well (the fit before 2026-11-26)
-    width and contrast traded off, and on the rendered grass the scale came out 2-12% low, most on frames
-    with clutter near the stem (docs/validation.md). Returns scale 1 (and no blur) when fewer than 5 clean
-    profiles are ``MIN_AREA_PX`` or wider (no shape to read the contrast from). Where the blur is a large
-    share of the profiles' width the scale is weakly determined (:data:`BLUR_RATIO_OK`).
+    tied to the coverage integral, ``w_i = A_i / k``, read off the integrals' smooth trend along the stem
+    (:func:`_clean_profiles`; each profile's own integral carries its noise into the tie: :func:`_box_fit`).
+    The integral is ``k w`` whatever the point spread, so only ``k`` and the centres are fitted; robust
+    least squares over the ``n_max`` widest clean profiles; where the blur is a large share of their
+    width, with up to ``THIN_N`` thin ones that pin it. With each profile's width free as well (the fit
+    before 2026-11-26) width and contrast traded off, and on the rendered grass the scale came out 2-12%
+    low, most on frames with clutter near the stem (docs/validation.md). Returns scale 1 (and no blur)
+    when fewer than 5 clean profiles are ``MIN_AREA_PX`` or wider (no shape to read the contrast from).
+    Where the blur is a large share of the profiles' width the scale is weakly determined
+    (:data:`BLUR_RATIO_OK`).
 
     Parameters
     ----------
@@ -517,18 +520,28 @@ def contrast_fit(
     wide = [i for i in order if clean[i] and trend[i] >= MIN_AREA_PX][:n_max]
     if len(wide) < 5:
         return ContrastFit()
-    fit = _box_fit(profiles, wide, loss, f_scale)
+    fit = _box_fit(profiles, trend, wide, loss, f_scale)
     if fit.width_px > 0 and fit.blur_px / fit.width_px > BLUR_RATIO_OK:
         # the blur a large share of the width: the thin profiles pin it (THIN_N)
         thin = [i for i in order if clean[i] and THIN_MIN_AREA_PX <= trend[i] < MIN_AREA_PX]
         if thin and THIN_N > 0:
-            fit = _box_fit(profiles, wide + thin[:: max(1, len(thin) // THIN_N)][:THIN_N], loss, f_scale, len(wide))
+            use = wide + thin[:: max(1, len(thin) // THIN_N)][:THIN_N]
+            fit = _box_fit(profiles, trend, use, loss, f_scale, len(wide))
     return fit
 
 
-def _box_fit(profiles: list, use: list, loss: str, f_scale: float, n_wide: int | None = None) -> ContrastFit:
-    """The fit of :func:`contrast_fit` over the profiles ``use`` (indices), the first ``n_wide`` (all) of them
-    the wide ones whose median width it reports."""
+def _box_fit(
+    profiles: list, trend: NDArray, use: list, loss: str, f_scale: float, n_wide: int | None = None
+) -> ContrastFit:
+    """The fit of :func:`contrast_fit` over the profiles ``use`` (indices), each box's width tied to the
+    smooth ``trend`` (n,) of the integrals along the stem over k, the first ``n_wide`` (all) of them the
+    wide ones whose median width it reports.
+
+    Tied to each profile's own integral instead, the fit is an errors-in-variables one: the integral's noise
+    (the background estimate, the pixels' noise summed over the window) widens and narrows the boxes at
+    random, and k came out low: on a 1-D stem of 0.3-3.1 px under a blur of sd 1.2 px with pixel noise 3
+    the widths read +6.3% on average over 8 draws (+0.2% tied to the true widths, +0.2% to the trend).
+    """
     from scipy.optimize import least_squares
 
     n = len(use)
@@ -536,10 +549,11 @@ def _box_fit(profiles: list, use: list, loss: str, f_scale: float, n_wide: int |
     y_all = np.concatenate([profiles[i][1] for i in use])
     owner = np.repeat(np.arange(n), [profiles[i][0].size for i in use])  # the profile of each sample
     area = _coverage_integrals([profiles[i] for i in use])
+    tie = np.asarray(trend, float)[use]
 
     def resid(x):
         k, sig = np.exp(x[0]), np.exp(x[1])
-        return y_all - k * _blurred_box(t_all - x[2:][owner], (area / k)[owner], sig)
+        return y_all - k * _blurred_box(t_all - x[2:][owner], (tie / k)[owner], sig)
 
     # a profile's samples depend on k, sigma and its own centre only: with this sparsity the finite-difference
     # Jacobian takes a handful of evaluations instead of one per parameter
