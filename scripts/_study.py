@@ -20,9 +20,10 @@ def run_pending(
     csv_path: Path, fields: list[str], jobs: Iterable[tuple], fn: Callable, *, done_key: Callable, workers: int = 1
 ) -> Iterator[dict]:
     """Rows of ``fn(job)`` for the ``jobs`` not yet in ``csv_path`` (``done_key(row)`` gives a written row's
-    job), appended to it as they arrive. A CSV of other columns is refused, not appended to."""
+    job), appended to it as they arrive. A CSV written before columns were added gains them (its rows
+    keep empty cells: ``append_rows``); one of other columns is refused, not appended to."""
     old = read_rows(csv_path)
-    if old and list(old[0]) != list(fields):
+    if old and not set(old[0]) <= set(fields):
         raise SystemExit(f"{csv_path}: columns {', '.join(old[0])}, expected {', '.join(fields)}: use another --out")
     done = {done_key(r) for r in old}
     todo = [j for j in jobs if j not in done]
@@ -39,18 +40,19 @@ def seeds(text: str) -> list[int]:
     return [int(x) for x in text.split(",") if x]
 
 
-def extracted_push(stem: str, seed: int, graded: bool, folder: Path):
+def extracted_push(stem: str, seed: int, graded: bool, folder: Path, style: str = "flat"):
     """``bayesrod simulate`` one push of preset ``stem`` (its middle contact height; rendered frames with
-    exact widths; ``graded``: a diameter taper ``GRADIENT`` below the bending taper) into ``folder``/raw,
-    then ``bayesrod.extract``. Returns (extraction, the drawn diameter at its stations [m] (k,), metres
-    per pixel at the push's plane)."""
+    exact widths; ``graded``: a diameter taper ``GRADIENT`` below the bending taper; ``style``: the
+    renderer's ``render_style``, ``"shaded"`` a limb-darkened stem through a 1.2-px blur) into
+    ``folder``/raw, then ``bayesrod.extract``. Returns (extraction, the drawn diameter at its stations [m]
+    (k,), metres per pixel at the push's plane)."""
     import bayesrod
     from bayesrod.dataset.simulate import SimConfig
     from bayesrod.physics import stem_diameter
 
     cfg = SimConfig.from_preset(stem, seed=seed)
     h = cfg.heights_m[len(cfg.heights_m) // 2]
-    over = {"exact_width": True, **({"diameter_taper": cfg.p - GRADIENT} if graded else {})}
+    over = {"exact_width": True, "render_style": style, **({"diameter_taper": cfg.p - GRADIENT} if graded else {})}
     bayesrod.simulate(stem, seed=seed, heights_m=[h], config_overrides=over).save(Path(folder) / "raw", frames=True)
     ex = bayesrod.extract(Path(folder) / "raw", progress=False)
     ds, truth = ex.dataset, ex.source.extra["truth"]

@@ -1,6 +1,6 @@
 """Diameter from the frames, taper and Young's modulus: replicate study (issue 22).
 
-    python scripts/diameter_study.py --out diameter-study --reps 10 [--workers 1]
+    python scripts/diameter_study.py --out diameter-study --reps 10 [--workers 1] [--style shaded]
 
 Per replicate and stem (twig, grass; one contact height, the preset's middle one; rendered frames
 with clutter, the probe and depth dropouts, ``bayesrod simulate``'s renderer):
@@ -37,15 +37,15 @@ from bayesrod.dataset.io import read_rows
 FIELDS = ["stem", "seed", "graded", "stations_ok", "median_abs_err_px", "z_sd", "z_cover90"]
 FIELDS += ["d0_true", "d0", "d0_q05", "d0_q95", "E_true", "E", "E_q05", "E_q95"]
 FIELDS += ["p_true", "p_q05_shared", "p_q95_shared", "p_q05_off", "p_q95_off", "dq_q05", "dq_q95", "verdict"]
-FIELDS += ["seconds", "length"]
+FIELDS += ["seconds", "length", "style"]
 
 
 def one(job) -> dict:
-    stem, seed, graded, length = job
+    stem, seed, graded, length, style = job
     t0 = time.perf_counter()
-    row = {"stem": stem, "seed": seed, "graded": int(graded), "length": length}
+    row = {"stem": stem, "seed": seed, "graded": int(graded), "length": length, "style": style}
     with tempfile.TemporaryDirectory() as tmp:
-        ex, true, px = extracted_push(stem, seed, graded, Path(tmp))
+        ex, true, px = extracted_push(stem, seed, graded, Path(tmp), style)
         ds, dp, truth = ex.dataset, ex.diameters, ex.source.extra["truth"]
         ok = dp.ok
         z = (dp.d_m[ok] - true[ok]) / dp.sd_m[ok]
@@ -79,16 +79,19 @@ def one(job) -> dict:
 
 def table(rows) -> str:
     out = [
-        "| stem | modulus | reps | width error, median px | station z sd | station 90% cover | d0 within 5% "
+        "| stem | style | modulus | reps | width error, median px | station z sd | station 90% cover | d0 within 5% "
         "| d0 90% cover | E 90% cover | p width with / without width | p 90% cover with / without width "
         "| uniform modulus rejected |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for stem in ("twig", "grass"):
-        for graded in (0, 1):
-            rs = [r for r in rows if r["stem"] == stem and int(float(r["graded"])) == graded]
-            if not rs:
-                continue
+    styles = sorted({r.get("style") or "flat" for r in rows})
+    for stem, style, graded in ((st, sy, g) for st in ("twig", "grass") for sy in styles for g in (0, 1)):
+        rs = [
+            r
+            for r in rows
+            if r["stem"] == stem and (r.get("style") or "flat") == style and int(float(r["graded"])) == graded
+        ]
+        if rs:
 
             def f(k, rs=rs):
                 return np.array([float(r[k]) for r in rs])
@@ -106,7 +109,8 @@ def table(rows) -> str:
                 )
             rej = sum(r["verdict"] == "rejected" for r in rs)
             out.append(
-                f"| {stem} | {'graded' if graded else 'uniform'} | {len(rs)} | {np.median(f('median_abs_err_px')):.3f} "
+                f"| {stem} | {style} | {'graded' if graded else 'uniform'} | {len(rs)} "
+                f"| {np.median(f('median_abs_err_px')):.3f} "
                 f"| {np.median(f('z_sd')):.2f} | {np.median(f('z_cover90')):.2f} | {within:.2f} | {cover_d0:.2f} "
                 f"| {cover_E:.2f} | {ratio} | {cover_p} | {rej}/{len(rs)} |"
             )
@@ -126,16 +130,17 @@ def main(argv=None) -> None:
     ap.add_argument(
         "--length", choices=("known", "unknown"), default="known", help="the fits' stem length: given, or sampled"
     )
+    ap.add_argument("--style", choices=("flat", "shaded"), default="flat", help="the renderer's render_style")
     a = ap.parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     csv = out / "diameter_study.csv"
     stems = [s for s in a.stems.split(",") if s]
-    jobs = [(s, a.first_seed + k, False, a.length) for k in range(a.reps) for s in stems]
-    jobs += [(s, 100 + a.first_seed + k, True, a.length) for k in range(a.graded_reps) for s in stems]
+    jobs = [(s, a.first_seed + k, False, a.length, a.style) for k in range(a.reps) for s in stems]
+    jobs += [(s, 100 + a.first_seed + k, True, a.length, a.style) for k in range(a.graded_reps) for s in stems]
 
     def done_key(r):
-        return r["stem"], int(float(r["seed"])), bool(int(float(r["graded"]))), r["length"]
+        return r["stem"], int(float(r["seed"])), bool(int(float(r["graded"]))), r["length"], r.get("style") or "flat"
 
     for row in run_pending(csv, FIELDS, jobs, one, done_key=done_key, workers=a.workers):
         print(row["stem"], row["seed"], row["graded"], row.get("verdict"), row["seconds"], flush=True)
