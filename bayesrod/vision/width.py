@@ -70,9 +70,10 @@ BG_PX = 3.0  # width of each background strip [px]
 MARGIN_PX = 3.0  # the window reaches this far beyond the mask's half-width (blur, anti-aliasing)
 #: sd [px] of the width error all stations of a profile share (the method's bias at the stem's edges:
 #: blur, anti-aliasing, the colour model). scripts/width_error_study.py measured its rms over 12 replicates:
-#: 0.029 px on the twig, 0.088 px on the grass (heavy-tailed: -0.19 and -0.17 px); 0.1 px covers both
-#: (docs/validation.md)
-OFFSET_SD_PX = 0.1
+#: 0.029 px on the twig, 0.088 px on the grass (heavy-tailed: -0.19 and -0.17 px) at first, hence 0.1 px;
+#: with the boxes of the contrast fit tied to the integrals' trend (2026-11-27) 0.011 and 0.027 px (seeds
+#: 0-11), the shaded stems 0.026 px (seeds 0-5): 0.05 px, about twice those (docs/validation.md, "Thin stems")
+OFFSET_SD_PX = 0.05
 OWN_CORE_HALF_PX = 3.0  # a station at least 6 px wide (in the mask) takes the stem colour of its own core
 #: the contrast scale reads only profiles of the stem alone (:func:`_clean_profiles`): coverage peak at most
 #: PEAK_MAX (a stem's coverage against a frame colour still mixed with the background exceeds 1 by the
