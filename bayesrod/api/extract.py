@@ -271,8 +271,9 @@ def extract(dataset, *, progress: bool = True, width_colour_model: str = "auto")
             blurred = (
                 f"the lens's blur is {diameters.blur_over_width:.2f} of the width of the narrow stations the stem's "
                 f"colour contrast is read from (at most {BLUR_RATIO_OK:g} reads it well): their widths may read "
-                f"several per cent narrow (Young's modulus high by four times that); every width now shares a scale "
-                f"error of sd {100 * diameters.shared_scale_sd:.1f}% (docs/validation.md, 'Blur against width')"
+                f"several per cent off, most often narrow (Young's modulus off by four times that); every width "
+                f"now shares a scale error of sd {100 * diameters.shared_scale_sd:.1f}% (docs/validation.md, 'Blur "
+                f"against width' and 'Thin stems'); a closer or sharper camera avoids it"
             )
             report["diameters"]["warning"] = blurred
             log.warning("warning: %s: %s", spec.specimen, blurred)
