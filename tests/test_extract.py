@@ -151,3 +151,29 @@ def test_arc_length_is_not_lengthened_by_pixel_scale_wiggles():
         assert abs(mid / (0.5 * true) - 1) < tol  # along the whole curve, not only at its end
     xf, zf = circle(0.15)(fine)
     assert np.sum(np.hypot(np.diff(xf), np.diff(zf))) / true - 1 > 0.005  # what the fine sampling read
+
+
+def test_extract_warns_when_the_blur_leaves_the_widths_a_shared_scale_error(twig_frames, tmp_path, monkeypatch):
+    """The twig's lens blur is about 0.2 of its narrow stations' width: no warning. Declared as acceptable
+    only up to 0 instead of 0.3, the same frames carry a blur scale error of about 5%: the report says so in
+    ``diameters.warning`` (with the scale error written to the diameters) and the console prints it."""
+    import logging
+
+    import bayesrod
+    from bayesrod.vision import width as W
+
+    quiet = bayesrod.extract(twig_frames, progress=False)
+    assert "warning" not in quiet.doc["diameters"]
+    monkeypatch.setattr(W, "BLUR_RATIO_OK", 0.0)
+    records = []
+    handler = logging.Handler()
+    handler.emit = records.append
+    logging.getLogger("bayesrod").addHandler(handler)
+    try:
+        loud = bayesrod.extract(twig_frames, progress=False)
+    finally:
+        logging.getLogger("bayesrod").removeHandler(handler)
+    warning = loud.doc["diameters"]["warning"]
+    assert "lens's blur" in warning and f"{100 * loud.diameters.shared_scale_sd:.1f}%" in warning
+    assert loud.diameters.shared_scale_sd > quiet.diameters.shared_scale_sd + 0.02
+    assert any("lens's blur" in r.getMessage() for r in records)
