@@ -11,7 +11,7 @@ Gaussian of sd 1.2 cut to a 7 x 7 kernel (the renderer's shaded frames), disks o
 (``bayesrod.vision.width.choose_colour_model``), then ``width_profile`` on each seed. Prints per case the
 stations' median relative error against the drawn width (mean over seeds), the contrast fit's blur over
 the profiles' width (``WidthProfile.blur_over_width``, median over seeds) and the scale error sd the
-extraction then declares for blur and lens (``blur_scale_sd``, ``lens_scale_sd``); last, the rms of the
+extraction then declares for blur and lens (``contrast_fit_scale_sd``); last, the rms of the
 errors over the declared sd and the share within 1.645 sd. About three seconds per image.
 """
 
@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 
 from bayesrod.vision.render import SYNTHETIC_CAMERA, synthetic_stem_frame
-from bayesrod.vision.width import BLUR_RATIO_OK, blur_scale_sd, choose_colour_model, lens_scale_sd, width_profile
+from bayesrod.vision.width import BLUR_RATIO_OK, choose_colour_model, contrast_fit_scale_sd, width_profile
 
 
 def _disk(r: float) -> np.ndarray:
@@ -33,12 +33,6 @@ def _disk(r: float) -> np.ndarray:
     sub = (np.arange(8) + 0.5) / 8 - 0.5
     acc = sum((np.hypot(xx + a, yy + b) <= r).astype(float) for a in sub for b in sub)
     return acc / acc.sum()
-
-
-def declared_sd(ratio: float, share: float) -> float:
-    """The scale error sd the extraction declares for the blur and the lens (``DiameterProfile.shared_scale_sd``
-    without the depth's and the frames' parts)."""
-    return float(np.hypot(blur_scale_sd(ratio), lens_scale_sd(share)))
 
 
 def case(w0: float, seeds, lens, shaded: bool) -> tuple[float, float, float, str]:
@@ -82,7 +76,7 @@ def main(argv=None) -> None:
     for style in a.styles:
         for w, name, lens in rows:
             err, ratio, share, model = case(w, a.seeds, lens, style == "shaded")
-            sd = declared_sd(ratio, share)
+            sd = contrast_fit_scale_sd(ratio, share)
             print(
                 f"| {w:g} | {style} | {name} | {model} | {100 * err:+.2f}% | {ratio:.2f} | {100 * sd:.1f}% |",
                 flush=True,

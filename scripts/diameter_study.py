@@ -77,6 +77,11 @@ def one(job) -> dict:
     return row
 
 
+def _style(row) -> str:
+    """A row's render style (rows written before the column was added: flat)."""
+    return row.get("style") or "flat"
+
+
 def table(rows) -> str:
     out = [
         "| stem | style | modulus | reps | width error, median px | station z sd | station 90% cover | d0 within 5% "
@@ -84,13 +89,9 @@ def table(rows) -> str:
         "| uniform modulus rejected |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    styles = sorted({r.get("style") or "flat" for r in rows})
+    styles = sorted({_style(r) for r in rows})
     for stem, style, graded in ((st, sy, g) for st in ("twig", "grass") for sy in styles for g in (0, 1)):
-        rs = [
-            r
-            for r in rows
-            if r["stem"] == stem and (r.get("style") or "flat") == style and int(float(r["graded"])) == graded
-        ]
+        rs = [r for r in rows if r["stem"] == stem and _style(r) == style and int(float(r["graded"])) == graded]
         if rs:
 
             def f(k, rs=rs):
@@ -140,7 +141,7 @@ def main(argv=None) -> None:
     jobs += [(s, 100 + a.first_seed + k, True, a.length, a.style) for k in range(a.graded_reps) for s in stems]
 
     def done_key(r):
-        return r["stem"], int(float(r["seed"])), bool(int(float(r["graded"]))), r["length"], r.get("style") or "flat"
+        return r["stem"], int(float(r["seed"])), bool(int(float(r["graded"]))), r["length"], _style(r)
 
     for row in run_pending(csv, FIELDS, jobs, one, done_key=done_key, workers=a.workers):
         print(row["stem"], row["seed"], row["graded"], row.get("verdict"), row["seconds"], flush=True)

@@ -14,11 +14,12 @@ import bayesrod
 from bayesrod.dataset.model import Diameters
 from bayesrod.dataset.reader import read_dataset, validate_dataset
 from bayesrod.inference.likelihood import RodLikelihood
-from bayesrod.vision.render import STEM_RGB, SYNTHETIC_BG_RGB, SYNTHETIC_DEPTH_M, stem_coverage
+from bayesrod.vision.render import STEM_RGB, SYNTHETIC_BG_RGB, SYNTHETIC_CAMERA, SYNTHETIC_DEPTH_M, stem_coverage
 from bayesrod.vision.render import synthetic_stem_frame as _synthetic
 from bayesrod.vision.width import WidthProfile, combine_profiles, width_profile
 
-F, Z = 600.0, SYNTHETIC_DEPTH_M  # the synthetic frame's camera (bayesrod.vision.render.SYNTHETIC_CAMERA)
+CAM = SYNTHETIC_CAMERA  # the synthetic frame's camera
+F, Z = CAM["fx"], SYNTHETIC_DEPTH_M
 BG, STEM = SYNTHETIC_BG_RGB, STEM_RGB
 
 
@@ -45,7 +46,7 @@ def test_width_profile_is_subpixel_on_a_thin_and_a_wide_stem(w0):
     """The coverage integral with the contrast read from the profiles' shapes: unbiased on a 3-px stem,
     where the stem's colour is never seen unmixed (without the contrast scale: +10-15%)."""
     img, line, truth = _synthetic(w0, 1.6, 0.0)
-    wp = width_profile(img, None, line, {"fx": F, "fy": F, "base_px": [128, 441.6]})
+    wp = width_profile(img, None, line, CAM)
     ok = wp.flag == "ok"
     assert ok.sum() > 60
     err = wp.width_px[ok] - truth(wp.s_m[ok])
@@ -61,7 +62,7 @@ def test_thin_stem_widths_do_not_follow_the_background_behind_them():
     widths within 0.005 px on average above and below mid-stem; the picked colour itself read them -0.033 and
     -0.052 px (-4.9% above)."""
     img, line, truth = _synthetic(3.27, 1.6, 0.0, ramp=60.0)
-    wp = width_profile(img, None, line, {"fx": F, "fy": F, "base_px": [128, 441.6]})
+    wp = width_profile(img, None, line, CAM)
     ok = wp.flag == "ok"
     err = wp.width_px[ok] - truth(wp.s_m[ok])
     upper = wp.s_m[ok] > 0.2
@@ -73,15 +74,14 @@ def test_unmixing_reads_a_shaded_stem_that_projection_reads_too_wide():
     """A round stem's darker limbs project as more than full coverage: projection reads an 8-px shaded
     stem ~0.5 px too wide; unmixing into background and a stem colour of free brightness does not."""
     img, line, truth = _synthetic(8.0, 0.43, 0.0, shaded=True)
-    cam = {"fx": F, "fy": F, "base_px": [128, 441.6]}
     err = {}
     for model in ("projection", "unmixing"):
-        wp = width_profile(img, None, line, cam, colour_model=model)
+        wp = width_profile(img, None, line, CAM, colour_model=model)
         ok = wp.flag == "ok"
         err[model] = float(np.median(wp.width_px[ok] - truth(wp.s_m[ok])))
     assert err["projection"] > 0.3 and abs(err["unmixing"]) < 0.05, err
     with pytest.raises(ValueError, match="colour_model: expected one of projection, unmixing"):
-        width_profile(img, None, line, cam, colour_model="ratio")
+        width_profile(img, None, line, CAM, colour_model="ratio")
 
 
 @pytest.mark.parametrize("w0", [3.27, 4.0, 8.0])
@@ -94,8 +94,7 @@ def test_auto_colour_model_unmixes_shaded_stems_and_keeps_projection_on_flat_one
     from bayesrod.vision.width import choose_colour_model
 
     img, line, truth = _synthetic(w0, 0.43 if w0 > 3.5 else 1.6, 2.0, shaded=shaded)
-    cam = {"fx": F, "fy": F, "base_px": [128, 441.6]}
-    c = choose_colour_model(img, None, line, cam)
+    c = choose_colour_model(img, None, line, CAM)
     assert c.model == ("unmixing" if shaded or w0 < 3.5 else "projection"), c
     if shaded:
         assert c.stations >= 10 and c.shading_px > 0.25, c
@@ -103,7 +102,7 @@ def test_auto_colour_model_unmixes_shaded_stems_and_keeps_projection_on_flat_one
         assert c.stations >= 10 and abs(c.shading_px) < 0.05, c
     else:
         assert c.stations < 10 and "too narrow" in c.reason and np.isnan(c.shading_px), c
-    wp = width_profile(img, None, line, cam, colour_model=c.model)
+    wp = width_profile(img, None, line, CAM, colour_model=c.model)
     ok = wp.flag == "ok"
     assert abs(np.median(wp.width_px[ok] - truth(wp.s_m[ok]))) < 0.06
     assert json.dumps(c.to_dict())  # the extract report's record: plain JSON (NaN written as null)
@@ -112,25 +111,24 @@ def test_auto_colour_model_unmixes_shaded_stems_and_keeps_projection_on_flat_one
 @pytest.mark.parametrize("shaded", [False, True])
 def test_a_stem_too_narrow_to_show_shading_is_unmixed_unless_its_colours_cannot_be(shaded):
     """A 3-px stem has too few 3-px stations to compare the models at. A shaded one, read by projection, comes
-    out 14% wide (its darker limbs project as more than full coverage); ``auto`` unmixes it and reads the flat
-    and the shaded stem to 4% (measured +0.1% and -0.1%). A grey stem on a grey background (one
+    out 12% wide (its darker limbs project as more than full coverage); ``auto`` unmixes it and reads the flat
+    and the shaded stem to 4% (measured -1.2% and -0.4%). A grey stem on a grey background (one
     chromaticity) keeps projection, saying why."""
     from bayesrod.vision.width import choose_colour_model
 
-    cam = {"fx": F, "fy": F, "base_px": [128, 441.6]}
     img, line, truth = _synthetic(3.0, 1.6, 2.0, shaded=shaded)
-    c = choose_colour_model(img, None, line, cam)
+    c = choose_colour_model(img, None, line, CAM)
     assert c.model == "unmixing" and "too narrow" in c.reason, c
     err = {}
     for model in ("projection", "unmixing"):
-        wp = width_profile(img, None, line, cam, colour_model=model)
+        wp = width_profile(img, None, line, CAM, colour_model=model)
         ok = (wp.flag == "ok") & (truth(wp.s_m) > 1.0)
         err[model] = float(np.median((wp.width_px[ok] - truth(wp.s_m[ok])) / truth(wp.s_m[ok])))
     assert abs(err["unmixing"]) < 0.04, err
     if shaded:
         assert err["projection"] > 0.08, err  # what auto avoids
     grey = img.astype(float).mean(axis=2, keepdims=True).repeat(3, axis=2).astype(np.uint8)
-    g = choose_colour_model(grey, None, line, cam)
+    g = choose_colour_model(grey, None, line, CAM)
     assert g.model == "projection" and "chromaticity" in g.reason, g
 
 
@@ -141,7 +139,7 @@ def test_auto_colour_model_keeps_projection_when_stem_and_background_share_their
 
     img, line, _ = _synthetic(8.0, 0.43, 0.0, shaded=True)
     grey = img.astype(float).mean(axis=2, keepdims=True).repeat(3, axis=2).astype(np.uint8)
-    c = choose_colour_model(grey, None, line, {"fx": F, "fy": F, "base_px": [128, 441.6]})
+    c = choose_colour_model(grey, None, line, CAM)
     assert c.model == "projection" and "cannot unmix" in c.reason and abs(c.shading_px) > 0.15, c
 
 
@@ -632,7 +630,6 @@ def test_a_stick_of_the_stems_colour_behind_it_flags_the_stations_it_meets():
     otherwise) and no other station is, though the stem's blurred edges lie on background depth too; at
     the plane's own depth, or without depth, nothing says so."""
     img, line, truth = _synthetic(4.0, 0.43, 0.0)
-    cam = {"fx": F, "fy": F, "base_px": [128, 441.6]}
     s = np.linspace(0.10, 0.16, 60)
     u, v = 128 + F * (0.15 * s**2) / Z + 3.5, 441.6 - F * s / Z  # touching the stem on its right
     stick = stem_coverage(u, v, np.full(s.size, 3.0), img.shape[:2])
@@ -643,12 +640,12 @@ def test_a_stick_of_the_stems_colour_behind_it_flags_the_stations_it_meets():
     depth[::7, ::5] = 0
     plane = np.where(stick > 0, int(Z * 1000), depth).astype(np.uint16)
     depth[stick > 0.5] = int((Z + 0.5) * 1000)
-    wp = width_profile(img, depth, line, cam)
+    wp = width_profile(img, depth, line, CAM)
     hit = (wp.s_m > 0.10 - 0.004) & (wp.s_m < 0.16 + 0.004)
     assert np.all(wp.flag[~hit & (wp.s_m > 0.02) & (wp.s_m < 0.38)] == "ok")
     assert np.mean(wp.flag[(wp.s_m > 0.105) & (wp.s_m < 0.155)] == "cluttered") == 1.0
     for d in (plane, None):  # the stick at the plane's depth or no depth at all: read as stem
-        seen = width_profile(img, d, line, cam)
+        seen = width_profile(img, d, line, CAM)
         mid = (seen.s_m > 0.11) & (seen.s_m < 0.15)
         assert np.all(seen.flag[mid] == "ok")
         assert np.median(seen.width_px[mid] / truth(seen.s_m[mid])) > 1.5
@@ -663,12 +660,11 @@ def test_a_blur_wide_against_a_thin_stem_is_declared_as_a_shared_scale_error():
     is added (docs/validation.md, "Blur against width")."""
     from bayesrod.vision.width import BLUR_RATIO_OK, LENS_SCALE_SD, blur_scale_sd, combine_profiles
 
-    cam = {"fx": F, "fy": F, "base_px": [128, 441.6]}
     for blur, seeds in ((0.6, (0, 1)), (1.2, (0, 1, 2))):
         frames, errors = [], []
         for seed in seeds:
             img, line, truth = _synthetic(3.27, 1.6, 3.0, seed, blur=blur)
-            wp = width_profile(img, None, line, cam)
+            wp = width_profile(img, None, line, CAM)
             ok = wp.flag == "ok"
             errors.append(np.median(wp.width_px[ok] / truth(wp.s_m[ok]) - 1.0))
             frames.append(wp)
@@ -697,7 +693,7 @@ def test_choose_colour_model_judges_agreement_against_the_compared_stations_widt
 
     monkeypatch.setattr(W, "colour_verdict", spy)
     img, line, _ = _synthetic(4.0, 0.43, 2.0)
-    W.choose_colour_model(img, None, line, {"fx": F, "fy": F, "base_px": [128, 441.6]})
+    W.choose_colour_model(img, None, line, CAM)
     assert 3.0 <= seen["width_px"] <= 4.0, seen
 
 

@@ -88,7 +88,8 @@ AREA_N_MAX = 40
 #: and up to THIN_N clean profiles from THIN_MIN_AREA_PX to MIN_AREA_PX wide, evenly spread over that range:
 #: their shape is mostly the blur's, so they pin the blur the wide profiles' contrast trades off against. With
 #: the wide profiles alone, a 3.1-px stem under a lens blur of sd 1.2 px read 10-20% narrow (flat) or 12-18%
-#: (shaded, unmixed); with the thin ones -1% to -10% (docs/validation.md, "Thin stems")
+#: (shaded, unmixed); with the thin ones -1% to -10% (both with each box tied to its own integral, before
+#: :func:`_box_fit` tied it to the trend; docs/validation.md, "Thin stems")
 THIN_MIN_AREA_PX = 0.5
 THIN_N = 20
 #: a station is ``cluttered`` when its samples of coverage above CLUTTER_COVERAGE (stem, not the blurred
@@ -127,6 +128,12 @@ def lens_scale_sd(borrowed_share: float) -> float:
     """Relative sd of the scale error the lens's shape leaves when a share ``borrowed_share`` (0-1) of the
     ok stations took their width from the contrast fit (:data:`LENS_SCALE_SD`)."""
     return LENS_SCALE_SD * float(np.clip(borrowed_share, 0.0, 1.0)) if np.isfinite(borrowed_share) else 0.0
+
+
+def contrast_fit_scale_sd(ratio: float, borrowed_share: float) -> float:
+    """Relative sd of the scale error the contrast fit leaves every station with: the blur's
+    (:func:`blur_scale_sd`) and the lens's (:func:`lens_scale_sd`) in quadrature."""
+    return float(np.hypot(blur_scale_sd(ratio), lens_scale_sd(borrowed_share)))
 
 
 @dataclass(frozen=True)
@@ -834,10 +841,10 @@ def combine_profiles(
     # a blur wide against the stem leaves the contrast weakly determined, the same way in every frame
     ratios = np.array([wp.blur_over_width for wp in profiles], float)
     ratio = float(np.median(ratios[np.isfinite(ratios)])) if np.isfinite(ratios).any() else float("nan")
-    blur_sd = blur_scale_sd(ratio)
-    # the lens's shape, which the contrast fit takes for a Gaussian, in the frames' median share of fitted stations
+    # and the lens's shape, which the contrast fit takes for a Gaussian, in the frames' median share of fitted
+    # stations
     shares = np.array([wp.borrowed_share for wp in profiles], float)
-    lens_sd = lens_scale_sd(float(np.median(shares))) if shares.size else 0.0
+    fit_sd = contrast_fit_scale_sd(ratio, float(np.median(shares)) if shares.size else 0.0)
     return DiameterProfile(
         s_m=s_m,
         d_m=d,
@@ -845,6 +852,6 @@ def combine_profiles(
         n_frames=n.astype(int),
         flag=flag.astype(str),
         shared_offset_sd_m=offset_sd,
-        shared_scale_sd=float(np.linalg.norm([depth_scale_sd, contrast_sd, blur_sd, lens_sd])),
+        shared_scale_sd=float(np.linalg.norm([depth_scale_sd, contrast_sd, fit_sd])),
         blur_over_width=ratio,
     )
