@@ -95,6 +95,7 @@ TARGETS: dict[str, tuple[str, list[str], list[str] | None]] = {
                     "test_dimensional_solutions_report_every_field_in_si_units_and_round_trip",
                 )
             ),
+            "tests/test_root_search.py",  # the root search alone, on functions with known roots
             "tests/test_effects.py",
             "tests/test_lumped.py",  # secant_k_theta's tests
         ],

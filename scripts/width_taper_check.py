@@ -1,7 +1,7 @@
 """Is the diameter taper p_geom from the width profile alone calibrated? (issue 22)
 
     python scripts/width_taper_check.py --stem grass --seeds 20-31 [--graded 120-122] --cache DIR
-        [--same-pixels 1,3]
+        [--same-pixels 1,3] [--style shaded]
 
 Per seed: simulate and extract one rendered push as scripts/diameter_study.py does (``_study.extracted_push``),
 keeping every frame's width profile (cached in ``DIR``, so variants of how the frames are combined rerun in
@@ -40,9 +40,9 @@ def combined(fr: dict):
     return W.combine_profiles(fr["profiles"], fr["s_m"], *fr["args"], **fr["kwargs"])
 
 
-def frames_of(stem: str, seed: int, graded: bool, cache: Path) -> dict:
-    """The frames' width profiles of one push and its truth (cached)."""
-    key = f"{stem}_{seed}_{int(graded)}"
+def frames_of(stem: str, seed: int, graded: bool, cache: Path, style: str = "flat") -> dict:
+    """The frames' width profiles of one push and its truth (cached; ``style``: the renderer's)."""
+    key = f"{stem}_{seed}_{int(graded)}" + ("" if style == "flat" else f"_{style}")
     if (cache / f"{key}.pkl").exists():
         return load_cached(cache, key)
     seen = {}
@@ -55,7 +55,7 @@ def frames_of(stem: str, seed: int, graded: bool, cache: Path) -> dict:
     W.combine_profiles = keep
     try:
         with tempfile.TemporaryDirectory() as tmp:
-            ex, _, px = extracted_push(stem, seed, graded, Path(tmp))
+            ex, _, px = extracted_push(stem, seed, graded, Path(tmp), style)
     finally:
         W.combine_profiles = real
     truth = ex.source.extra["truth"]
@@ -122,6 +122,7 @@ def main(argv=None) -> None:
     ap.add_argument("--graded", default="")
     ap.add_argument("--cache", type=Path, required=True)
     ap.add_argument("--same-pixels", default=str(W.SAME_PIXELS_PX), help="SAME_PIXELS_PX values, comma separated")
+    ap.add_argument("--style", default="flat", choices=("flat", "shaded"), help="the renderer's style")
     ap.add_argument("--floor", action="store_true", help="stations' sd with a sampled floor (sd^2 k^2 + f^2)")
     a = ap.parse_args(argv)
     jobs = [(s, False) for s in seeds(a.seeds)] + [(s, True) for s in seeds(a.graded)]
@@ -129,7 +130,7 @@ def main(argv=None) -> None:
     keep = W.SAME_PIXELS_PX
     pooled = {v: [] for v in values}
     for seed, graded in jobs:
-        fr = frames_of(a.stem, seed, graded, a.cache)
+        fr = frames_of(a.stem, seed, graded, a.cache, a.style)
         line = [f"{a.stem} {seed}{' graded' if graded else ''}: drawn p_geom {fr['q']:.3f}"]
         for v in values:
             W.SAME_PIXELS_PX = v

@@ -503,7 +503,9 @@ def _illinois(fun, lo, hi, glo, ghi, xtol=1e-13, maxiter=80):
     """
     lo, hi, glo, ghi = (np.array(a, float) for a in (lo, hi, glo, ghi))
     x = hi.copy()
-    todo = np.ones(lo.shape, bool)
+    # a root at the bracket's end is the answer (the regula falsi point would sit on the end, and bisection
+    # would walk towards it for some 40 rounds)
+    todo = ghi != 0.0
     side = np.zeros(lo.shape, int)
     newton = np.full(lo.shape, np.nan)  # the Newton candidate of the last round (NaN: none)
     for _ in range(maxiter):
