@@ -92,6 +92,28 @@ def test_default_noise_is_realistic_and_engagement_found(twig_noisy):
         assert not np.any(np.abs(seen - push.height_m) < 0.015)  # occluded around the sensor
 
 
+def test_the_simulated_sensor_holds_the_simulated_forces(twig_noisy):
+    """The declared range is the smallest capacity holding the pushes' forces with a tenth to spare (the twig
+    at 0.45 m peaks near 15 N: 20 N), so validate does not read the simulator's own data as saturated; the
+    bundled dataset declares the same; a range set in the configuration is kept."""
+    from bayesrod import DEMO_DATASET
+    from bayesrod.dataset.simulate import SimConfig, sensor_range
+
+    for path in (twig_noisy, DEMO_DATASET):
+        spec = read_dataset(path)
+        peak = max(float(np.max(p.force.force_N)) for p in spec.pushes)
+        assert spec.sensor.force_range_N == (0.05, 20.0)
+        assert 10.0 < 1.1 * peak <= 20.0
+        assert not [q for q in validate_dataset(path) if "sensor range" in str(q)]
+    cfg = SimConfig.from_preset("twig")
+    assert sensor_range(cfg, []) == (0.05, 8.0)
+    assert sensor_range(SimConfig.from_preset("twig", force_range_N=(0.1, 5.0)), []) == (0.1, 5.0)
+    from types import SimpleNamespace
+
+    for peak, top in ((7.2, 8.0), (7.5, 10.0), (1500.0, 10000.0)):  # a tenth to spare; past the list, a power of 10
+        assert sensor_range(cfg, [SimpleNamespace(force_N=np.array([0.0, peak]))]) == (0.05, top)
+
+
 def test_engagement_with_unzeroed_sensor(tmp_path):
     ds = make_dataset(tmp_path / "off", "grass", seed=3, effects=Effects(force_offset=0.8))
     for push in read_dataset(ds).pushes:

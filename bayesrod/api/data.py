@@ -110,7 +110,7 @@ def simulate(
     config_overrides : mapping or None
         Further :class:`~bayesrod.dataset.simulate.SimConfig` fields (samples per push, frames, ...).
     """
-    from ..dataset.simulate import WIRE_LENGTH, SimConfig
+    from ..dataset.simulate import WIRE_LENGTH, SimConfig, sensor_range
     from ..dataset.simulate import simulate as simulate_pushes
     from ..physics.lumped import wire_dx_from_elongation
     from ._common import progress_enabled
@@ -186,7 +186,7 @@ def simulate(
         length_m=cfg.length_m,
         pushes=pushes,
         species=cfg.species,
-        sensor=Sensor("wire", WIRE_LENGTH, tuple(cfg.force_range_N)),
+        sensor=Sensor("wire", WIRE_LENGTH, sensor_range(cfg, sim)),
         extra={"truth": truth},
         simulation=(cfg, tuple(sim)),
         built_pushes=pushes,

@@ -74,7 +74,9 @@ class SimConfig:
     n_frames_engaged: int = 20
     n_frames_after: int = 2
     n_points: int = 80
-    force_range_N: tuple[float, float] = (0.05, 8.0)
+    # the sensor's range declared in specimen.json [N]; None (default): (0.05, the smallest of
+    # SENSOR_CAPACITIES_N that holds the simulated forces with a tenth to spare), so the data never exceed it
+    force_range_N: tuple[float, float] | None = None
     # the robot stops after this contact displacement if the stem has not slipped (None: push until the slip)
     max_contact_displacement_m: float | None = None
     # the robot's step between force samples [m]; None (default): n_force_engaged samples spread over the
@@ -355,6 +357,22 @@ def simulate(cfg: SimConfig, progress: bool = False) -> list[SimulatedPush]:
     return pushes
 
 
+#: capacities [N] of the force sensor a simulated rig declares (:func:`sensor_range`)
+SENSOR_CAPACITIES_N = (8.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0)
+
+
+def sensor_range(cfg: SimConfig, pushes: list[SimulatedPush]) -> tuple[float, float]:
+    """The force range [N] the simulated sensor declares: ``cfg.force_range_N`` when set, else from 0.05 N
+    to the smallest of :data:`SENSOR_CAPACITIES_N` at least 1.1 times the largest simulated force (a
+    sensor that held the push: a declared range the data exceed reads as saturation, and ``design``
+    judges heights against it)."""
+    if cfg.force_range_N is not None:
+        return (float(cfg.force_range_N[0]), float(cfg.force_range_N[1]))
+    peak = 1.1 * max((float(np.max(sp.force_N, initial=0.0)) for sp in pushes), default=0.0)
+    top = next((c for c in SENSOR_CAPACITIES_N if c >= peak), None)
+    return (0.05, top if top is not None else float(10 ** np.ceil(np.log10(peak))))
+
+
 def write_simulated(
     cfg: SimConfig,
     pushes: list[SimulatedPush],
@@ -375,7 +393,7 @@ def write_simulated(
         "specimen": cfg.specimen,
         "species": cfg.species,
         "length_m": cfg.length_m,
-        "sensor": {"type": "wire", "wire_length_m": WIRE_LENGTH, "force_range_N": list(cfg.force_range_N)},
+        "sensor": {"type": "wire", "wire_length_m": WIRE_LENGTH, "force_range_N": list(sensor_range(cfg, pushes))},
         "pushes": [],
         "truth": {
             "EI0": cfg.EI0,
