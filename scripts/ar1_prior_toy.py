@@ -1,6 +1,6 @@
 """Why the rho prior matters: exact Bayesian coverage for a linear stand-in of the rod under AR(1) noise.
 
-    python scripts/ar1_prior_toy.py [--replicates 1500] [--seed 0]
+    python scripts/ar1_prior_toy.py [--replicates 1500] [--seed 0] [--pushes 2]
 
 Three pushes of 68 samples (the AR(1) coverage study's twig, docs/validation.md), each with two
 smooth regressors (a stiffness-like slope and a taper-like curvature term, scaled per height),
@@ -9,7 +9,8 @@ coefficients and 1/sigma on the noise sd integrate out analytically (a Student-t
 is integrated on a grid over [-0.5, 0.995] under three priors: uniform (bayesrod's rho_force prior
 before session 19), arcsine (1 - rho^2)^(-1/2) (the reference / Jeffreys prior of a stationary AR(1)
 correlation, bayesrod's default since), and 1/(1 - rho). Prints the 90% coverage of both coefficients
-and the median interval width of the first for each prior.
+and the median interval width of the first for each prior. ``--pushes 2``: two pushes (the first and the
+last of the three), as each condition of fit-group's two-height study has to learn its own noise from.
 """
 
 from __future__ import annotations
@@ -21,16 +22,18 @@ from scipy import stats
 
 from bayesrod.dataset.simulate import ar1_noise
 
-N, PUSHES, RHO, SIGMA = 68, 3, 0.9, 0.05
+N, RHO, SIGMA = 68, 0.9, 0.05
+#: the pushes' regressor scales (per height): all three, or the first and last (``--pushes 2``)
+SCALES = {3: (1.0, 0.75, 0.55), 2: (1.0, 0.55)}
 BETA = np.array([1.0, 0.5])
 GRID = np.linspace(-0.5, 0.995, 400)
 PRIORS = {"uniform": np.ones_like(GRID), "arcsine": 1 / np.sqrt(1 - GRID**2), "1/(1-rho)": 1 / (1 - GRID)}
 
 
-def design() -> tuple[np.ndarray, np.ndarray]:
+def design(pushes: int = 3) -> tuple[np.ndarray, np.ndarray]:
     d = np.linspace(0, 1, N)
-    X = np.concatenate([np.column_stack([c * d, 0.7 * c * (d**2 - d / 2)]) for c in (1.0, 0.75, 0.55)])
-    first = np.zeros(N * PUSHES, bool)
+    X = np.concatenate([np.column_stack([c * d, 0.7 * c * (d**2 - d / 2)]) for c in SCALES[pushes]])
+    first = np.zeros(N * pushes, bool)
     first[::N] = True
     return X, first
 
@@ -83,13 +86,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--replicates", type=int, default=1500)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--pushes", type=int, choices=sorted(SCALES), default=3)
     args = ap.parse_args()
     rng = np.random.default_rng(args.seed)
-    X, first = design()
+    X, first = design(args.pushes)
     covered = {k: np.zeros(2, int) for k in PRIORS}
     widths = {k: [] for k in PRIORS}
     for _ in range(args.replicates):
-        y = X @ BETA + np.concatenate([ar1_noise(rng, SIGMA, RHO, N) for _ in range(PUSHES)])
+        y = X @ BETA + np.concatenate([ar1_noise(rng, SIGMA, RHO, N) for _ in range(args.pushes)])
         for name, qs in intervals(y, X, first).items():
             covered[name] += (qs[:, 0] <= BETA) & (BETA <= qs[:, 1])
             widths[name].append(qs[0, 1] - qs[0, 0])
