@@ -453,7 +453,9 @@ def test_a_checkpoint_of_a_base_spring_run_in_log_k_is_refused_and_other_runs_st
     assert sampling_coordinates("ar1", ("rest_curvature",)) == {
         "noise_coordinates": "innovation_sd",
         "base_coordinates": "log_k",
+        "stiffness_coordinates": "log_EI0",
     }
+    assert sampling_coordinates("iid", (), one_height=True)["stiffness_coordinates"] == "log_k_at_height"
     config = {k: None for k in _RESUME_KEYS} | {
         "effects": ["base_compliance"],
         "base_coordinates": "u_forces_only_stiff_start",

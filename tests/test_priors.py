@@ -447,3 +447,82 @@ def test_a_base_spring_stays_in_u_from_a_stiff_start_and_moves_to_log_k_from_a_s
     after = space.to_natural(got[None])
     for n in before:
         np.testing.assert_allclose(after[n], before[n], rtol=1e-12)
+
+
+@pytest.mark.parametrize("eta", [0.1, 0.5, 0.9])
+@pytest.mark.parametrize("p", [0.0, 0.43, 1.6, 3.0])
+def test_the_compliance_factor_is_the_integral_of_the_taper_law_and_3_ei_over_h3_for_a_uniform_rod(p, eta):
+    """log C(p) against scipy's quad; at p = 0, C = eta^3 / 3 (k_x = 3 EI / h^3 for constant EI)."""
+    from scipy.integrate import quad
+
+    from bayesrod.inference.priors import log_compliance_factor
+
+    ref = quad(lambda x: (eta - x) ** 2 * (1 - x) ** (-4 * p), 0, eta, epsabs=0, epsrel=1e-12)[0]
+    # (any smooth function of p would make a valid coordinate; this one is C to 2e-5 where it is steepest)
+    assert float(log_compliance_factor(p, eta)) == pytest.approx(math.log(ref), abs=1e-4)
+    if p == 0.0:
+        assert float(np.exp(log_compliance_factor(p, eta))) == pytest.approx(eta**3 / 3, rel=1e-12)
+    np.testing.assert_array_equal(log_compliance_factor(np.full((2, 3), p), eta).shape, (2, 3))
+
+
+def _stiffness_space(stiffness_at):
+    ps = ParameterSpace()
+    ps.names = ["EI0", "p", "sigma_force_N", "rho_force"]
+    ps.priors = [
+        ParamPrior("EI0", "lognormal", (2.0, 1.0)),
+        ParamPrior("p", "uniform", (0.0, 3.0)),
+        ParamPrior("sigma_force_N", "lognormal", (0.03, 1.0)),
+        ParamPrior("rho_force", "arcsine", (-0.5, 0.995)),
+    ]
+    ps.stiffness_at = stiffness_at
+    return ps
+
+
+def test_at_one_height_ei0_is_sampled_as_the_log_stiffness_there_a_shear_of_unit_jacobian():
+    """With ``stiffness_at`` = (h, L) the EI0 coordinate is log EI0 - log C(p, h/L): at fixed stiffness
+    EI0 / C, moving p moves nothing else; the map back is exact, the prior coordinates are log EI0 again
+    (the log density needs no Jacobian), and the other coordinates are those of the plain space."""
+    from bayesrod.inference.priors import log_compliance_factor
+
+    rng = np.random.default_rng(4)
+    nat = {
+        "EI0": np.exp(rng.normal(1.0, 0.5, 7)),
+        "p": rng.uniform(0.0, 3.0, 7),
+        "sigma_force_N": np.exp(rng.normal(-3.0, 0.3, 7)),
+        "rho_force": rng.uniform(-0.4, 0.99, 7),
+    }
+    shear, plain = _stiffness_space((0.55, 0.8)), _stiffness_space(None)
+    assert shear.stiffness_pair() == (0, 1) and plain.stiffness_pair() is None
+    t_shear, t_plain = shear.to_sample(nat), plain.to_sample(nat)
+    np.testing.assert_allclose(t_shear[:, 0], np.log(nat["EI0"]) - log_compliance_factor(nat["p"], 0.55 / 0.8))
+    np.testing.assert_array_equal(t_shear[:, 1:], t_plain[:, 1:])
+    np.testing.assert_allclose(shear.prior_coordinates(t_shear), plain.prior_coordinates(t_plain), rtol=0, atol=1e-12)
+    back = shear.to_natural(t_shear)
+    for k, v in nat.items():
+        np.testing.assert_allclose(back[k], v, rtol=1e-12, atol=0)
+    np.testing.assert_array_equal(shear.log_jacobian(t_shear), 0.0)
+    # the stiffness fixed, p moved: EI0 follows the ridge log EI0 = log k + log C(p)
+    moved = t_shear.copy()
+    moved[:, 1] = 2.0
+    ei0 = shear.to_natural(moved)["EI0"]
+    np.testing.assert_allclose(np.log(ei0) - log_compliance_factor(2.0, 0.55 / 0.8), t_shear[:, 0], rtol=0, atol=1e-12)
+
+
+def test_the_posterior_samples_ei0_by_the_stiffness_only_when_every_push_is_at_one_height(tmp_path):
+    """One height on a known length: the shear, and the log posterior at a natural point is the plain
+    coordinates' (unit Jacobian); two heights, or the length sampled: log EI0 as before."""
+    import bayesrod
+    from bayesrod.inference.likelihood import LogPosterior, build_likelihood
+    from bayesrod.inference.priors import load_prior
+
+    prior = load_prior("default")
+    one = bayesrod.simulate("twig", seed=3, heights_m=[0.55])
+    lik = build_likelihood(one, prior, (), use_shapes=False)
+    post = LogPosterior(lik, prior)
+    assert post.stiffness_at == (0.55, 0.8) and post.stiffness_pair() == (0, 1)
+    plain = LogPosterior(lik, prior)
+    plain.stiffness_at = None
+    nat = {"EI0": np.array([2.3, 2.63, 3.1]), "p": np.array([0.3, 0.43, 0.9]), "sigma_force_N": np.full(3, 0.03)}
+    np.testing.assert_allclose(post.log_prob(post.to_sample(nat)), plain.log_prob(plain.to_sample(nat)), atol=1e-9)
+    two = bayesrod.simulate("twig", seed=3, heights_m=[0.45, 0.65])
+    assert LogPosterior(build_likelihood(two, prior, (), use_shapes=False), prior).stiffness_at is None

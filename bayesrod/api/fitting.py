@@ -66,6 +66,7 @@ _RESUME_KEYS = (
     "force_offsets",
     "noise_coordinates",
     "base_coordinates",
+    "stiffness_coordinates",
     "slip",
 )
 #: what a checkpoint written before an option existed meant by it
@@ -79,6 +80,8 @@ _RESUME_DEFAULTS = {
     "noise_coordinates": "marginal_sd",
     # before 2026-11-27 a base spring was sampled in log k; its chains cannot be resumed
     "base_coordinates": "log_k",
+    # before 2026-11-27 (session 34) EI0 was sampled as log EI0 also at one height; such chains cannot be resumed
+    "stiffness_coordinates": "log_EI0",
     # before 2026-11-26 the likelihood had no slip term
     "slip": False,
 }
@@ -646,14 +649,16 @@ def _two_stage(spec, use_shapes: bool) -> tuple[dict | None, object]:
 TABLE_SHIFT_WARN_SD = 0.1
 
 
-def sampling_coordinates(force_noise: str, effects) -> dict:
-    """The coordinates the sampler moves the force noise and a base spring in (ParameterSpace): an AR(1)
+def sampling_coordinates(force_noise: str, effects, one_height: bool = False) -> dict:
+    """The coordinates the sampler moves the force noise, a base spring and EI0 in (ParameterSpace): an AR(1)
     noise by its innovation sd (since 2026-11-26), a base spring on forces alone by its table coordinate u
-    where the start's spring is stiff (since 2026-11-27; ``ParameterSpace.settle_base_coordinates``). A checkpoint
-    records them; chains in others cannot be resumed."""
+    where the start's spring is stiff (since 2026-11-27; ``ParameterSpace.settle_base_coordinates``), EI0 by the
+    log stiffness at the pushes' height when they are all at one (``one_height``: ``ParameterSpace.stiffness_at``,
+    since session 34). A checkpoint records them; chains in others cannot be resumed."""
     return {
         "noise_coordinates": "innovation_sd" if force_noise == "ar1" else "marginal_sd",
         "base_coordinates": "u_forces_only_stiff_start" if "base_compliance" in effects else "log_k",
+        "stiffness_coordinates": "log_k_at_height" if one_height else "log_EI0",
     }
 
 
@@ -834,10 +839,11 @@ def fit(
     if lik.length_prior is not None:
         lo, hi = lik.length_prior.bounds()
         log.info("%s: stem length sampled (prior %s on [%.3g, %.3g] m)", spec.specimen, lik.length_prior.dist, lo, hi)
+    post = LogPosterior(lik, pr)
+    config.update(sampling_coordinates(force_noise, effects, one_height=post.stiffness_at is not None))
     if checkpoint is not None:
         checkpoint = Path(checkpoint)
         _check_checkpoint(checkpoint, config)
-    post = LogPosterior(lik, pr)
     log.info(
         "%s: %d engaged force samples, %d centerline points, %d pushes; parameters %s",
         spec.specimen,

@@ -43,7 +43,7 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize
 
 from .diagnose import BLOCK_TRAIN
-from .likelihood import EffectAxis, PosteriorBase, RodLikelihood, _ident, force_scale_fit
+from .likelihood import EffectAxis, PosteriorBase, RodLikelihood, _ident, force_scale_fit, one_height_stiffness
 from .priors import ParamPrior
 
 #: upper end of the base-compliance coordinate u = c/(1+c): c = EI0 C / L up to 9
@@ -210,6 +210,12 @@ class GroupPosterior(PosteriorBase):
         self._p_idx = [i for i, n in enumerate(self.names) if n == "p" or n.startswith("p__")]
         self._p_bounds = likelihood.p_range
         self._z_idx = [i for i, n in enumerate(self.names) if n.startswith("z_base")]
+        # every condition pushed at the same one height (the stem's L known): the shared EI0 sampled as the
+        # log stiffness there (ParameterSpace)
+        liks = [likelihood.liks[c] for c in likelihood.conditions]
+        same_L = len({round(float(lk.L), 9) for lk in liks}) == 1
+        data = [d for lk in liks for d in lk.data]
+        self.stiffness_at = one_height_stiffness(data, liks[0].L, not same_L or "length_m" in self.names)
 
     def sample_bounds(self) -> list[tuple[float | None, float | None]]:
         """Bounds of each sampling-space coordinate (None: unbounded), for a bounded optimiser."""

@@ -1253,6 +1253,13 @@ class PosteriorBase(ParameterSpace):
         return float(out[0]) if single else out
 
 
+def one_height_stiffness(data, L: float, length_sampled: bool) -> tuple[float, float] | None:
+    """(h, L) when every push of ``data`` (each with ``height_m``) is at one height h and L is known, else None:
+    :attr:`ParameterSpace.stiffness_at`, the coordinates the sampler moves EI0 in."""
+    heights = {round(float(d.height_m), 9) for d in data}
+    return (heights.pop(), float(L)) if len(heights) == 1 and not length_sampled else None
+
+
 class LogPosterior(PosteriorBase):
     """Prior times likelihood in the sampling space; ``log_prob(theta)`` is what emcee sees.
 
@@ -1275,6 +1282,9 @@ class LogPosterior(PosteriorBase):
         # alone: centerlines pin EI0 and p apart from the spring, and then log k is the better coordinate
         forces_only = not getattr(likelihood, "n_points", 0)
         self.base_length_m = float(likelihood.L) if "base_compliance" in self.names and forces_only else None
+        # every push at one height on a known length: EI0 sampled as the log stiffness there (ParameterSpace)
+        data = getattr(likelihood, "data", ())  # (a stand-in likelihood may hold no pushes)
+        self.stiffness_at = one_height_stiffness(data, getattr(likelihood, "L", 1.0), "length_m" in self.names)
 
     def _in_support(self, natural: dict) -> NDArray:
         return self.likelihood.in_table(natural)  # a tabled effect's coordinate inside its table

@@ -141,6 +141,20 @@ def _open_unit(u) -> tuple[NDArray, NDArray]:
     return inside, np.where(inside, u, 0.5)
 
 
+#: Gauss-Legendre nodes and weights on [0, 1] for :func:`log_compliance_factor`
+_GL_X, _GL_W = (0.5 * (a + 1.0) if k == 0 else 0.5 * a for k, a in enumerate(np.polynomial.legendre.leggauss(24)))
+
+
+def log_compliance_factor(p, eta: float) -> NDArray:
+    """log C(p) with C(p) = int_0^eta (eta - x)^2 (1 - x)^(-4p) dx: the small-deflection tip compliance of the
+    taper law EI(s) = EI0 (1 - s/L)^(4p) at the contact height eta = h/L, in units of L^3 / EI0 (24-point
+    Gauss-Legendre; C(0) = eta^3 / 3, k_x = 3 EI / h^3 for a uniform rod). ``p`` any shape; finite for any real p."""
+    p = np.asarray(p, float)
+    x = eta * _GL_X  # (24,)
+    integrand = (eta - x) ** 2 * np.exp(-4.0 * p[..., None] * np.log1p(-x))
+    return np.log(eta * np.sum(_GL_W * integrand, axis=-1))
+
+
 class ParameterSpace:
     """Named parameters with their priors (``names``, ``priors``): maps between natural units and the
     sampling space, shared by the posteriors emcee sees.
@@ -161,12 +175,23 @@ class ParameterSpace:
     prior-limited arm and the soft spring's branch), which the ensembles crossed slowly: R-hat up to 1.21
     after 8000 steps, 6 of 12 forces-only SBC cases unconverged (docs/inference.md, "Sampling"). This map is not
     of unit Jacobian; :meth:`log_jacobian` holds its log determinant.
+
+    A third when ``stiffness_at`` = (h, L) is set (every push at one height h, L known): log EI0 is
+    sampled as log EI0 - log C(p), C(p) = int_0^eta (eta - x)^2 (1 - x)^(-4p) dx at eta = h / L, the log of
+    the rod's small-deflection stiffness at h up to a constant (k = F / delta = EI0 / (L^3 C(p))). Forces at
+    one height pin that stiffness and hardly p, so in (log EI0, p) the posterior is a ridge log EI0 = log k +
+    log C(p), curved (C grows steeply with p), which the ensembles crossed slowly (a fit-group series at
+    one height: R-hat 1.77 after 6000 steps); in (log k, p) it runs along p. A shear of unit Jacobian, like
+    the noise's (docs/inference.md, "Sampling").
     """
 
     names: list
     priors: list
     #: the length L [m] in the base spring's coordinate c = EI0 / (k L); None: k is sampled in log k
     base_length_m: float | None = None
+    #: (h, L) [m] of a fit whose pushes are all at one contact height h on a known length L: EI0 is sampled
+    #: as the log of the small-deflection stiffness there (:meth:`stiffness_pair`); None: as log EI0
+    stiffness_at: tuple[float, float] | None = None
 
     @property
     def ndim(self) -> int:
@@ -192,6 +217,20 @@ class ParameterSpace:
             out[..., s] = out[..., s] - sign * 0.5 * np.log1p(-(rho**2))
         return out
 
+    def stiffness_pair(self) -> tuple[int, int] | None:
+        """(EI0 column, p column) when EI0 is sampled as the log stiffness at one height, else None (also
+        where a base spring is sampled by its u, whose map already follows the ridge of EI0 in series with
+        the spring: with both, a one-push fit ended at R-hat 1.012 where u alone converged)."""
+        if self.stiffness_at is None or "EI0" not in self.names or "p" not in self.names or self.base_pair():
+            return None
+        i, j = self.names.index("EI0"), self.names.index("p")
+        return (i, j) if self.priors[i].log_space and not self.priors[j].log_space else None
+
+    def _stiffness_shift(self, p) -> NDArray:
+        """log C(p) (see the class docstring) at the taper exponents ``p`` (any shape)."""
+        h, L = self.stiffness_at
+        return log_compliance_factor(p, h / L)
+
     def base_pair(self) -> tuple[int, int] | None:
         """(EI0 column, base spring column) when the spring is sampled by its table coordinate u, else None."""
         if self.base_length_m is None or "base_compliance" not in self.names or "EI0" not in self.names:
@@ -204,6 +243,9 @@ class ParameterSpace:
         the marginal noise sd in place of the innovation sd (a shear of unit Jacobian), log k in place of
         the base spring's u (Jacobian :meth:`log_jacobian`; u outside (0, 1) maps to nan)."""
         out = self._shear(theta, +1.0)
+        stiff = self.stiffness_pair()
+        if stiff is not None:  # log EI0 first: the base spring's map below reads it
+            out[..., stiff[0]] = out[..., stiff[0]] + self._stiffness_shift(out[..., stiff[1]])
         pair = self.base_pair()
         if pair is not None:
             i, j = pair
@@ -255,6 +297,9 @@ class ParameterSpace:
         if pair is not None:
             c = np.exp(out[..., pair[0]] - out[..., pair[1]]) / self.base_length_m  # EI0 / (k L)
             out[..., pair[1]] = c / (1.0 + c)
+        stiff = self.stiffness_pair()
+        if stiff is not None:
+            out[..., stiff[0]] = out[..., stiff[0]] - self._stiffness_shift(out[..., stiff[1]])
         return out
 
 
