@@ -463,3 +463,28 @@ def test_a_yielded_push_keeps_the_shape_of_its_plastic_solution():
     np.testing.assert_allclose(grid[0, 2, :], res["phi_plastic"], atol=1e-12)  # the base's tangent angle
     x, _ = centerline_x_at_heights(grid, np.array([0.5625]))
     np.testing.assert_allclose(x[:, 0], res["xi_c"], atol=1e-6)
+
+
+@pytest.mark.parametrize("keep", [False, True])
+@pytest.mark.parametrize("at", [30.5, 30.25, 30.8])
+def test_march_finds_a_contact_height_the_rod_only_reaches_inside_one_step(keep, at):
+    """A uniform rod under a constant moment (no force) curls into a circle of curvature k: zeta(s) =
+    sin(k s) / k peaks at 1/k where the tangent turns horizontal. With that peak in the middle of a step
+    of the 48-step march, a contact height between the step ends' zeta and the peak is crossed and left
+    again inside the step: the march's peak check must find it, at s = asin(k eta) / k (before the peak),
+    xi = (1 - cos(k s)) / k, phi = k s. The peak in the middle of the step and off it (the step's ends then
+    read different heights)."""
+    from bayesrod.physics import elastica as el
+
+    n = 48
+    k = np.pi / (2 * (at / n))  # the peak at sigma = at / 48, inside step 30
+    ends = np.sin(k * np.array([30, 31]) / n) / k  # zeta at the step's ends, both below the peak 1/k
+    eta = 0.5 * (ends.max() + 1.0 / k)
+    assert ends.max() < eta < 1.0 / k
+    P, _ = el._problem(eta, 0.0, None)
+    out = el._march(np.zeros(1), np.array([k]), np.zeros(1), P, n, keep)
+    s = np.arcsin(k * eta) / k
+    assert out["found"][0]
+    np.testing.assert_allclose(out["sig_c"], s, rtol=1e-9)
+    np.testing.assert_allclose(out["xi_c"], (1 - np.cos(k * s)) / k, rtol=1e-8)
+    np.testing.assert_allclose(out["phi_c"], k * s, rtol=1e-9)

@@ -401,7 +401,7 @@ def _march(f, m0, phi0, P, n_steps, keep=False):
             io = np.flatnonzero(over)
             Po = _subset(Pi, io)
             hs = dmax[io]
-            ypk, dpk = _locate(Y0[:, io], _at(sig0, io), hs, fi[io], Po, 2, _HALF_PI, hs)
+            ypk, dpk = _locate(Y0[:, io], _at(sig0, io), fi[io], Po, 2, _HALF_PI, hs)
             peak = ypk[1] >= Po["eta"]
             crossed[io[peak]] = True
             dmax[io[peak]] = dpk[peak]
@@ -409,7 +409,7 @@ def _march(f, m0, phi0, P, n_steps, keep=False):
         if ic.size == 0:
             return ic, None, None
         Pc = _subset(Pi, ic)
-        yc, dc = _locate(Y0[:, ic], _at(sig0, ic), dmax[ic], fi[ic], Pc, 1, Pc["eta"], dmax[ic])
+        yc, dc = _locate(Y0[:, ic], _at(sig0, ic), fi[ic], Pc, 1, Pc["eta"], dmax[ic])
         j = idx[ic]
         out["sig_c"][j] = _at(sig0, ic) + dc
         out["xi_c"][j] = yc[0]
@@ -464,7 +464,7 @@ def _at(a, idx):
     return a[idx] if np.ndim(a) else a
 
 
-def _locate(Y, sig, h, f, P, comp, target, dmax, iters=8):
+def _locate(Y, sig, f, P, comp, target, dmax, iters=8):
     """Newton on the partial step length d in [0, dmax] so that Y[comp](sig + d) = target.
 
     The state component must be increasing over the step (zeta toward the
