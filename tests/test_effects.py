@@ -139,7 +139,9 @@ def test_effects_agree_with_reference(name, value):
     d = np.array([0.02, 0.1, 0.25])
     fast = force_from_displacement(d, H, EI0, P, L, eff)
     ref = np.array([R.solve_displacement(x / L, H / L, P, nd)["f"] for x in d]) * EI0 / L**2
-    np.testing.assert_allclose(fast.true_force_N, ref, rtol=1e-6)
+    # they agree to 2e-10 (self weight; 3e-12 or better for the others): 1e-8 catches a base-moment secant
+    # stopped at 1e-6 instead of 1e-12 (self weight: 1.4e-7), which 1e-6 let through; NaN where both slipped
+    np.testing.assert_allclose(fast.true_force_N, ref, rtol=1e-8)
 
 
 @pytest.mark.parametrize(
@@ -198,3 +200,16 @@ def test_effect_values_just_inside_their_bounds_are_accepted():
     assert all(np.shape(v) == (2,) for v in nd.values())
     np.testing.assert_allclose(nd["kappa0"], [0.32, 0.32])
     np.testing.assert_allclose(nd["w0"], 2.0 * 0.8**3 / EI)
+
+
+@pytest.mark.parametrize(("name", "value"), [("contact_friction", 0.25), ("self_weight", 1.5)])
+def test_base_moment_where_it_is_not_f_h_matches_the_reference(name, value):
+    """With friction or self weight the base moment is solved for (a secant on its residual), not F h: the
+    reported base moment against the reference solver's moment balance (f eta - mu f xi_c for friction)."""
+    eff = Effects.from_mapping({name: value})
+    nd = {k: float(v) for k, v in eff.nondim(L, EI0).items()}
+    F = np.array([0.5, 2.0])
+    fast = contact_from_force(F, H, EI0, P, L, eff)
+    ref = np.array([R.solve_force(f * L**2 / EI0, H / L, P, nd)["m0"] for f in F]) * EI0 / L
+    assert np.all(np.abs(ref / (F * H) - 1) > 1e-3)  # the moment is not F h here
+    np.testing.assert_allclose(fast.base_moment_Nm, ref, rtol=1e-8)
