@@ -143,3 +143,38 @@ def test_bracket_and_solve_takes_the_first_root_along_a_folding_branch():
     x, ok = el._bracket_and_solve(fun, np.full(3, 0.05))
     assert ok.all()
     np.testing.assert_allclose(x, hi, rtol=1e-12, atol=0)
+
+
+def test_locate_starts_from_the_secant_of_the_step_and_converges_in_few_newton_steps(monkeypatch):
+    """``_locate`` (the contact inside the step that crossed it) starts from the secant of the step's ends and
+    needs few Newton steps: on a curled uniform rod (zeta = sin(k s) / k) the partial step to a height
+    crossed inside the step, in at most 4 steps of the stepper (the secant end, then Newton); a start at the
+    step's end or at 0 (a wrong secant) takes more, and 8 Newton steps hide it from the answer alone."""
+    n, k = 48, 2.0
+    eta = np.sin(k * 20.4 / n) / k  # crossed inside step 20 (sigma 20/48 to 21/48), zeta increasing there
+    P, _ = el._problem(eta, 0.0, None)
+    P = el._prepare(P)
+    s0, h = 20 / n, 1 / n
+    Y0 = np.array([[(1 - np.cos(k * s0)) / k], [np.sin(k * s0) / k], [k * s0], [k]])
+    calls = []
+    step = el._step
+
+    def counted(*a):
+        calls.append(1)
+        return step(*a)
+
+    monkeypatch.setattr(el, "_step", counted)
+    y, d = el._locate(Y0, s0, np.zeros(1), P, 1, P["eta"], np.array([h]))
+    np.testing.assert_allclose(s0 + d, np.arcsin(k * eta) / k, rtol=1e-13)
+    np.testing.assert_allclose(y[1], eta, rtol=1e-14)
+    assert len(calls) <= 4, len(calls)
+    # with a force on the step (the contact's load), against bisection on the stepper itself
+    f = np.array([3.0])
+    lo, hi = 0.0, h
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if step(Y0, s0, mid, f, P, 1.0)[1, 0] < eta else (lo, mid)
+    calls.clear()
+    y, d = el._locate(Y0, s0, f, P, 1, P["eta"], np.array([h]))
+    np.testing.assert_allclose(d, 0.5 * (lo + hi), rtol=1e-12)
+    assert len(calls) <= 4, len(calls)
