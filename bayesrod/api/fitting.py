@@ -840,7 +840,7 @@ def fit(
         lo, hi = lik.length_prior.bounds()
         log.info("%s: stem length sampled (prior %s on [%.3g, %.3g] m)", spec.specimen, lik.length_prior.dist, lo, hi)
     post = LogPosterior(lik, pr)
-    config.update(sampling_coordinates(force_noise, effects, one_height=post.stiffness_at is not None))
+    config.update(sampling_coordinates(force_noise, effects, one_height=post.stiffness_pair() is not None))
     if checkpoint is not None:
         checkpoint = Path(checkpoint)
         _check_checkpoint(checkpoint, config)

@@ -182,7 +182,7 @@ class ParameterSpace:
     one height pin that stiffness and hardly p, so in (log EI0, p) the posterior is a ridge log EI0 = log k +
     log C(p), curved (C grows steeply with p), which the ensembles crossed slowly (a fit-group series at
     one height: R-hat 1.77 after 6000 steps); in (log k, p) it runs along p. A shear of unit Jacobian, like
-    the noise's (docs/inference.md, "Sampling").
+    the noise's (docs/inference.md, "Sampling"). Not with a base spring (:meth:`stiffness_pair`).
     """
 
     names: list
@@ -218,10 +218,14 @@ class ParameterSpace:
         return out
 
     def stiffness_pair(self) -> tuple[int, int] | None:
-        """(EI0 column, p column) when EI0 is sampled as the log stiffness at one height, else None (also
-        where a base spring is sampled by its u, whose map already follows the ridge of EI0 in series with
-        the spring: with both, a one-push fit ended at R-hat 1.012 where u alone converged)."""
-        if self.stiffness_at is None or "EI0" not in self.names or "p" not in self.names or self.base_pair():
+        """(EI0 column, p column) when EI0 is sampled as the log stiffness at one height, else None, also with a
+        base spring (``base_compliance``): in series with the spring the stiffness at the height is not the
+        rod's, and the shear bent the posterior instead: with the spring in u a one-push fit ended at R-hat
+        1.012 where u alone converged; with it in log k (a soft start) the SBC's seed 25 ended at R-hat 1.41
+        where log EI0 gave 1.009 (docs/validation.md, "Raw tables from another model")."""
+        if self.stiffness_at is None or "EI0" not in self.names or "p" not in self.names:
+            return None
+        if "base_compliance" in self.names:
             return None
         i, j = self.names.index("EI0"), self.names.index("p")
         return (i, j) if self.priors[i].log_space and not self.priors[j].log_space else None
