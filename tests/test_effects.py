@@ -213,3 +213,25 @@ def test_base_moment_where_it_is_not_f_h_matches_the_reference(name, value):
     ref = np.array([R.solve_force(f * L**2 / EI0, H / L, P, nd)["m0"] for f in F]) * EI0 / L
     assert np.all(np.abs(ref / (F * H) - 1) > 1e-3)  # the moment is not F h here
     np.testing.assert_allclose(fast.base_moment_Nm, ref, rtol=1e-8)
+
+
+@pytest.mark.parametrize(
+    "mapping",
+    [
+        {"base_compliance": 6.0, "self_weight": 1.5},
+        {"base_compliance": 6.0, "contact_friction": 0.25},
+        {"base_tilt": -0.05, "self_weight": 1.5},
+        {"rest_curvature": 0.3, "contact_friction": 0.25},
+    ],
+)
+def test_two_effects_at_once_agree_with_reference(mapping):
+    """Pairs of effects, as diagnose fits them: a base spring or tilt with the solved base moment of self
+    weight or friction (the base rotation inside its secant), a rest curvature with friction; against the
+    reference solver at 1e-8 (they agree to 3e-10)."""
+    eff = Effects.from_mapping(mapping)
+    nd = {k: float(v) for k, v in eff.nondim(L, EI0).items()}
+    d = np.array([0.02, 0.1, 0.2])
+    fast = force_from_displacement(d, 0.55, EI0, P, L, eff)
+    ref = np.array([R.solve_displacement(x / L, 0.55 / L, P, nd)["f"] for x in d]) * EI0 / L**2
+    assert np.isfinite(ref[:2]).all()
+    np.testing.assert_allclose(fast.true_force_N, ref, rtol=1e-8)
