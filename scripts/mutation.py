@@ -94,6 +94,7 @@ TARGETS: dict[str, tuple[str, list[str], list[str] | None]] = {
                     "test_plastic_branch_is_the_elastic_rod_on_a_base_turned_by_the_plastic_rotation",
                     "test_dimensional_solutions_report_every_field_in_si_units_and_round_trip",
                     "test_march_finds_a_contact_height_the_rod_only_reaches_inside_one_step",
+                    "test_without_effects_the_measured_force_is_the_true_force",
                 )
             ),
             "tests/test_root_search.py",  # the root search alone, on functions with known roots

@@ -488,3 +488,16 @@ def test_march_finds_a_contact_height_the_rod_only_reaches_inside_one_step(keep,
     np.testing.assert_allclose(out["sig_c"], s, rtol=1e-9)
     np.testing.assert_allclose(out["xi_c"], (1 - np.cos(k * s)) / k, rtol=1e-8)
     np.testing.assert_allclose(out["phi_c"], k * s, rtol=1e-9)
+
+
+def test_without_effects_the_measured_force_is_the_true_force():
+    """``effects_nd`` None or without a force offset: no sensor offset (f_measured = f); with one, f plus it."""
+    from bayesrod.physics import elastica as E
+
+    d = np.array([0.01, 0.05])
+    plain = E.force_from_displacement_nd(d, 0.6, 0.43)
+    np.testing.assert_array_equal(plain["f_measured"], plain["f"])
+    tilted = E.force_from_displacement_nd(d, 0.6, 0.43, {"tilt": 0.02})
+    np.testing.assert_array_equal(tilted["f_measured"], tilted["f"])
+    offset = E.force_from_displacement_nd(d, 0.6, 0.43, {"f_offset": 0.3})
+    np.testing.assert_allclose(offset["f_measured"], plain["f"] + 0.3, rtol=1e-14)

@@ -458,7 +458,7 @@ def test_the_compliance_factor_is_the_integral_of_the_taper_law_and_3_ei_over_h3
     from bayesrod.inference.priors import log_compliance_factor
 
     ref = quad(lambda x: (eta - x) ** 2 * (1 - x) ** (-4 * p), 0, eta, epsabs=0, epsrel=1e-12)[0]
-    # (any smooth function of p would make a valid coordinate; this one is C to 2e-5 where it is steepest)
+    # (the closed form of eq. kx; any smooth function of p would make a valid coordinate)
     assert float(log_compliance_factor(p, eta)) == pytest.approx(math.log(ref), abs=1e-4)
     if p == 0.0:
         assert float(np.exp(log_compliance_factor(p, eta))) == pytest.approx(eta**3 / 3, rel=1e-12)
@@ -531,3 +531,25 @@ def test_the_posterior_samples_ei0_by_the_stiffness_only_when_every_push_is_at_o
     assert spring.stiffness_at == (0.55, 0.8) and spring.stiffness_pair() is None
     spring.base_length_m = None  # the spring in log k (a soft start)
     assert spring.stiffness_pair() is None
+
+
+def test_one_height_stiffness_needs_one_height_one_known_length():
+    """(h, L) only for one height on one known length (conditions of a group may differ in either)."""
+    from bayesrod.inference.likelihood import one_height_stiffness
+
+    assert one_height_stiffness([0.5, 0.5], [1.8], False) == (0.5, 1.8)
+    assert one_height_stiffness([0.5, 0.5], [1.8, 1.8], False) == (0.5, 1.8)
+    assert one_height_stiffness([0.5, 0.6], [1.8], False) is None
+    assert one_height_stiffness([0.5], [1.8, 1.7], False) is None
+    assert one_height_stiffness([0.5], [1.8], True) is None
+    assert one_height_stiffness([], [1.8], False) is None
+
+
+def test_a_one_height_fit_records_its_stiffness_coordinates_for_resuming():
+    """A checkpoint must know the coordinates its chains are in: a one-height fit records them."""
+    import bayesrod
+
+    one = bayesrod.simulate("twig", seed=3, heights_m=[0.55])
+    fit = bayesrod.fit(one, use_shapes=False, progress=False, max_steps=100, target_ess=10)
+    assert fit.config["stiffness_coordinates"] == "log_k_at_height"
+    assert fit.config["noise_coordinates"] == "marginal_sd" and fit.config["base_coordinates"] == "log_k"

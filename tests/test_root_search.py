@@ -178,14 +178,3 @@ def test_locate_starts_from_the_secant_of_the_step_and_converges_in_few_newton_s
     y, d = el._locate(Y0, s0, f, P, 1, P["eta"], np.array([h]))
     np.testing.assert_allclose(d, 0.5 * (lo + hi), rtol=1e-12)
     assert len(calls) <= 4, len(calls)
-
-
-def test_without_effects_the_measured_force_is_the_true_force():
-    """``effects_nd`` None or without a force offset: no sensor offset (f_measured = f); with one, f plus it."""
-    d = np.array([0.01, 0.05])
-    plain = el.force_from_displacement_nd(d, 0.6, 0.43)
-    np.testing.assert_array_equal(plain["f_measured"], plain["f"])
-    tilted = el.force_from_displacement_nd(d, 0.6, 0.43, {"tilt": 0.02})
-    np.testing.assert_array_equal(tilted["f_measured"], tilted["f"])
-    offset = el.force_from_displacement_nd(d, 0.6, 0.43, {"f_offset": 0.3})
-    np.testing.assert_allclose(offset["f_measured"], plain["f"] + 0.3, rtol=1e-14)

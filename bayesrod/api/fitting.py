@@ -826,7 +826,6 @@ def fit(
         "height_sd_m": height_sd_m,
         "force_offsets": bool(force_offsets),
         "diameter": diameter,
-        **sampling_coordinates(force_noise, effects),  # a checkpoint stores chains in them
         "slip": bool(slip),
         "bayesrod": __version__,
     }
@@ -840,6 +839,7 @@ def fit(
         lo, hi = lik.length_prior.bounds()
         log.info("%s: stem length sampled (prior %s on [%.3g, %.3g] m)", spec.specimen, lik.length_prior.dist, lo, hi)
     post = LogPosterior(lik, pr)
+    # the coordinates the chains move in (a checkpoint stores chains in them): set by the posterior
     config.update(sampling_coordinates(force_noise, effects, one_height=post.stiffness_pair() is not None))
     if checkpoint is not None:
         checkpoint = Path(checkpoint)

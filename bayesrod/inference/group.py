@@ -213,9 +213,8 @@ class GroupPosterior(PosteriorBase):
         # every condition pushed at the same one height (the stem's L known): the shared EI0 sampled as the
         # log stiffness there (ParameterSpace)
         liks = [likelihood.liks[c] for c in likelihood.conditions]
-        same_L = len({round(float(lk.L), 9) for lk in liks}) == 1
-        data = [d for lk in liks for d in lk.data]
-        self.stiffness_at = one_height_stiffness(data, liks[0].L, not same_L or "length_m" in self.names)
+        heights = [d.height_m for lk in liks for d in lk.data]
+        self.stiffness_at = one_height_stiffness(heights, [lk.L for lk in liks], "length_m" in self.names)
 
     def sample_bounds(self) -> list[tuple[float | None, float | None]]:
         """Bounds of each sampling-space coordinate (None: unbounded), for a bounded optimiser."""

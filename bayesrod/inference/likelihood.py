@@ -1253,11 +1253,11 @@ class PosteriorBase(ParameterSpace):
         return float(out[0]) if single else out
 
 
-def one_height_stiffness(data, L: float, length_sampled: bool) -> tuple[float, float] | None:
-    """(h, L) when every push of ``data`` (each with ``height_m``) is at one height h and L is known, else None:
-    :attr:`ParameterSpace.stiffness_at`, the coordinates the sampler moves EI0 in."""
-    heights = {round(float(d.height_m), 9) for d in data}
-    return (heights.pop(), float(L)) if len(heights) == 1 and not length_sampled else None
+def one_height_stiffness(heights, lengths, length_sampled: bool) -> tuple[float, float] | None:
+    """(h, L) when the pushes' ``heights`` [m] are all one h and their stems' ``lengths`` [m] one known L, else
+    None: :attr:`ParameterSpace.stiffness_at`, the coordinates the sampler moves EI0 in."""
+    hs, Ls = ({round(float(x), 9) for x in v} for v in (heights, lengths))
+    return (hs.pop(), Ls.pop()) if len(hs) == 1 and len(Ls) == 1 and not length_sampled else None
 
 
 class LogPosterior(PosteriorBase):
@@ -1283,8 +1283,8 @@ class LogPosterior(PosteriorBase):
         forces_only = not getattr(likelihood, "n_points", 0)
         self.base_length_m = float(likelihood.L) if "base_compliance" in self.names and forces_only else None
         # every push at one height on a known length: EI0 sampled as the log stiffness there (ParameterSpace)
-        data = getattr(likelihood, "data", ())  # (a stand-in likelihood may hold no pushes)
-        self.stiffness_at = one_height_stiffness(data, getattr(likelihood, "L", 1.0), "length_m" in self.names)
+        heights = [d.height_m for d in getattr(likelihood, "data", ())]  # (a stand-in likelihood may hold none)
+        self.stiffness_at = one_height_stiffness(heights, [getattr(likelihood, "L", 1.0)], "length_m" in self.names)
 
     def _in_support(self, natural: dict) -> NDArray:
         return self.likelihood.in_table(natural)  # a tabled effect's coordinate inside its table

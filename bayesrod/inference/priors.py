@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from scipy import special, stats
 
 from ..physics.effects import EFFECT_NAMES
+from ..physics.lumped import kx_nd
 
 _DISTS = {"lognormal", "normal", "truncnormal", "halfnormal", "uniform", "arcsine"}
 
@@ -141,18 +142,12 @@ def _open_unit(u) -> tuple[NDArray, NDArray]:
     return inside, np.where(inside, u, 0.5)
 
 
-#: Gauss-Legendre nodes and weights on [0, 1] for :func:`log_compliance_factor`
-_GL_X, _GL_W = (0.5 * (a + 1.0) if k == 0 else 0.5 * a for k, a in enumerate(np.polynomial.legendre.leggauss(24)))
-
-
 def log_compliance_factor(p, eta: float) -> NDArray:
     """log C(p) with C(p) = int_0^eta (eta - x)^2 (1 - x)^(-4p) dx: the small-deflection tip compliance of the
-    taper law EI(s) = EI0 (1 - s/L)^(4p) at the contact height eta = h/L, in units of L^3 / EI0 (24-point
-    Gauss-Legendre; C(0) = eta^3 / 3, k_x = 3 EI / h^3 for a uniform rod). ``p`` any shape; finite for any real p."""
-    p = np.asarray(p, float)
-    x = eta * _GL_X  # (24,)
-    integrand = (eta - x) ** 2 * np.exp(-4.0 * p[..., None] * np.log1p(-x))
-    return np.log(eta * np.sum(_GL_W * integrand, axis=-1))
+    taper law EI(s) = EI0 (1 - s/L)^(4p) at the contact height eta = h/L, in units of L^3 / EI0, i.e.
+    -log of :func:`bayesrod.physics.lumped.kx_nd` (eq. kx, closed form; C(0) = eta^3 / 3, k_x = 3 EI / h^3 for a
+    uniform rod). ``p`` any shape."""
+    return -np.log(kx_nd(eta, np.asarray(p, float)))
 
 
 class ParameterSpace:
@@ -218,14 +213,15 @@ class ParameterSpace:
         return out
 
     def stiffness_pair(self) -> tuple[int, int] | None:
-        """(EI0 column, p column) when EI0 is sampled as the log stiffness at one height, else None, also with a
-        base spring (``base_compliance``): in series with the spring the stiffness at the height is not the
-        rod's, and the shear bent the posterior instead: with the spring in u a one-push fit ended at R-hat
-        1.012 where u alone converged; with it in log k (a soft start) the SBC's seed 25 ended at R-hat 1.41
-        where log EI0 gave 1.009 (docs/validation.md, "Raw tables from another model")."""
-        if self.stiffness_at is None or "EI0" not in self.names or "p" not in self.names:
+        """(EI0 column, p column) when EI0 is sampled as the log stiffness at one height, else None.
+
+        None also with a base spring (``base_compliance``): in series with the spring the stiffness at the
+        height is not the rod's, and the shear bent the posterior instead (spring in u: a one-push fit ended
+        at R-hat 1.012 where u alone converged; in log k from a soft start: the SBC's seed 25 at 1.41 where
+        log EI0 gave 1.009; docs/inference.md, "Sampling")."""
+        if self.stiffness_at is None or "base_compliance" in self.names:
             return None
-        if "base_compliance" in self.names:
+        if "EI0" not in self.names or "p" not in self.names:
             return None
         i, j = self.names.index("EI0"), self.names.index("p")
         return (i, j) if self.priors[i].log_space and not self.priors[j].log_space else None
@@ -248,7 +244,7 @@ class ParameterSpace:
         the base spring's u (Jacobian :meth:`log_jacobian`; u outside (0, 1) maps to nan)."""
         out = self._shear(theta, +1.0)
         stiff = self.stiffness_pair()
-        if stiff is not None:  # log EI0 first: the base spring's map below reads it
+        if stiff is not None:
             out[..., stiff[0]] = out[..., stiff[0]] + self._stiffness_shift(out[..., stiff[1]])
         pair = self.base_pair()
         if pair is not None:
