@@ -240,10 +240,13 @@ def test_the_sharing_check_starts_its_refits_from_the_posteriors_best_draw(cut_p
     monkeypatch.setattr(api_group, "run_ensembles", run)
     monkeypatch.setattr(api_group, "sharing_check", check)
     bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, max_steps=100, target_ess=10)
-    res = seen["res"]
-    best = res.chain.reshape(-1, seen["post"].ndim)[np.argmax(res.log_prob.reshape(-1))]
-    np.testing.assert_array_equal(seen["theta"], best)
-    assert not np.array_equal(seen["theta"], seen["theta0"])
+    res, post = seen["res"], seen["post"]
+    best = res.chain.reshape(-1, post.ndim)[np.argmax(res.log_prob.reshape(-1))]
+    # one height: the sampler moved the soft bases in w; the refits run in z (the same point)
+    assert post.relative_bases
+    in_z = GroupPosterior(post.likelihood).to_sample(post.to_natural(best))[0]
+    np.testing.assert_allclose(seen["theta"], in_z, rtol=1e-12)
+    assert not np.allclose(seen["theta"], post.to_sample(post.to_natural(seen["theta0"]))[0])
 
 
 def test_the_sampled_base_coordinate_keeps_the_prior_on_u(cut_pair):
@@ -278,3 +281,48 @@ def test_the_sampled_base_coordinate_keeps_the_prior_on_u(cut_pair):
     assert a == pytest.approx(b, abs=1e-5)
     c, d = post.log_prob(edge)
     assert d - c == pytest.approx(np.log(U_SCALE * Z_CLAMP / U_MAX), abs=1e-5)  # the sampler's density: z's Jacobian
+
+
+def test_at_one_height_the_soft_bases_are_sampled_relative_to_the_stem(cut_pair):
+    """At one height the sampler moves each soft base by w (r = R_SCALE w, the base's compliance at the height
+    relative to the stem's): the same posterior as in z (density times the Jacobian, checked by finite
+    differences), the same point after a round trip, the clamp untouched, and along p at fixed stiffness and w
+    every condition's apparent small-deflection compliance 1/k + C_b h^2 stays put (the ridge runs along p)."""
+    lik = GroupLikelihood({d.extra["condition"]: d for d in cut_pair}, load_prior("woody"))
+    in_z = GroupPosterior(lik)
+    t = start_point(in_z)
+    in_w = GroupPosterior(lik)
+    w = in_w.settle_base_coordinates(t)
+    assert in_w.relative_bases and not in_z.relative_bases
+    ia, ib, jp = (in_w.names.index(n) for n in ("z_base__a", "z_base__b", "p"))
+    assert w[ia] == t[ia] <= 0 and w[ib] > 0 and w[ib] != pytest.approx(t[ib], rel=0.05)
+    for k, v in in_z.to_natural(t).items():
+        np.testing.assert_allclose(in_w.to_natural(w)[k], v, rtol=1e-12)
+    rng = np.random.default_rng(3)
+    pts = w + rng.normal(0.0, 0.02, (5, w.size)) * np.maximum(np.abs(w), 1.0)
+    pts[0, ia] = -0.4
+    zs = in_z.to_sample(in_w.to_natural(pts))
+    jac = in_w.log_jacobian(pts)
+    assert jac[0] != 0.0 and np.all(np.isfinite(in_w.log_prob(pts)))
+    np.testing.assert_allclose(in_w.log_prob(pts) - jac, in_z.log_prob(zs), atol=1e-9)
+    np.testing.assert_allclose(in_w.map_log_density(pts), in_z.map_log_density(zs), atol=1e-9)
+    pts[:, ia] = -0.4  # the intact clamped: the Jacobian is the cut's dz/dw alone
+    step = np.zeros(w.size)
+    step[ib] = 1e-6
+    dz = (in_w.prior_coordinates(pts + step)[:, ib] - in_w.prior_coordinates(pts)[:, ib]) / 1e-6
+    np.testing.assert_allclose(np.log(dz), in_w.log_jacobian(pts), rtol=1e-5)
+
+    def apparent(theta):
+        nat = in_w.to_natural(theta)
+        EI, p = float(nat["EI0"][0]), float(nat["p"][0])
+        cb = float(base_compliance(clamp_or_u(nat["z_base__b"]), EI, L)[0])
+        return 1.0 / float(k_x(H_REF, EI, p, L)) + cb * H_REF**2
+
+    along = [w.copy() for _ in range(3)]
+    for x, p in zip(along, (0.2, 0.5, 0.9), strict=True):
+        x[jp] = p
+    ref = apparent(along[0])
+    assert [apparent(x) for x in along] == pytest.approx([ref] * 3, rel=1e-9)
+    moved = in_z.to_natural(np.where(np.arange(w.size) == jp, 0.9, t))  # in z the same step changes it
+    cb = float(base_compliance(clamp_or_u(moved["z_base__b"]), moved["EI0"][0], L)[0])
+    assert 1.0 / float(k_x(H_REF, moved["EI0"][0], 0.9, L)) + cb * H_REF**2 != pytest.approx(ref, rel=0.01)

@@ -298,7 +298,7 @@ def fit_group(
     lik = GroupLikelihood(specs, pr, shared=tuple(shared), force_noise=force_noise, force_offsets=force_offsets)
     post = GroupPosterior(lik)
     log.info("%s: %d conditions, parameters %s", sid, len(specs), ", ".join(post.names))
-    theta0 = start_point(post)
+    theta0 = post.settle_base_coordinates(start_point(post))
     res = run_ensembles(
         post, theta0, seed=seed, progress=progress_enabled(progress), max_steps=max_steps, target_ess=target_ess
     )
@@ -311,6 +311,7 @@ def fit_group(
     # the held-out refits start from the posterior's best draw: the start point can sit in a worse optimum
     # that a refit from it never leaves (a stem whose anchorage alone changed was then 'rejected')
     best = res.chain.reshape(-1, post.ndim)[int(np.argmax(res.log_prob.reshape(-1)))]
+    best = GroupPosterior(lik).to_sample(post.to_natural(best))[0]  # in z, where the refits run
     check = sharing_check(lik, best) if sharing else None
     doc = _summary(sid, lik, nat, per, samples, res, pr, check, time.perf_counter() - t0)
     not_converged = convergence_message(res, max_steps, target_ess)

@@ -44,7 +44,7 @@ from scipy.optimize import minimize
 
 from .diagnose import BLOCK_TRAIN
 from .likelihood import EffectAxis, PosteriorBase, RodLikelihood, _ident, force_scale_fit, one_height_stiffness
-from .priors import ParamPrior
+from .priors import ParamPrior, log_compliance_factor
 
 #: upper end of the base-compliance coordinate u = c/(1+c): c = EI0 C / L up to 9
 U_MAX = 0.9
@@ -53,6 +53,9 @@ U_MAX = 0.9
 U_SCALE = 0.005
 #: length of the clamp's arm z in [-Z_CLAMP, 0] (prior mass 1/2 whatever its length)
 Z_CLAMP = 1.0
+#: the sampled coordinate of a soft base at one height (:meth:`GroupPosterior.settle_base_coordinates`):
+#: r = R_SCALE w, r the base's share of the apparent compliance at the height relative to the stem's
+R_SCALE = 0.01
 #: nodes of the u table axis: 25 (with 13 the interpolation biased a two-height fit of precise forces by
 #: 1.4% in EI0 (2.668 vs 2.63), outside its 90% interval; with 25 by 0.2% (2.624), tests/test_group.py)
 U_NODES = 25
@@ -215,6 +218,70 @@ class GroupPosterior(PosteriorBase):
         liks = [likelihood.liks[c] for c in likelihood.conditions]
         heights = [d.height_m for lk in liks for d in lk.data]
         self.stiffness_at = one_height_stiffness(heights, [lk.L for lk in liks], "length_m" in self.names)
+        #: each soft base sampled relative to the stem at the one height (:meth:`settle_base_coordinates`)
+        self.relative_bases = False
+
+    def settle_base_coordinates(self, theta: NDArray) -> NDArray:
+        """The start ``theta`` (ndim,) in the coordinates the sampler will use: at one height (EI0 sampled as
+        the stiffness there, :attr:`stiffness_at`), each condition's soft base by w, r = R_SCALE w, with r the
+        base's compliance at the height relative to the stem's there: r = C_b h^2 k, k = EI0 / (L^3 C(p)) the
+        stem's small-deflection stiffness at h, i.e. c = EI0 C_b / L = r C(p) / eta^2 (eta = h / L). w <= 0 is
+        the clamp, as z is.
+
+        At one height the forces pin each condition's apparent compliance 1/k + C_b h^2 and hardly p: moving
+        along p at fixed k moves EI0 = k L^3 C(p), and every cut's u = c / (1 + c) with it, in z; in w the
+        cuts stay put (docs/inference.md, "One stem, many conditions"). The prior stays on u (the Jacobian
+        is in :meth:`log_jacobian`). Maximum a posteriori fits (:func:`start_point`, :func:`map_fit`,
+        :func:`release_clamps`, :func:`sharing_check`) run in z, before this is called.
+        """
+        if self.stiffness_pair() is None or not self._z_idx:
+            return np.asarray(theta, float)
+        natural = self.to_natural(np.asarray(theta, float)[None])
+        self.relative_bases = True
+        return self.to_sample(natural)[0]
+
+    def _relative_u(self, w: NDArray, p: NDArray) -> tuple[NDArray, NDArray]:
+        """u and du/dw of a soft base's w > 0 at the taper exponents p (same shape)."""
+        h, L = self.stiffness_at
+        eta = h / L
+        gain = R_SCALE * np.exp(log_compliance_factor(p, eta)) / eta**2  # dc/dw
+        c = gain * w
+        return c / (1.0 + c), gain / (1.0 + c) ** 2
+
+    def prior_coordinates(self, theta) -> NDArray:
+        out = super().prior_coordinates(theta)
+        if self.relative_bases:
+            theta = np.asarray(theta, float)
+            p = theta[..., self.stiffness_pair()[1]]
+            for i in self._z_idx:
+                w = theta[..., i]
+                u, _ = self._relative_u(np.maximum(w, 0.0), p)
+                out[..., i] = np.where(w > 0, z_of_u(u), w)
+        return out
+
+    def log_jacobian(self, theta) -> NDArray:
+        out = super().log_jacobian(theta)
+        if self.relative_bases:
+            theta = np.asarray(theta, float)
+            p = theta[..., self.stiffness_pair()[1]]
+            for i in self._z_idx:
+                w = theta[..., i]
+                _, dudw = self._relative_u(np.maximum(w, 0.0), p)
+                out = out + np.where(w > 0, np.log(dudw / U_SCALE), 0.0)  # dz/dw on the soft arm, 1 on the clamp
+        return out
+
+    def to_sample(self, natural: dict) -> NDArray:
+        out = super().to_sample(natural)
+        if self.relative_bases:
+            h, L = self.stiffness_at
+            eta = h / L
+            p = out[..., self.stiffness_pair()[1]]
+            for i in self._z_idx:
+                z = out[..., i]
+                u = clamp_or_u(z)
+                c = u / (1.0 - u)
+                out[..., i] = np.where(z > 0, c * eta**2 / (R_SCALE * np.exp(log_compliance_factor(p, eta))), z)
+        return out
 
     def sample_bounds(self) -> list[tuple[float | None, float | None]]:
         """Bounds of each sampling-space coordinate (None: unbounded), for a bounded optimiser."""
@@ -240,8 +307,10 @@ class GroupPosterior(PosteriorBase):
         theta_arr = np.asarray(theta, float)
         t = np.atleast_2d(theta_arr)
         out = np.asarray(self.log_prob(t), float)
-        # dropping z's prior leaves a flat prior in z, which is flat in u on both arms (up to a constant)
-        z_prior = sum(self.priors[i].logpdf_sample(t[:, i]) for i in self._z_idx)
+        # dropping z's prior leaves a flat prior in z, which is flat in u on both arms (up to a constant); in
+        # the relative coordinates w the Jacobian dz/dw goes too, leaving the same function of the parameters
+        pc = self.prior_coordinates(t)
+        z_prior = sum(self.priors[i].logpdf_sample(pc[:, i]) for i in self._z_idx) + self.log_jacobian(t)
         out = np.where(np.isfinite(out), out - z_prior, -np.inf)
         return float(out[0]) if theta_arr.ndim == 1 else out
 
