@@ -326,3 +326,78 @@ def test_at_one_height_the_soft_bases_are_sampled_relative_to_the_stem(cut_pair)
     moved = in_z.to_natural(np.where(np.arange(w.size) == jp, 0.9, t))  # in z the same step changes it
     cb = float(base_compliance(clamp_or_u(moved["z_base__b"]), moved["EI0"][0], L)[0])
     assert 1.0 / float(k_x(H_REF, moved["EI0"][0], 0.9, L)) + cb * H_REF**2 != pytest.approx(ref, rel=0.01)
+
+
+def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
+    """Every number of a group summary a user reads, from draws set here (the sampler replaced): the shared EI0
+    and p, each condition's base compliance C (zero on the clamp's draws) and its probability of a clamp,
+    k_theta at the pushed height with the base spring 1/C in series, the noise, and each ordered contrast's
+    difference (b minus a) and P(b softer), against the same quantities computed here from the draws."""
+    import bayesrod.api.group as api_group
+    from bayesrod.inference.group import U_SCALE
+    from bayesrod.inference.sampler import SamplingResult
+    from bayesrod.physics import k_theta
+
+    rng = np.random.default_rng(5)
+    n = 4000
+    EI = EI0 * np.exp(0.02 * rng.standard_normal(n))
+    p = P + 0.02 * rng.standard_normal(n)
+    C_a = np.where(np.arange(n) < n // 4, 0.0, np.abs(0.004 + 0.002 * rng.standard_normal(n)))  # a quarter clamped
+    C_b = np.where(np.arange(n) < n // 8, 0.0, 0.05 + 0.003 * rng.standard_normal(n))  # both clamped: a tie
+    sig = {"a": 0.02 + 0.001 * rng.standard_normal(n), "b": 0.03 + 0.001 * rng.standard_normal(n)}
+    rho = {"a": 0.8 + 0.01 * rng.standard_normal(n), "b": 0.9 + 0.01 * rng.standard_normal(n)}
+
+    def z(C):
+        c = EI * C / L
+        return np.where(C > 0, c / (1.0 + c) / U_SCALE, -0.5)
+
+    natural = {"EI0": EI, "p": p, "z_base__a": z(C_a), "z_base__b": z(C_b)}
+    for c in "ab":
+        natural[f"sigma_force_N__{c}"], natural[f"rho_force__{c}"] = sig[c], rho[c]
+    seen = {}
+
+    def run(post, theta0, **kw):
+        chain = post.to_sample({k: natural[k] for k in post.names}).reshape(4, n // 4, post.ndim)
+        diag = {"rhat": dict.fromkeys(post.names, 1.001), "ess_bulk": dict.fromkeys(post.names, 5000.0)}
+        seen["post"] = post
+        return SamplingResult(chain, np.zeros((4, n // 4)), 2000, 1000, np.ones(post.ndim), 0.3, 4, diag, True, (0,))
+
+    monkeypatch.setattr(api_group, "run_ensembles", run)
+    monkeypatch.setattr(
+        api_group, "start_point", lambda post: post.to_sample({k: natural[k][:1] for k in post.names})[0]
+    )
+    fit = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False)
+    s = fit.doc
+    assert seen["post"].relative_bases  # the draws went through the one-height coordinates and back
+
+    def band(x):
+        q05, q50, q95 = np.quantile(x, [0.05, 0.5, 0.95])
+        return {"median": q50, "q05": q05, "q95": q95}
+
+    def same(got, x):
+        want = band(x)
+        assert {k: got[k] for k in want} == pytest.approx(want, rel=1e-9, abs=1e-15)
+
+    same(s["shared"]["EI0"], EI)
+    same(s["shared"]["p"], p)
+    C = {"a": C_a, "b": C_b}
+    for c in "ab":
+        row = s["conditions"][c]
+        same(row["base_compliance_rad_per_Nm"], C[c])
+        same(row["sigma_force_N"], sig[c])
+        same(row["rho_force"], rho[c])
+        with np.errstate(divide="ignore"):
+            kb = np.where(C[c] > 0, 1.0 / np.where(C[c] > 0, C[c], 1.0), np.inf)
+        [kt] = row["k_theta"]
+        assert kt["height_m"] == H_REF
+        same(kt, k_theta(np.array([[H_REF]]), EI[:, None], p[:, None], L, kb[:, None])[:, 0])
+    assert s["conditions"]["a"]["prob_rigid_clamp"] == pytest.approx(0.25)
+    assert s["conditions"]["b"]["prob_rigid_clamp"] == pytest.approx(0.125)
+    pairs = {(k["a"], k["b"]): k for k in s["contrasts"]}
+    assert set(pairs) == {("a", "b"), ("b", "a")}
+    for a, b in pairs:
+        same(pairs[a, b]["compliance_difference_rad_per_Nm"], C[b] - C[a])
+        assert pairs[a, b]["prob_b_softer"] == pytest.approx(np.mean(C[b] > C[a]))
+    # a tie (both clamped) is neither softer: P(b softer) + P(a softer) = 1 - P(tie)
+    assert pairs["a", "b"]["prob_b_softer"] == pytest.approx(0.875) and pairs["b", "a"]["prob_b_softer"] < 0.01
+    np.testing.assert_allclose(fit.samples["base_compliance_rad_per_Nm__b"], C_b, rtol=1e-9)
