@@ -18,6 +18,7 @@ from bayesrod.inference.group import (
     map_fit,
     release_clamps,
     sharing_check,
+    sharing_verdict,
     start_point,
     z_of_u,
 )
@@ -214,8 +215,50 @@ def test_sharing_check_refits_without_the_heldout_samples(cut_pair):
     shifted = lik.liks["a"].restricted(np.ones(held.size, bool))
     shifted.F_obs = shifted.F_obs + 0.5 * held
     lik.liks["a"] = shifted
-    per = sharing_check(lik, theta).per_condition["a"]
+    check = sharing_check(lik, theta)
+    per = check.per_condition["a"]
     assert per["joint"] > 0.45 and per["separate"] > 0.45, per
+    # the pooled RMSE is over every held-out sample: each condition's weighted by how many it held out
+    n = {c: int(last_third_masks(lik.liks[c]).sum()) for c in lik.conditions}
+    for key, got in (("joint", check.heldout_force_rmse_joint_N), ("separate", check.heldout_force_rmse_separate_N)):
+        pooled = sum(n[c] * check.per_condition[c][key] ** 2 for c in n) / sum(n.values())
+        assert got == pytest.approx(math.sqrt(pooled), rel=1e-12)
+
+
+def test_the_heldout_block_is_the_last_third_of_each_push():
+    """floor(n/3) samples of each push, its last ones (the block diagnose holds out of a single push)."""
+    from types import SimpleNamespace
+
+    push = np.repeat([0, 1, 2], [7, 10, 12])
+    held = last_third_masks(SimpleNamespace(F_obs=np.zeros(push.size), F_push=push))
+    for j, n in enumerate((7, 10, 12)):
+        assert held[push == j].tolist() == [False] * (n - n // 3) + [True] * (n // 3)
+
+
+def test_the_sharing_verdict_rejects_only_beyond_the_tolerance():
+    assert sharing_verdict(1.05, 1.0, 0.10) == "supported"
+    assert sharing_verdict(0.5, 1.0, 0.10) == "supported"
+    assert sharing_verdict(1.11, 1.0, 0.10) == "rejected"
+    assert sharing_verdict(1.11, 1.0, 0.12) == "supported"
+
+
+def test_a_release_must_gain_min_gain(cut_pair, monkeypatch):
+    """release_clamps keeps a clamp unless a soft base raises the log density by more than min_gain (2 nats):
+    a release gaining 1 nat is refused, one gaining 3 is kept (the refit stubbed to land there)."""
+    import bayesrod.inference.group as group
+
+    post = GroupPosterior(GroupLikelihood({d.extra["condition"]: d for d in cut_pair}, load_prior("woody")))
+    theta = start_point(post)
+    i = post.names.index("z_base__a")
+    assert theta[i] <= 0  # the intact condition clamped
+    lp = float(post.map_log_density(theta))
+    for gain, kept in ((1.0, False), (3.0, True)):
+        soft = theta.copy()
+        soft[i] = z_of_u(0.02)
+        monkeypatch.setattr(group, "map_fit", lambda post, t, soft=soft: soft)
+        monkeypatch.setattr(post, "map_log_density", lambda t, soft=soft, g=gain: lp + g * float(t[i] > 0))
+        out = group.release_clamps(post, theta)
+        assert bool(out[i] > 0) == kept
 
 
 @pytest.mark.slow  # about 40 s: tables, start and 100 steps of a two-condition stem
@@ -401,3 +444,13 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     # a tie (both clamped) is neither softer: P(b softer) + P(a softer) = 1 - P(tie)
     assert pairs["a", "b"]["prob_b_softer"] == pytest.approx(0.875) and pairs["b", "a"]["prob_b_softer"] < 0.01
     np.testing.assert_allclose(fit.samples["base_compliance_rad_per_Nm__b"], C_b, rtol=1e-9)
+
+
+def test_a_conditions_force_offset_has_the_documented_prior(cut_pair):
+    """N(0, 5% of the condition's peak force) (docs/inference.md), one per condition, in newtons."""
+    lik = GroupLikelihood({d.extra["condition"]: d for d in cut_pair}, load_prior("woody"), force_offsets=True)
+    for c in lik.conditions:
+        pr = lik.priors[lik.local[c]["force_offset"]]
+        peak = float(np.max(np.abs(lik.liks[c].F_obs)))
+        assert (pr.dist, pr.unit) == ("normal", "N") and pr.args == pytest.approx((0.0, 0.05 * peak), rel=1e-12)
+        assert peak > 0.5  # a real push, not an empty one

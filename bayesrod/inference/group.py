@@ -494,5 +494,10 @@ def sharing_check(joint: GroupLikelihood, theta_joint: NDArray, tolerance: float
         n += int(held.sum())
         per[c] = row
     rj, rs = math.sqrt(sq["joint"] / n), math.sqrt(sq["separate"] / n)
-    verdict = "rejected" if rj > (1.0 + tolerance) * rs else "supported"
-    return SharingCheck(verdict, rj, rs, per, tolerance)
+    return SharingCheck(sharing_verdict(rj, rs, tolerance), rj, rs, per, tolerance)
+
+
+def sharing_verdict(rmse_joint: float, rmse_separate: float, tolerance: float) -> str:
+    """``rejected`` when the joint model's held-out RMSE exceeds the separate fits' by more than ``tolerance``
+    (a fraction), else ``supported``."""
+    return "rejected" if rmse_joint > (1.0 + tolerance) * rmse_separate else "supported"
