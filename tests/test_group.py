@@ -16,6 +16,7 @@ from bayesrod.inference.group import (
     clamp_or_u,
     last_third_masks,
     map_fit,
+    refit_start,
     release_clamps,
     sharing_check,
     sharing_verdict,
@@ -284,12 +285,38 @@ def test_the_sharing_check_starts_its_refits_from_the_posteriors_best_draw(cut_p
     monkeypatch.setattr(api_group, "sharing_check", check)
     bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, max_steps=100, target_ess=10)
     res, post = seen["res"], seen["post"]
-    best = res.chain.reshape(-1, post.ndim)[np.argmax(res.log_prob.reshape(-1))]
-    # one height: the sampler moved the soft bases in w; the refits run in z (the same point)
+    # one height: the sampler moved the soft bases in w; the refits run in z
     assert post.relative_bases
-    in_z = GroupPosterior(post.likelihood).to_sample(post.to_natural(best))[0]
-    np.testing.assert_allclose(seen["theta"], in_z, rtol=1e-12)
-    assert not np.allclose(seen["theta"], post.to_sample(post.to_natural(seen["theta0"]))[0])
+    np.testing.assert_array_equal(seen["theta"], refit_start(post, seen["theta0"], res.chain, res.log_prob))
+
+
+def test_the_refits_start_at_the_best_map_density_of_the_start_and_the_top_draws(cut_pair):
+    """refit_start: of the sampler's start and the REFIT_CANDIDATES draws of highest sampled density, the one of
+    highest MAP density, in z; a draw outside the top ones is not looked at (session 35: the top draw alone was
+    6 nats below the start and the sharing of a stem whose base alone changed was rejected)."""
+    from bayesrod.inference.group import REFIT_CANDIDATES
+
+    lik = GroupLikelihood({d.extra["condition"]: d for d in cut_pair}, load_prior("woody"))
+    in_z = GroupPosterior(lik)
+    post = GroupPosterior(lik)
+    best = post.settle_base_coordinates(start_point(in_z))
+    rng = np.random.default_rng(2)
+    draws = best + 0.01 * rng.standard_normal((3, 10, best.size))  # three walkers of ten draws near the mode
+    start = best.copy()
+    start[post.names.index("EI0")] += 0.1  # a start off the mode
+    as_z = in_z.to_sample(post.to_natural(draws.reshape(-1, start.size)))
+    dens = in_z.map_log_density(as_z)
+    log_prob = np.arange(30.0).reshape(3, 10)  # the sampled density ranks draws by index
+    log_prob.flat[int(np.argmax(dens))] = -1.0  # the best MAP draw ranked last: not a candidate
+    top = np.argsort(log_prob.reshape(-1))[::-1][:REFIT_CANDIDATES]
+    start_z = in_z.to_sample(post.to_natural(start))[0]
+    want = as_z[top][int(np.argmax(dens[top]))]
+    assert dens[top].max() > in_z.map_log_density(start_z) and dens.max() > dens[top].max()
+    np.testing.assert_allclose(refit_start(post, start, draws, log_prob), want, rtol=1e-12)
+    # the start wins when it is the best
+    worse = draws.copy()
+    worse[..., post.names.index("EI0")] += 0.2
+    np.testing.assert_allclose(refit_start(post, start, worse, log_prob), start_z, rtol=1e-12)
 
 
 def test_the_sampled_base_coordinate_keeps_the_prior_on_u(cut_pair):

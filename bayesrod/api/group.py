@@ -27,6 +27,7 @@ from ..inference.group import (
     GroupPosterior,
     base_compliance,
     clamp_or_u,
+    refit_start,
     sharing_check,
     start_point,
 )
@@ -308,11 +309,7 @@ def fit_group(
     for c in lik.conditions:
         u = clamp_or_u(nat[lik.local[c]["z_base"]])
         samples[f"base_compliance_rad_per_Nm__{c}"] = base_compliance(u, per[c]["EI0"], lik.liks[c].L)
-    # the held-out refits start from the posterior's best draw: the start point can sit in a worse optimum
-    # that a refit from it never leaves (a stem whose anchorage alone changed was then 'rejected')
-    best = res.chain.reshape(-1, post.ndim)[int(np.argmax(res.log_prob.reshape(-1)))]
-    best = GroupPosterior(lik).to_sample(post.to_natural(best))[0]  # in z, where the refits run
-    check = sharing_check(lik, best) if sharing else None
+    check = sharing_check(lik, refit_start(post, theta0, res.chain, res.log_prob)) if sharing else None
     doc = _summary(sid, lik, nat, per, samples, res, pr, check, time.perf_counter() - t0)
     not_converged = convergence_message(res, max_steps, target_ess)
     doc["convergence"]["converged"] = not_converged is None

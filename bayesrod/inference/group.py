@@ -432,6 +432,28 @@ def map_fit(post: GroupPosterior, theta0: NDArray, maxiter: int = 400) -> NDArra
     return res.x / scale if np.isfinite(res.fun) and res.fun <= -post.map_log_density(theta1) else theta1
 
 
+#: how many of the chains' highest-density draws :func:`refit_start` weighs against the sampler's start
+REFIT_CANDIDATES = 8
+
+
+def refit_start(post: GroupPosterior, theta0: NDArray, chain: NDArray, log_prob: NDArray) -> NDArray:
+    """Where the sharing check's MAP refits start (in z, the coordinates they run in): of the sampler's start
+    and the ``REFIT_CANDIDATES`` draws of highest sampled density (``chain`` (..., ndim) with its ``log_prob``
+    (...), in ``post``'s coordinates), the one of highest MAP density (:meth:`GroupPosterior.map_log_density`).
+
+    Either alone failed: from the start a refit stayed in a worse optimum and rejected the sharing of a stem
+    whose anchorage alone changed (group study replicate 3: held-out RMSE joint 0.126 N against 0.067 N
+    separate; from the best draw 0.025 N); the draw of highest sampled density, with the clamp's arm 180
+    times denser than a soft base in z, was 6 nats below the start on replicate 7 at one height and the
+    sharing was rejected there (joint 0.131 N, separate 0.088 N; docs/validation.md, session 35).
+    """
+    in_z = GroupPosterior(post.likelihood)
+    flat = np.asarray(chain, float).reshape(-1, post.ndim)
+    top = np.argsort(np.asarray(log_prob, float).reshape(-1))[::-1][:REFIT_CANDIDATES]
+    cands = in_z.to_sample(post.to_natural(np.vstack([np.asarray(theta0, float)[None], flat[top]])))
+    return cands[int(np.argmax(in_z.map_log_density(cands)))]
+
+
 @dataclass(frozen=True)
 class SharingCheck:
     """Held-out comparison of the joint (shared stem) and separate models."""
