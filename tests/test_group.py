@@ -263,7 +263,7 @@ def test_a_release_must_gain_min_gain(cut_pair, monkeypatch):
 
 
 @pytest.mark.slow  # about 40 s: tables, start and 100 steps of a two-condition stem
-def test_the_sharing_check_starts_its_refits_from_the_posteriors_best_draw(cut_pair, monkeypatch):
+def test_fit_group_starts_the_sharing_refits_where_refit_start_says(cut_pair, monkeypatch):
     """fit_group hands the sharing check the highest-probability draw of its chains, not the sampler's start:
     from the start a joint refit could stay in a worse optimum and reject the sharing of a stem whose
     anchorage alone changed (group study replicate 3: held-out RMSE joint 0.126 N against 0.067 N separate;
