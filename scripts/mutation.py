@@ -197,6 +197,14 @@ TARGETS["elastica_solver"] = (
     ],
 )
 
+# added in session 35: the joint posterior of one stem under several conditions (issue 23) and its summary
+TARGETS["group"] = ("bayesrod/inference/group.py", ["tests/test_group.py"], None)
+TARGETS["group_summary"] = (
+    "bayesrod/api/group.py",
+    ["tests/test_group.py", "tests/test_compare_groups.py"],
+    ["*.x__summary__mutmut_*", "*.x_fit_group__mutmut_*"],
+)
+
 STATUSES = ("killed", "timeout", "survived", "no tests", "suspicious", "skipped", "segfault")
 
 
