@@ -23,7 +23,9 @@ an intact condition's posterior was an L: a flat arm 0.9 long (the clamp) joined
 thousandths long in which EI0 rises with u; the ensembles split between the arms and did not cross
 (R-hat 1.1-1.7 on half of the group study's replicates, with EI0 intervals up to 5x too wide). In z the
 clamp's arm is 1 long and a soft arm of u < 0.005 (U_SCALE) is 1 long (docs/validation.md, "One stem,
-many conditions").
+many conditions"). At one height on a known length the sampler moves a soft base by w instead, relative to
+the stem's compliance there (:meth:`GroupPosterior.settle_base_coordinates`); maximum a posteriori fits stay
+in z.
 
 Sharing. ``shared`` names the stem parameters common to all conditions (default EI0 and p);
 a parameter not shared gets one copy per condition (``EI0__<condition>``). The *separate*
