@@ -242,47 +242,44 @@ class GroupPosterior(PosteriorBase):
         self.relative_bases = True
         return self.to_sample(natural)[0]
 
-    def _relative_u(self, w: NDArray, p: NDArray) -> tuple[NDArray, NDArray]:
-        """u and du/dw of a soft base's w > 0 at the taper exponents p (same shape)."""
+    def _dc_dw(self, p: NDArray) -> NDArray:
+        """dc/dw = R_SCALE C(p) / eta^2 at the taper exponents ``p`` (c = EI0 C_b / L; any shape)."""
         h, L = self.stiffness_at
-        eta = h / L
-        gain = R_SCALE * np.exp(log_compliance_factor(p, eta)) / eta**2  # dc/dw
-        c = gain * w
-        return c / (1.0 + c), gain / (1.0 + c) ** 2
+        return R_SCALE * np.exp(log_compliance_factor(p, h / L)) / (h / L) ** 2
+
+    def _soft_bases(self, theta) -> list[tuple[int, NDArray, NDArray, NDArray]]:
+        """Per base column of ``theta`` (..., ndim) in w: (column, w, u, du/dw), u and du/dw for w > 0."""
+        theta = np.asarray(theta, float)
+        gain = self._dc_dw(theta[..., self.stiffness_pair()[1]])
+        out = []
+        for i in self._z_idx:
+            w = theta[..., i]
+            c = gain * np.maximum(w, 0.0)
+            out.append((i, w, c / (1.0 + c), gain / (1.0 + c) ** 2))
+        return out
 
     def prior_coordinates(self, theta) -> NDArray:
         out = super().prior_coordinates(theta)
         if self.relative_bases:
-            theta = np.asarray(theta, float)
-            p = theta[..., self.stiffness_pair()[1]]
-            for i in self._z_idx:
-                w = theta[..., i]
-                u, _ = self._relative_u(np.maximum(w, 0.0), p)
+            for i, w, u, _ in self._soft_bases(theta):
                 out[..., i] = np.where(w > 0, z_of_u(u), w)
         return out
 
     def log_jacobian(self, theta) -> NDArray:
         out = super().log_jacobian(theta)
         if self.relative_bases:
-            theta = np.asarray(theta, float)
-            p = theta[..., self.stiffness_pair()[1]]
-            for i in self._z_idx:
-                w = theta[..., i]
-                _, dudw = self._relative_u(np.maximum(w, 0.0), p)
+            for _, w, _, dudw in self._soft_bases(theta):
                 out = out + np.where(w > 0, np.log(dudw / U_SCALE), 0.0)  # dz/dw on the soft arm, 1 on the clamp
         return out
 
     def to_sample(self, natural: dict) -> NDArray:
         out = super().to_sample(natural)
         if self.relative_bases:
-            h, L = self.stiffness_at
-            eta = h / L
-            p = out[..., self.stiffness_pair()[1]]
+            gain = self._dc_dw(out[..., self.stiffness_pair()[1]])
             for i in self._z_idx:
                 z = out[..., i]
                 u = clamp_or_u(z)
-                c = u / (1.0 - u)
-                out[..., i] = np.where(z > 0, c * eta**2 / (R_SCALE * np.exp(log_compliance_factor(p, eta))), z)
+                out[..., i] = np.where(z > 0, u / (1.0 - u) / gain, z)
         return out
 
     def sample_bounds(self) -> list[tuple[float | None, float | None]]:
