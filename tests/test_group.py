@@ -358,6 +358,8 @@ def test_at_one_height_the_soft_bases_are_sampled_relative_to_the_stem(cut_pair)
     relative to the stem's): the same posterior as in z (density times the Jacobian, checked by finite
     differences), the same point after a round trip, the clamp untouched, and along p at fixed stiffness and w
     every condition's apparent small-deflection compliance 1/k + C_b h^2 stays put (the ridge runs along p)."""
+    from bayesrod.inference.group import R_SCALE
+
     lik = GroupLikelihood({d.extra["condition"]: d for d in cut_pair}, load_prior("woody"))
     in_z = GroupPosterior(lik)
     t = start_point(in_z)
@@ -392,6 +394,11 @@ def test_at_one_height_the_soft_bases_are_sampled_relative_to_the_stem(cut_pair)
     for x, p in zip(along, (0.2, 0.5, 0.9), strict=True):
         x[jp] = p
     ref = apparent(along[0])
+    # w means what the docs say: r = R_SCALE w, r = C_b h^2 k the base's compliance at h over the stem's
+    nat = in_w.to_natural(w)
+    EI, p = float(nat["EI0"][0]), float(nat["p"][0])
+    cb = float(base_compliance(clamp_or_u(nat["z_base__b"]), EI, L)[0])
+    assert cb * H_REF**2 * float(k_x(H_REF, EI, p, L)) == pytest.approx(R_SCALE * w[ib], rel=1e-9)
     assert [apparent(x) for x in along] == pytest.approx([ref] * 3, rel=1e-9)
     moved = in_z.to_natural(np.where(np.arange(w.size) == jp, 0.9, t))  # in z the same step changes it
     cb = float(base_compliance(clamp_or_u(moved["z_base__b"]), moved["EI0"][0], L)[0])
