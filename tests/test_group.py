@@ -1,5 +1,6 @@
 """One stem under several conditions (issue 23): grouping, the joint posterior, the sharing check, the CLI."""
 
+import copy
 import json
 import math
 
@@ -480,11 +481,64 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     np.testing.assert_allclose(fit.samples["base_compliance_rad_per_Nm__b"], C_b, rtol=1e-9)
 
 
-def test_a_conditions_force_offset_has_the_documented_prior(cut_pair):
-    """N(0, 5% of the condition's peak force) (docs/inference.md), one per condition, in newtons."""
+def test_a_conditions_force_offset_is_integrated_out_exactly(cut_pair):
+    """--force-offsets: per condition an offset N(0, sd 5% of its peak force) (docs/inference.md), integrated out of
+    the AR(1) force likelihood: the group log-likelihood equals the log of a quadrature over the offset of each
+    condition's likelihood with the offset given, times its prior; offset_posterior's mean and sd are the
+    quadrature's; the offset is not a sampled parameter."""
+    from scipy import integrate, stats
+
+    specs = {d.extra["condition"]: d for d in cut_pair}
+    pr = load_prior("woody")
+    marg = GroupLikelihood(specs, pr, force_offsets=True)
+    assert not any("offset" in n for n in marg.names)
+    post = GroupPosterior(marg)
+    nat = post.to_natural(start_point(post))
+    nat["rho_force__a"] = np.array([0.85])
+    total = 0.0
+    for c in marg.conditions:
+        one = marg.liks[c]
+        peak = float(np.max(np.abs(one.F_obs)))
+        assert peak > 0.5 and one.offset_prior_sd == pytest.approx(0.05 * peak, rel=1e-12)
+        params = marg.condition_params(nat, c)
+        given = copy.copy(one)
+        given.offset_prior_sd = None  # the same data, the offset now a parameter
+
+        def ll(a, given=given, params=params):
+            return float(given.log_likelihood({**params, "force_offset": np.array([a])})[0])
+
+        mode = float(one.offset_posterior(params)[0][0])
+        peak_ll = ll(mode)
+        sd0 = one.offset_prior_sd
+        half = 12.0 * float(one.offset_posterior(params)[1][0])  # 12 sd either side
+        grid = np.linspace(mode - half, mode + half, 4001)
+        dens = np.exp(np.array([ll(a) for a in grid]) - peak_ll) * stats.norm.pdf(grid, 0.0, sd0)
+        Z = integrate.simpson(dens, x=grid)
+        m1 = integrate.simpson(grid * dens, x=grid) / Z
+        m2 = integrate.simpson((grid - m1) ** 2 * dens, x=grid) / Z
+        got = float(one.log_likelihood(params)[0])
+        assert got == pytest.approx(peak_ll + np.log(Z), abs=1e-6)
+        mean, sd = one.offset_posterior(params)
+        assert float(mean[0]) == pytest.approx(m1, abs=1e-6) and float(sd[0]) == pytest.approx(np.sqrt(m2), rel=1e-4)
+        total += got
+    assert float(marg.log_likelihood(nat)[0]) == pytest.approx(total, rel=1e-12)
+
+
+def test_an_offset_integrated_out_is_learned_for_the_heldout_third_and_reported(cut_pair):
+    """Condition a's load cell reads 0.3 N high throughout. With --force-offsets the sharing check's refits learn
+    the offset from the samples they keep and predict the held-out third with it (not 0.3 N off), the joint and
+    the separate model alike, and
+    summary.json's force_offset_N (offset_draws) is centred on it."""
+    from bayesrod.api.group import offset_draws
+
     lik = GroupLikelihood({d.extra["condition"]: d for d in cut_pair}, load_prior("woody"), force_offsets=True)
-    for c in lik.conditions:
-        pr = lik.priors[lik.local[c]["force_offset"]]
-        peak = float(np.max(np.abs(lik.liks[c].F_obs)))
-        assert (pr.dist, pr.unit) == ("normal", "N") and pr.args == pytest.approx((0.0, 0.05 * peak), rel=1e-12)
-        assert peak > 0.5  # a real push, not an empty one
+    lik.liks["a"].F_obs = lik.liks["a"].F_obs + 0.3
+    post = GroupPosterior(lik)
+    theta = start_point(post)
+    check = sharing_check(lik, theta)
+    # both models: the separate fits get the offset too
+    assert check.per_condition["a"]["joint"] < 0.1 and check.per_condition["a"]["separate"] < 0.1, check.per_condition
+    nat = post.to_natural(np.repeat(theta[None], 50, axis=0))
+    draws = offset_draws(lik, nat, np.random.default_rng(0))
+    assert set(draws) == {"a", "b"} and draws["a"].size == 50
+    assert abs(float(np.median(draws["a"])) - 0.3) < 0.1 and abs(float(np.median(draws["b"]))) < 0.1

@@ -261,7 +261,8 @@ def fit_group(
     force_noise : {"ar1", "iid"}
         Force noise per condition (AR(1): sd and lag-1 correlation per condition).
     force_offsets : bool
-        A load-cell offset per condition.
+        A load-cell offset per condition, prior N(0, sd 5% of the condition's peak force), integrated out of the
+        likelihood (not sampled); summary.json's ``force_offset_N`` holds its posterior (from up to 4000 draws).
     sharing : bool
         Run the sharing check (held-out refits of the joint and the separate models; a minute or more).
     max_steps, target_ess : int, float
@@ -310,7 +311,8 @@ def fit_group(
         u = clamp_or_u(nat[lik.local[c]["z_base"]])
         samples[f"base_compliance_rad_per_Nm__{c}"] = base_compliance(u, per[c]["EI0"], lik.liks[c].L)
     check = sharing_check(lik, refit_start(post, theta0, res.chain, res.log_prob)) if sharing else None
-    doc = _summary(sid, lik, nat, per, samples, res, pr, check, time.perf_counter() - t0)
+    offsets = offset_draws(lik, nat, np.random.default_rng(seed))
+    doc = _summary(sid, lik, nat, per, samples, res, pr, check, time.perf_counter() - t0, offsets)
     not_converged = convergence_message(res, max_steps, target_ess)
     doc["convergence"]["converged"] = not_converged is None
     if not_converged:
@@ -321,7 +323,26 @@ def fit_group(
     return GroupFit(sid, tuple(lik.conditions), MappingProxyType(ro), MappingProxyType(plain_json(doc)))
 
 
-def _summary(sid, lik: GroupLikelihood, nat, per, samples, res, pr, check, seconds) -> dict:
+#: draws of each condition's integrated-out offset behind summary.json's force_offset_N (from thinned draws)
+OFFSET_DRAWS = 4000
+
+
+def offset_draws(lik: GroupLikelihood, nat: dict, rng: np.random.Generator) -> dict:
+    """Per condition with an integrated-out load-cell offset, draws [N] of it: at up to OFFSET_DRAWS posterior
+    draws (evenly thinned), one from its Gaussian conditional given the draw's other parameters."""
+    n = next(iter(nat.values())).size
+    idx = np.unique(np.linspace(0, n - 1, min(n, OFFSET_DRAWS)).round().astype(int))
+    thin = {k: v[idx] for k, v in nat.items()}
+    out = {}
+    for c in lik.conditions:
+        one = lik.liks[c]
+        if one.offset_prior_sd:
+            mean, sd = one.offset_posterior(lik.condition_params(thin, c))
+            out[c] = mean + sd * rng.standard_normal(mean.size)
+    return out
+
+
+def _summary(sid, lik: GroupLikelihood, nat, per, samples, res, pr, check, seconds, offsets) -> dict:
     conds = lik.conditions
     shared = {n: credible_interval(nat[n]) for n in lik.shared}
     out_conds = {}
@@ -342,8 +363,8 @@ def _summary(sid, lik: GroupLikelihood, nat, per, samples, res, pr, check, secon
                 row[n] = credible_interval(nat[loc[n]])
         if "rho_force" in loc:
             row["rho_force"] = credible_interval(nat[loc["rho_force"]])
-        if "force_offset" in loc:
-            row["force_offset_N"] = credible_interval(nat[loc["force_offset"]])
+        if c in offsets:
+            row["force_offset_N"] = credible_interval(offsets[c])
         out_conds[c] = row
     contrasts = []
     for a, b in itertools.permutations(conds, 2):

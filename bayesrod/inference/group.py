@@ -58,6 +58,8 @@ Z_CLAMP = 1.0
 #: the sampled coordinate of a soft base at one height (:meth:`GroupPosterior.settle_base_coordinates`):
 #: r = R_SCALE w, r the base's share of the apparent compliance at the height relative to the stem's
 R_SCALE = 0.01
+#: a condition's load-cell offset: prior N(0, sd OFFSET_PRIOR_PEAK x its peak force), integrated out
+OFFSET_PRIOR_PEAK = 0.05
 #: nodes of the u table axis: 25 (with 13 the interpolation biased a two-height fit of precise forces by
 #: 1.4% in EI0 (2.668 vs 2.63), outside its 90% interval; with 25 by 0.2% (2.624), tests/test_group.py)
 U_NODES = 25
@@ -84,7 +86,9 @@ class GroupLikelihood:
     anchorage : bool
         Fit a base compliance per condition (True), or none (the *separate* model of the sharing check).
     force_offsets : bool
-        A load-cell offset per condition (prior N(0, 5% of its peak force)).
+        A load-cell offset per condition (prior N(0, sd 5% of its peak force)), integrated out of each
+        condition's force likelihood in closed form (``RodLikelihood.offset_prior_sd``), not sampled: sampled,
+        it traded off against the AR(1) correlation and slowed the chains (docs/validation.md, session 35).
     """
 
     def __init__(
@@ -110,7 +114,7 @@ class GroupLikelihood:
         self.prior = prior
         lo, hi = prior.get("p").bounds()
         self.p_range = (lo, min(hi, 3.0))
-        effects = (("force_offset",) if force_offsets else ()) + (("base_compliance",) if anchorage else ())
+        effects = ("base_compliance",) if anchorage else ()
         axis = EffectAxis("base_compliance", np.linspace(0.0, U_MAX, U_NODES)) if anchorage else None
         self.liks = _liks or {
             c: RodLikelihood(
@@ -123,6 +127,9 @@ class GroupLikelihood:
             )
             for c, s in specs.items()
         }
+        if _liks is None and force_offsets:
+            for lik in self.liks.values():
+                lik.offset_prior_sd = OFFSET_PRIOR_PEAK * float(np.max(np.abs(lik.F_obs))) if lik.n_force else 1.0
         self.specs = specs
         priors = {n: prior.get(n) for n in self.shared}
         self.local: dict[str, dict[str, str]] = {}
@@ -141,10 +148,6 @@ class GroupLikelihood:
             if anchorage:
                 loc["z_base"] = condition_name("z_base", c)
                 priors[loc["z_base"]] = ParamPrior(loc["z_base"], "clamp_or_uniform", (Z_CLAMP, U_SCALE, U_MAX), "1")
-            if force_offsets:
-                loc["force_offset"] = condition_name("force_offset_N", c)
-                peak = float(np.max(np.abs(lik.F_obs))) if lik.n_force else 1.0
-                priors[loc["force_offset"]] = ParamPrior(loc["force_offset"], "normal", (0.0, 0.05 * peak), "N")
             self.local[c] = loc
         # the stem parameters first (emcee's ESS target is on the first two), then each condition's nuisances
         stem = list(self.shared) + [
@@ -161,8 +164,6 @@ class GroupLikelihood:
         out["sigma_force_N"] = params[loc["sigma_force_N"]]
         if "rho_force" in loc:
             out["rho_force"] = params[loc["rho_force"]]
-        if "force_offset" in loc:
-            out["force_offset"] = params[loc["force_offset"]]
         if self.anchorage:
             out["base_compliance"] = base_stiffness(clamp_or_u(params[loc["z_base"]]), out["EI0"], self.liks[c].L)
         return out
@@ -332,8 +333,6 @@ def start_point(post: GroupPosterior) -> NDArray:
             nat[loc["sigma_force_N"]] = max(rms, 1e-4)
             if "rho_force" in loc:
                 nat[loc["rho_force"]] = 0.5
-            if "force_offset" in loc:
-                nat[loc["force_offset"]] = 0.0
         top = max(scales.values())
         for c in lik.conditions:
             loc = lik.local[c]
@@ -509,7 +508,11 @@ def sharing_check(joint: GroupLikelihood, theta_joint: NDArray, tolerance: float
         for key, model, post, t0 in (("joint", joint, post_j, theta_joint), ("separate", separate, post_s, theta_s)):
             sub = GroupPosterior(model.restricted(masks))
             t = map_fit(sub, t0)
-            r = model.residuals(post.to_natural(t))[c][0][held]
+            nat = post.to_natural(t)
+            r = model.residuals(nat)[c][0][held]
+            trained = sub.likelihood.liks[c]
+            if trained.offset_prior_sd:  # the offset the refit's own samples imply
+                r = r - trained.offset_posterior(sub.likelihood.condition_params(nat, c))[0][0]
             sq[key] += float(np.sum(r**2))
             row[key] = float(np.sqrt(np.mean(r**2)))
         n += int(held.sum())

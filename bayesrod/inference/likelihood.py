@@ -364,7 +364,13 @@ class RodLikelihood:
         Natural parameter names in order: EI0, p, sigma_force_N (if forces),
         shape noise (``shape_sd_scale`` if every point has an sd, else
         ``sigma_shape_m``), then effects.
+    offset_prior_sd : float or None
+        Set (by :class:`~bayesrod.inference.group.GroupLikelihood`) to integrate one force offset common to
+        all this likelihood's force samples out of the force term in closed form, prior N(0, sd^2) [N]
+        (:func:`shared_error_loglik`); :meth:`offset_posterior` gives its conditional. None: no such offset.
     """
+
+    offset_prior_sd: float | None = None
 
     def __init__(
         self,
@@ -949,7 +955,9 @@ class RodLikelihood:
             ll += self.slip_loglik(params["p"], self.effect_coordinate(params), pre)
         if "force" in res:
             s = np.atleast_1d(params["sigma_force_N"])[:, None]
-            if self.force_noise == "ar1":
+            if self.offset_prior_sd:
+                ll += shared_error_loglik(res["force"], s, self._rho(params, s), self.F_first, [self._offset_column()])
+            elif self.force_noise == "ar1":
                 ll += ar1_loglik(res["force"], s, np.atleast_1d(params["rho_force"])[:, None], self.F_first)
             else:
                 ll += np.sum(-0.5 * (res["force"] / s) ** 2 - np.log(s), axis=1) - 0.5 * self.n_force * _LOG_2PI
@@ -968,6 +976,32 @@ class RodLikelihood:
         if self.diameter != "off":
             ll += self._diameter_loglik(params)
         return ll
+
+    def _rho(self, params: dict, s: NDArray) -> NDArray:
+        """(W, 1) lag-1 correlation of the force noise (zeros for independent noise)."""
+        return np.atleast_1d(params["rho_force"])[:, None] if self.force_noise == "ar1" else np.zeros_like(s)
+
+    def _offset_column(self) -> NDArray:
+        return np.full((1, self.n_force), float(self.offset_prior_sd))
+
+    def offset_posterior(self, params: dict) -> tuple[NDArray, NDArray]:
+        """Mean and sd [N], each (W,), of the integrated-out force offset (``offset_prior_sd``) given the
+        other parameters: Gaussian, a = sd b / M and sd / sqrt(M) with M = 1 + u^T S^-1 u, b = u^T S^-1 r
+        (u the constant column of the prior sd, r the force residuals, S the noise covariance; by whitening)."""
+        if not self.offset_prior_sd:
+            raise ValueError("offset_posterior: expected a likelihood with offset_prior_sd set, got none")
+        r = self.residuals(params)["force"]
+        s = np.atleast_1d(params["sigma_force_N"])[:, None]
+        rho = self._rho(params, s)
+
+        def whiten(x):
+            e, v = ar1_innovations(x, rho, self.F_first)
+            return e / (s * np.sqrt(v))
+
+        wu = whiten(np.broadcast_to(self._offset_column(), r.shape))
+        M = 1.0 + np.sum(wu**2, axis=1)
+        b = np.sum(wu * whiten(r), axis=1)
+        return self.offset_prior_sd * b / M, self.offset_prior_sd / np.sqrt(M)
 
     def fit_error(self, params: dict) -> dict:
         """RMS force error [N] and shape error [mm] at one parameter set (docs/format.md: summary.fit_error)."""
