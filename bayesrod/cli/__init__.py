@@ -122,7 +122,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--shared", default="EI0,p", help="stem parameters shared by the conditions (default EI0,p; '' for none)"
     )
     fg.add_argument("--force-noise", default="ar1", choices=["iid", "ar1"], help="force noise per condition")
-    fg.add_argument("--force-offsets", action="store_true", help="a load-cell offset per condition, integrated out (prior sd 5%% of its peak force)")
+    fg.add_argument(
+        "--force-offsets",
+        action="store_true",
+        help="a load-cell offset per condition, integrated out (prior sd 5%% of its peak force)",
+    )
     fg.add_argument("--no-sharing-check", action="store_true", help="skip the held-out check of the sharing")
     fg.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     fg.add_argument("--max-steps", type=int, default=6000, help="sampling budget per ensemble (default 6000)")
