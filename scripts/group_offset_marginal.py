@@ -3,14 +3,15 @@
     python scripts/brace_root_tables.py --out tables
     bayesrod import table tables/stalk7_*.csv --out ds --time "Time (s)" --force-column "Load (N)" \\
         --displacement "Position (mm)" --displacement-unit mm --metadata tables/meta.csv
-    python scripts/group_offset_marginal.py ds --offsets sampled        # as fit-group --force-offsets does
-    python scripts/group_offset_marginal.py ds --offsets marginalised   # each offset integrated out exactly
+    python scripts/group_offset_marginal.py ds --offsets sampled        # as fit-group had it before session 35
+    python scripts/group_offset_marginal.py ds --offsets marginalised   # integrated out, as fit-group does now
 
 Both fit the same posterior of the stem and the anchorage (default prior, AR(1) noise, the one-height
-coordinates of `fit_group`) for exactly ``--steps`` steps from the same start and seed, and print ArviZ's rank
+coordinates of `fit_group`) for exactly ``--steps`` steps from the same start (`start_point` of the integrated
+model; the sampled offsets at their conditional means there) and seed, and print ArviZ's rank
 R-hat and bulk ESS per sampled coordinate (walkers as chains) and the 90% intervals. Marginalised: each
-condition's offset, N(0, sd 5% of its peak force) as in `GroupLikelihood`, is integrated out of the AR(1)
-likelihood in closed form (`shared_error_loglik` with a constant column), so it is not a sampled coordinate.
+condition's offset, N(0, sd 5% of its peak force), is integrated out of the AR(1) likelihood in closed form
+(`GroupLikelihood(force_offsets=True)`, `RodLikelihood.offset_prior_sd`); sampled: it is a coordinate.
 About 2.5 minutes of one core each.
 """
 
@@ -23,26 +24,36 @@ from pathlib import Path
 import numpy as np
 
 from bayesrod.api._common import as_dataset
-from bayesrod.inference.group import GroupLikelihood, GroupPosterior, base_compliance, clamp_or_u, start_point
-from bayesrod.inference.likelihood import shared_error_loglik
-from bayesrod.inference.priors import load_prior
+from bayesrod.inference.group import (
+    OFFSET_PRIOR_PEAK,
+    GroupLikelihood,
+    GroupPosterior,
+    base_compliance,
+    clamp_or_u,
+    condition_name,
+    start_point,
+)
+from bayesrod.inference.priors import ParamPrior, load_prior
 from bayesrod.inference.sampler import diagnostics, run_ensembles
 
 
-def marginalise_offsets(lik: GroupLikelihood) -> None:
-    """Replace each condition's force likelihood by its integral over a N(0, (5% of the peak)^2) offset."""
-    for L1 in lik.liks.values():
-        if L1.slip or L1.force_noise != "ar1":
-            raise ValueError("expected AR(1) force noise without the slip term")
-        sd = 0.05 * float(np.max(np.abs(L1.F_obs)))
+class SampledOffsets(GroupLikelihood):
+    """The group likelihood with each condition's offset a sampled parameter (as fit_group had it before
+    session 35): ``force_offset_N__<condition>``, prior N(0, sd OFFSET_PRIOR_PEAK x the peak force), after the
+    condition's other nuisances."""
 
-        def ll(params, L1=L1, sd=sd):
-            r = L1.residuals(params)["force"]
-            s = np.atleast_1d(params["sigma_force_N"])[:, None]
-            rho = np.atleast_1d(params["rho_force"])[:, None]
-            return shared_error_loglik(r, s, rho, L1.F_first, [np.full(r.shape, sd)])
+    def __init__(self, specs, prior):
+        super().__init__(specs, prior)
+        for c in self.conditions:
+            name = condition_name("force_offset_N", c)
+            sd = OFFSET_PRIOR_PEAK * float(np.max(np.abs(self.liks[c].F_obs)))
+            self.local[c]["force_offset"] = name
+            self.priors[name] = ParamPrior(name, "normal", (0.0, sd), "N")
+        stem = list(self.shared)
+        self.names = stem + [n for c in self.conditions for n in self.local[c].values() if n not in stem]
 
-        L1.log_likelihood = ll
+    def condition_params(self, params: dict, c: str) -> dict:
+        return {**super().condition_params(params, c), "force_offset": params[self.local[c]["force_offset"]]}
 
 
 def main() -> None:
@@ -53,12 +64,20 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args()
     dss = [as_dataset(d) for d in sorted(p for p in a.datasets.iterdir() if (p / "specimen.json").is_file())]
-    sampled = a.offsets == "sampled"
-    lik = GroupLikelihood({d.extra["condition"]: d for d in dss}, load_prior("default"), force_offsets=sampled)
-    if not sampled:
-        marginalise_offsets(lik)
-    post = GroupPosterior(lik)
-    theta0 = post.settle_base_coordinates(start_point(post))
+    specs, prior = {d.extra["condition"]: d for d in dss}, load_prior("default")
+    marginal = GroupLikelihood(specs, prior, force_offsets=True)  # what fit_group --force-offsets samples
+    start = GroupPosterior(marginal)
+    theta0 = start_point(start)
+    if a.offsets == "marginalised":
+        post = start
+    else:  # the same start, each offset at its conditional mean there
+        post = GroupPosterior(SampledOffsets(specs, prior))
+        nat = start.to_natural(theta0)
+        for c in marginal.conditions:
+            mean = marginal.liks[c].offset_posterior(marginal.condition_params(nat, c))[0]
+            nat[post.likelihood.local[c]["force_offset"]] = mean
+        theta0 = post.to_sample(nat)[0]
+    theta0 = post.settle_base_coordinates(theta0)
     t0 = time.process_time()
     res = run_ensembles(
         post, theta0, seed=a.seed, progress=False, max_steps=a.steps, min_steps=a.steps, target_ess=1e12
@@ -70,6 +89,7 @@ def main() -> None:
     nat = post.to_natural(res.chain.reshape(-1, post.ndim))
     for n in ("EI0", "p"):
         print(n, np.round(np.quantile(nat[n], [0.05, 0.5, 0.95]), 4))
+    lik = post.likelihood
     for c in lik.conditions:
         per = lik.condition_params(nat, c)
         C = base_compliance(clamp_or_u(nat[lik.local[c]["z_base"]]), per["EI0"], lik.liks[c].L)

@@ -493,6 +493,7 @@ def sharing_check(joint: GroupLikelihood, theta_joint: NDArray, tolerance: float
         shared=(),
         force_noise=joint.force_noise,
         anchorage=False,
+        force_offsets=joint.force_offsets,  # the copies keep each condition's integrated-out offset
         _liks={c: joint.liks[c].without_effect_axis() for c in joint.conditions},
     )
     post_j = GroupPosterior(joint)

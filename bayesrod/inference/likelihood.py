@@ -958,7 +958,7 @@ class RodLikelihood:
             if self.offset_prior_sd:
                 ll += shared_error_loglik(res["force"], s, self._rho(params, s), self.F_first, [self._offset_column()])
             elif self.force_noise == "ar1":
-                ll += ar1_loglik(res["force"], s, np.atleast_1d(params["rho_force"])[:, None], self.F_first)
+                ll += ar1_loglik(res["force"], s, self._rho(params, s), self.F_first)
             else:
                 ll += np.sum(-0.5 * (res["force"] / s) ** 2 - np.log(s), axis=1) - 0.5 * self.n_force * _LOG_2PI
         if "shape" in res:
@@ -992,15 +992,8 @@ class RodLikelihood:
             raise ValueError("offset_posterior: expected a likelihood with offset_prior_sd set, got none")
         r = self.residuals(params)["force"]
         s = np.atleast_1d(params["sigma_force_N"])[:, None]
-        rho = self._rho(params, s)
-
-        def whiten(x):
-            e, v = ar1_innovations(x, rho, self.F_first)
-            return e / (s * np.sqrt(v))
-
-        wu = whiten(np.broadcast_to(self._offset_column(), r.shape))
-        M = 1.0 + np.sum(wu**2, axis=1)
-        b = np.sum(wu * whiten(r), axis=1)
+        M, b = shared_error_terms(r, s, self._rho(params, s), self.F_first, [self._offset_column()])
+        M, b = M[:, 0, 0], b[:, 0]
         return self.offset_prior_sd * b / M, self.offset_prior_sd / np.sqrt(M)
 
     def fit_error(self, params: dict) -> dict:
@@ -1234,17 +1227,22 @@ def shared_error_loglik(z: NDArray, sigma: NDArray, rho: NDArray, first: NDArray
     base = ar1_loglik(z, sigma, rho, first)
     if not shared:
         return base
+    M, b = shared_error_terms(z, sigma, rho, first, shared)
+    sol = np.linalg.solve(M, b[..., None])[..., 0]
+    return base + 0.5 * np.sum(b * sol, axis=1) - 0.5 * np.linalg.slogdet(M)[1]
+
+
+def shared_error_terms(z: NDArray, sigma: NDArray, rho: NDArray, first: NDArray, shared: list) -> tuple:
+    """M = I + U^T S^-1 U (W, k, k) and b = U^T S^-1 z (W, k) of :func:`shared_error_loglik` (S^-1 applied by
+    whitening with the AR(1) innovations). The coefficients a given z are Gaussian, mean M^-1 b, covariance M^-1."""
 
     def whiten(x):
         e, v = ar1_innovations(x, rho, first)
         return e / (sigma * np.sqrt(v))
 
-    wz = whiten(z)
     wu = np.stack([whiten(np.asarray(u, float)) for u in shared], axis=1)  # (W, k, N)
     M = np.eye(len(shared))[None] + np.einsum("wkn,wln->wkl", wu, wu)
-    b = np.einsum("wkn,wn->wk", wu, wz)
-    sol = np.linalg.solve(M, b[..., None])[..., 0]
-    return base + 0.5 * np.sum(b * sol, axis=1) - 0.5 * np.linalg.slogdet(M)[1]
+    return M, np.einsum("wkn,wn->wk", wu, whiten(z))
 
 
 class PosteriorBase(ParameterSpace):
