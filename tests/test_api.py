@@ -264,6 +264,20 @@ def test_no_module_below_the_cli_knows_a_flag():
     assert not bad, bad
 
 
+def test_the_cli_defaults_of_diagnose_are_the_apis():
+    """A flag's default that differs from the function's silently gives shell and notebook users two tools."""
+    import inspect
+
+    from bayesrod.cli import build_parser
+
+    sub = build_parser()._subparsers._group_actions[0].choices["diagnose"]
+    params = inspect.signature(bayesrod.diagnose).parameters
+    shared = [a for a in sub._actions if a.dest in params and params[a.dest].default is not inspect.Parameter.empty]
+    assert {a.dest for a in shared} >= {"alpha", "min_heldout_gain", "heldout_alpha", "force_noise"}
+    for a in shared:  # a flag defaulting to None passes nothing: the function's own default applies
+        assert a.default is None or a.default == params[a.dest].default, a.dest
+
+
 def test_progress_only_on_a_terminal(monkeypatch):
     from bayesrod.api._common import progress_enabled
 

@@ -16,7 +16,7 @@ from types import MappingProxyType
 from typing import Any
 
 from ..dataset.plausibility import starts_loaded
-from ..inference.diagnose import CATALOG, ForwardModel
+from ..inference.diagnose import CATALOG, HELDOUT_ALPHA, ForwardModel
 from ..inference.diagnose import diagnose as diagnose_model
 from ..inference.likelihood import default_length_prior, length_is_approximate, prepare_data
 from ._common import DocResult, plain_json
@@ -98,7 +98,7 @@ def diagnose(
     use_shapes: bool = True,
     alpha: float = 0.01,
     min_heldout_gain: float = 0.10,
-    heldout_alpha: float = 0.05,
+    heldout_alpha: float = HELDOUT_ALPHA,
     force_noise: str = "ar1",
     preload: bool | str = "auto",
     length: str = "known",

@@ -347,8 +347,8 @@ def build_parser() -> argparse.ArgumentParser:
     dg.add_argument(
         "--heldout-alpha",
         type=float,
-        default=0.05,
-        help="level of the bootstrap test (under the fitted AR noise) of the held-out improvement (default 0.05)",
+        default=0.02,
+        help="level of the bootstrap test (under the fitted AR noise) of the held-out improvement (default 0.02)",
     )
     dg.add_argument(
         "--force-noise",
