@@ -348,7 +348,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--heldout-alpha",
         type=float,
         default=0.02,
-        help="level of the bootstrap test (under the fitted AR noise) of the held-out improvement (default %(default)s)",
+        help="level of the bootstrap test (under the fitted AR noise) of the held-out gain (default %(default)s)",
     )
     dg.add_argument(
         "--force-noise",
