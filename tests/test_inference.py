@@ -411,6 +411,7 @@ def test_a_run_that_spends_its_budget_says_it_did_not_converge(twig_noisy):
     conv = post.to_dict()["convergence"]
     assert conv["converged"] is False and "not converged within 100 steps" in conv["message"], conv
     assert "target 5000" in conv["message"] and "rerun with more steps" in conv["message"]
+    assert "at least about" in conv["message"] and conv["message"].endswith(" in all)")
     assert any("not converged" in m for m in seen), seen
 
 

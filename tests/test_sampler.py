@@ -1,6 +1,7 @@
 """The sampler's repair of walkers left in a far worse optimum (``replace_stuck_walkers``)."""
 
 import numpy as np
+import pytest
 
 from bayesrod.inference import sampler
 from bayesrod.inference.sampler import replace_stuck_walkers, run_ensembles
@@ -298,3 +299,22 @@ def test_a_run_exactly_fifty_autocorrelation_times_long_is_long_enough(monkeypat
     kw = dict(n_ensembles=1, n_walkers=16, chunk=100, min_steps=200, max_steps=400, progress=False)
     res = run_ensembles(_Gauss(2), np.zeros(2), seed=0, **kw)
     assert res.converged is True and res.n_steps == 200
+
+
+def test_rhat_over_walkers_is_what_their_autocorrelation_time_gives():
+    """Walkers as chains, each an independent AR(1) with autocorrelation time tau: R-hat^2 - 1 is about
+    2 tau / (kept steps) (split chains of half the length), so R-hat alone falls to 1.01 only after about 100
+    tau kept steps; steps_needed reads it that way."""
+    from scipy.signal import lfilter
+
+    rng = np.random.default_rng(0)
+    n, tau = 2000, 60.0
+    rho = (tau - 1) / (tau + 1)
+    x = lfilter([1.0], [1.0, -rho], rng.standard_normal((224, n + 600)), axis=1)[:, 600:] * np.sqrt(1 - rho**2)
+    rhat = sampler.diagnostics(x[:, :, None], ["a"])["rhat"]["a"]
+    assert rhat == pytest.approx(np.sqrt(1 + 2 * (tau - 1) / n), abs=0.004), rhat  # 1.0292
+    # so many more steps: R-hat 1.07 after 6000 steps asks for (1.07^2 - 1) / (1.01^2 - 1) = 7.2 times as many
+    assert sampler.steps_needed(6000, 1.07, 5000.0, 100.0) == 44000
+    assert sampler.steps_needed(5000, 1.005, 250.0, 50.0, target_ess=1000) == 20000  # ESS grows as steps
+    assert sampler.steps_needed(5000, 1.005, 5000.0, 500.0) == 25000  # emcee's 50 tau
+    assert sampler.steps_needed(8000, 1.0, 5000.0, 10.0) == 9000  # never fewer than were run

@@ -181,17 +181,38 @@ class SamplingResult:
 def convergence_message(
     res: SamplingResult, max_steps: int, target_ess: float, target_rhat: float = 1.01
 ) -> str | None:
-    """None when the run met its targets; else one line for the user: what was missed and what to do."""
+    """None when the run met its targets; else one line for the user: what was missed and what to do,
+    with the steps the targets need at this run's rate (:func:`steps_needed`)."""
     if res.converged or res.diagnostics is None:
         return None
     rhat = max(res.diagnostics["rhat"].values())
     targeted = list(res.diagnostics["ess_bulk"])[:2]  # run_ensembles' ESS target: the first two parameters
     ess = min(res.diagnostics["ess_bulk"][n] for n in targeted)
+    need = steps_needed(res.n_steps, rhat, ess, float(np.nanmax(res.tau)), target_rhat, target_ess)
     return (
         f"not converged within {max_steps} steps (R-hat max {rhat:.3f}, target {target_rhat:g}; bulk ESS of "
         f"{' and '.join(targeted)} {ess:.0f}, target {target_ess:g}): treat the intervals as provisional and "
-        "rerun with more steps"
+        f"rerun with more steps (at this run's rate, at least about {need} in all)"
     )
+
+
+def steps_needed(
+    n_steps: int, rhat: float, ess: float, tau: float, target_rhat: float = 1.01, target_ess: float = 1000.0
+) -> int:
+    """Steps a run needs to meet its targets at the rate it mixed so far, rounded up to 1000: a lower bound.
+
+    With the walkers as chains, R-hat^2 - 1 is about 2 tau / (kept steps) for walkers that each mix with
+    autocorrelation time tau (224 simulated AR(1) walkers: 1.036 at tau 150 and 4000 kept steps, predicted
+    1.037; docs/validation.md, "What R-hat over walkers measures"), so it falls as 1 / steps; bulk ESS grows
+    as steps; emcee's own rule asks for 50 tau. Where tau itself was underestimated (a slow direction the
+    run has not yet crossed often) the run needs more than this.
+    """
+    need = [50.0 * tau if np.isfinite(tau) else 0.0]
+    if np.isfinite(rhat) and rhat > target_rhat:
+        need.append(n_steps * (rhat**2 - 1.0) / (target_rhat**2 - 1.0))
+    if np.isfinite(ess) and 0 < ess < target_ess:
+        need.append(n_steps * target_ess / ess)
+    return int(1000 * np.ceil(max(max(need), n_steps + 1) / 1000))
 
 
 def replace_stuck_walkers(chain: NDArray, log_prob: NDArray, rng, p_miss: float = 1e-6) -> NDArray | None:
