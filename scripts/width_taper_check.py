@@ -92,7 +92,18 @@ def taper_posterior(dp, L: float, seed: int, floor: bool = False) -> np.ndarray:
         sde = np.sqrt((np.exp(logk)[:, None] * sd[None]) ** 2 + f**2)
         ones = np.ones((pred.shape[0], 1))
         with np.errstate(invalid="ignore", divide="ignore"):
-            ll = width_loglik(d, pred, sde, ones, rho[:, None], first, dp.shared_offset_sd_m, dp.shared_scale_sd)
+            ll = width_loglik(
+                d,
+                pred,
+                sde,
+                ones,
+                rho[:, None],
+                first,
+                dp.shared_offset_sd_m,
+                dp.shared_scale_sd,
+                dp.shared_taper_sd,
+                np.exp(logd0)[:, None],
+            )
         lp = -0.5 * (logk / 0.5) ** 2
         if floor:  # half-normal(1) on the floor's ratio to the median sd, sampled in log
             lp = lp - 0.5 * np.exp(2 * logf) + logf

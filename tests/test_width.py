@@ -287,6 +287,7 @@ def test_combined_profile_flags_unresolved_tips_and_carries_the_shared_errors():
     dp = combine_profiles(profs, s, depth_scale_sd=0.01)
     assert list(dp.flag[s >= 0.35]) == ["unresolved"] * int(np.sum(s >= 0.35)) and dp.ok[s < 0.35].all()
     assert dp.shared_offset_sd_m == pytest.approx(OFFSET_SD_PX * px) and dp.shared_scale_sd == 0.01
+    assert dp.shared_taper_sd == 0.0  # no blur was read
 
 
 def test_the_frames_spread_of_contrast_scales_is_a_scale_error_all_stations_share():
@@ -391,6 +392,7 @@ def test_diameters_read_from_a_csv_and_an_object_with_row_errors(tmp_path):
         "source": "caliper",
         "shared_offset_sd_m": 5e-5,
         "shared_scale_sd": 0.01,
+        "shared_taper_sd": 0.04,
     }
     (root / "specimen.json").write_text(json.dumps(doc))
     ds = read_dataset(root)
@@ -398,20 +400,31 @@ def test_diameters_read_from_a_csv_and_an_object_with_row_errors(tmp_path):
     back = read_dataset(tmp_path / "copy")
     np.testing.assert_allclose(back.diameters.d_m, [0.0101, 0.0098])
     assert back.diameters.source == "caliper"
-    assert (back.diameters.shared_offset_sd_m, back.diameters.shared_scale_sd) == (5e-5, 0.01)
+    shared = (back.diameters.shared_offset_sd_m, back.diameters.shared_scale_sd, back.diameters.shared_taper_sd)
+    assert shared == (5e-5, 0.01, 0.04)
+    # a taper error of 50% or more is refused, as a scale error is
+    doc["diameters"]["shared_taper_sd"] = 0.5
+    (root / "specimen.json").write_text(json.dumps(doc))
+    msgs = [str(p) for p in validate_dataset(root)]
+    assert any("diameters.shared_taper_sd" in m and "below 0.5" in m for m in msgs), msgs
 
 
-@pytest.mark.parametrize("offset_sd,scale_sd", [(0.0, 0.0), (8e-5, 0.0), (0.0, 0.02), (8e-5, 0.02)])
-def test_width_term_matches_a_dense_gaussian_reference(offset_sd, scale_sd):
-    """The O(n) width term (AR(1) along s, shared offset and scale marginalised by a rank-k update)
-    against the dense multivariate normal it stands for."""
+@pytest.mark.parametrize(
+    "offset_sd,scale_sd,taper_sd",
+    [(0.0, 0.0, 0.0), (8e-5, 0.0, 0.0), (0.0, 0.02, 0.0), (8e-5, 0.02, 0.0), (0.0, 0.0, 0.06), (8e-5, 0.02, 0.06)],
+)
+def test_width_term_matches_a_dense_gaussian_reference(offset_sd, scale_sd, taper_sd):
+    """The O(n) width term (AR(1) along s, shared offset, scale and taper errors marginalised by a rank-k
+    update) against the dense multivariate normal it stands for: the taper error g reads each width as
+    d (d / d0)^g, linearised d + g d log(d / d0) = d + g p_geom log(1 - s/L) d."""
     from scipy.stats import multivariate_normal
 
     rng = np.random.default_rng(0)
     s = np.sort(rng.uniform(0, 0.7, 30))
     sd = rng.uniform(5e-5, 2e-4, 30)
     d = 0.01 * (1 - s / 0.8) ** 0.43 + rng.normal(0, 1e-4, 30)
-    ds = _forces_only_twig(Diameters(s, d, sd, "frames", shared_offset_sd_m=offset_sd, shared_scale_sd=scale_sd))
+    shared = {"shared_offset_sd_m": offset_sd, "shared_scale_sd": scale_sd, "shared_taper_sd": taper_sd}
+    ds = _forces_only_twig(Diameters(s, d, sd, "frames", **shared))
     lik = RodLikelihood(ds, use_shapes=False, diameter="free")
     params = {"d0_m": 0.0101, "p_geom": 0.41, "diameter_sd_scale": 1.3, "rho_diameter": 0.6, "p": 0.43}
     got = lik._diameter_loglik({k: np.atleast_1d(v) for k, v in params.items()})[0]
@@ -421,13 +434,15 @@ def test_width_term_matches_a_dense_gaussian_reference(offset_sd, scale_sd):
     block = np.cumsum(first)
     lag = np.abs(np.arange(30)[:, None] - np.arange(30)[None, :])
     corr = np.where(block[:, None] == block[None, :], 0.6**lag, 0.0)
-    cov = corr * np.outer(1.3 * sd, 1.3 * sd) + offset_sd**2 + scale_sd**2 * np.outer(mean, mean)
+    slope = 0.41 * np.log(1 - s / 0.8) * mean  # d(width)/dg at g = 0
+    shared_cov = offset_sd**2 + scale_sd**2 * np.outer(mean, mean) + taper_sd**2 * np.outer(slope, slope)
+    cov = corr * np.outer(1.3 * sd, 1.3 * sd) + shared_cov
     assert got == pytest.approx(multivariate_normal(mean, cov).logpdf(d), rel=1e-9)
     # a caliper's few readings: independent, plus the shared terms
-    few = Diameters(s[:3], d[:3], sd[:3], "caliper", shared_offset_sd_m=offset_sd, shared_scale_sd=scale_sd)
+    few = Diameters(s[:3], d[:3], sd[:3], "caliper", **shared)
     lik = RodLikelihood(_forces_only_twig(few), use_shapes=False, diameter="free")
     got = lik._diameter_loglik({k: np.atleast_1d(v) for k, v in params.items()})[0]
-    cov = np.diag(sd[:3] ** 2) + offset_sd**2 + scale_sd**2 * np.outer(mean[:3], mean[:3])
+    cov = np.diag(sd[:3] ** 2) + shared_cov[:3, :3]
     assert got == pytest.approx(multivariate_normal(mean[:3], cov).logpdf(d[:3]), rel=1e-9)
 
 
@@ -672,11 +687,13 @@ def test_a_blur_wide_against_a_thin_stem_is_declared_as_a_shared_scale_error():
         error = float(np.mean(errors))
         if blur == 0.6:
             assert abs(error) < 0.005 and combined.blur_over_width <= BLUR_RATIO_OK + 0.02
-            assert blur_scale_sd(combined.blur_over_width) < 0.001
+            assert blur_scale_sd(combined.blur_over_width) < 0.001 and combined.shared_taper_sd < 0.001
             assert combined.shared_scale_sd == pytest.approx(LENS_SCALE_SD, rel=0.05)  # every station fitted
         else:
             assert -0.05 < error < -0.015 and combined.blur_over_width > 0.45
             assert 0.5 * abs(error) < combined.shared_scale_sd < 2.5 * abs(error), (error, combined.shared_scale_sd)
+            # the blur errs in the taper as well: the same sd, on the taper the widths read
+            assert combined.shared_taper_sd == blur_scale_sd(combined.blur_over_width) > 0.04
 
 
 def test_choose_colour_model_judges_agreement_against_the_compared_stations_width(monkeypatch):

@@ -266,14 +266,16 @@ def extract(dataset, *, progress: bool = True, width_colour_model: str = "auto")
                 "blur_over_width": None if not np.isfinite(diameters.blur_over_width) else diameters.blur_over_width,
             },
             "shared_scale_sd": diameters.shared_scale_sd,
+            "shared_taper_sd": diameters.shared_taper_sd,
         }
         if blur_scale_sd(diameters.blur_over_width) >= BLUR_WARN_SCALE_SD:
             blurred = (
                 f"the lens's blur is {diameters.blur_over_width:.2f} of the width of the narrow stations the stem's "
                 f"colour contrast is read from (at most {BLUR_RATIO_OK:g} reads it well): their widths may read "
                 f"several per cent off, most often narrow (Young's modulus off by four times that); every width "
-                f"now shares a scale error of sd {100 * diameters.shared_scale_sd:.1f}% (docs/validation.md, 'Blur "
-                f"against width' and 'Thin stems'); a closer or sharper camera avoids it"
+                f"now shares a scale error of sd {100 * diameters.shared_scale_sd:.1f}% and the taper read from them "
+                f"an error of sd {100 * diameters.shared_taper_sd:.1f}% (docs/validation.md, 'Blur against width', "
+                f"'Thin stems' and 'The taper under a wide blur'); a closer or sharper camera avoids it"
             )
             report["diameters"]["warning"] = blurred
             log.warning("warning: %s: %s", spec.specimen, blurred)

@@ -114,7 +114,7 @@ class Push:
 
 
 #: the errors every diameter station shares (fields of :class:`Diameters`; CSV columns or inline keys)
-SHARED_DIAMETER_ERRORS = ("shared_offset_sd_m", "shared_scale_sd")
+SHARED_DIAMETER_ERRORS = ("shared_offset_sd_m", "shared_scale_sd", "shared_taper_sd")
 
 
 @dataclass(frozen=True)
@@ -127,8 +127,11 @@ class Diameters:
 
     Errors every station shares, on top of each station's own ``sd_m``: an additive offset of sd
     ``shared_offset_sd_m`` [m] (the width method's bias at the edges; a caliper's zero) and a
-    relative scale of sd ``shared_scale_sd`` (the depth sensor's scale; a caliper's calibration).
-    They do not average down over stations; the fit marginalises both (docs/inference.md).
+    relative scale of sd ``shared_scale_sd`` (the depth sensor's scale; a caliper's calibration), and an
+    error in the taper the widths read, of relative sd ``shared_taper_sd`` (each width read as
+    d (d / d0)^g with g ~ N(0, shared_taper_sd^2): a lens's blur wide against the stem reads thin stations
+    differently from thick ones). They do not average down over stations; the fit marginalises all three
+    (docs/inference.md).
     """
 
     s_m: NDArray
@@ -137,6 +140,7 @@ class Diameters:
     source: str = "caliper"
     shared_offset_sd_m: float = 0.0
     shared_scale_sd: float = 0.0
+    shared_taper_sd: float = 0.0
 
     def __post_init__(self):
         for k in ("s_m", "d_m", "sd_m"):

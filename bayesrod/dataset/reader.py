@@ -494,7 +494,7 @@ def _read_diameters(c: _Collector, name: str, root: Path, value, length: float |
 def _shared_diameter_errors(c: _Collector, where: str, raw: dict) -> dict | None:
     """The diameters' shared error sds (docs/format.md): each one finite value >= 0 (a CSV repeats it in every
     row; ``raw`` maps the name to (value, field, row): a row is given where a CSV's value is not finite or not
-    the first row's), the scale below 0.5."""
+    the first row's), the scale's and the taper's below 0.5."""
     out = {}
     for k, (v, fld, row) in raw.items():
         if row is not None:
@@ -502,7 +502,7 @@ def _shared_diameter_errors(c: _Collector, where: str, raw: dict) -> dict | None
             c.add(where, fld, expected, _fmt(v), row=row)
         elif not (_is_number(v) and v >= 0):
             c.add(where, fld, "a finite number >= 0", _fmt(v))
-        elif k == "shared_scale_sd" and v >= 0.5:
+        elif k in ("shared_scale_sd", "shared_taper_sd") and v >= 0.5:
             c.add(where, fld, "a relative sd below 0.5 (0.01 = 1%)", _fmt(v))
         else:
             out[k] = float(v)

@@ -537,6 +537,7 @@ class RodLikelihood:
             )
         self.d_s, self.d_obs, self.d_sd = (np.asarray(a, float) for a in (dm.s_m, dm.d_m, dm.sd_m))
         self.d_offset_sd, self.d_scale_sd = dm.shared_offset_sd_m, dm.shared_scale_sd
+        self.d_taper_sd = dm.shared_taper_sd
         self.n_diameters = int(self.d_s.size)
         self.diameter_names = ["d0_m"] + (["p_geom"] if diameter == "free" else [])
         # a profile of many stations calibrates its own sd scale and the correlation of neighbouring stations'
@@ -577,7 +578,7 @@ class RodLikelihood:
 
     def _diameter_loglik(self, params: dict) -> NDArray:
         """Log density of the measured widths: each station's own error (AR(1) along s with a fitted
-        sd scale for a profile; independent for a few caliper readings), plus the offset and scale
+        sd scale for a profile; independent for a few caliper readings), plus the offset, scale and taper
         errors all stations share, marginalised exactly (rank-k update, :func:`shared_error_loglik`)."""
         pred = self.predict_diameter(params)
         W = pred.shape[0]
@@ -587,7 +588,10 @@ class RodLikelihood:
             scale = np.atleast_1d(np.asarray(params["diameter_sd_scale"], float))[:, None]
             rho = np.atleast_1d(np.asarray(params["rho_diameter"], float))[:, None]
             first = self.d_first
-        return width_loglik(self.d_obs, pred, self.d_sd, scale, rho, first, self.d_offset_sd, self.d_scale_sd)
+        d0 = np.atleast_1d(np.asarray(params["d0_m"], float))[:, None]
+        return width_loglik(
+            self.d_obs, pred, self.d_sd, scale, rho, first, self.d_offset_sd, self.d_scale_sd, self.d_taper_sd, d0
+        )
 
     # ------------------------------------------------------------------ tables
     def _build_tables(self) -> None:
@@ -1195,14 +1199,18 @@ def width_loglik(
     first: NDArray,
     offset_sd: float,
     scale_sd: float,
+    taper_sd: float = 0.0,
+    d0: NDArray | None = None,
 ) -> NDArray:
     """Log density (W,) of measured widths ``d_obs`` (N,) [m] given predicted ones ``pred`` (W, N).
 
     Each station's error has sd ``scale`` x ``sd`` (``sd`` (N,) or (W, N) [m], ``scale`` (W, 1)), AR(1)
     along s with correlation ``rho`` (W, 1) (chains start where ``first`` (N,)); an offset of sd
-    ``offset_sd`` [m] and a relative scale error of sd ``scale_sd`` are shared by all stations and
-    marginalised exactly (:func:`shared_error_loglik`). The width term of :class:`RodLikelihood`
-    (docs/inference.md, "Young's modulus").
+    ``offset_sd`` [m], a relative scale error of sd ``scale_sd`` and an error g in the taper of sd
+    ``taper_sd`` (each width read as pred (pred / d0)^g, linearised: pred + g pred log(pred / d0), with
+    ``d0`` (W, 1) [m] the predicted base diameter, so the base's width is left to the scale error) are
+    shared by all stations and marginalised exactly (:func:`shared_error_loglik`). The width term of
+    :class:`RodLikelihood` (docs/inference.md, "Young's modulus").
     """
     sd = np.broadcast_to(sd, pred.shape)
     z = (d_obs - pred) / sd
@@ -1211,6 +1219,12 @@ def width_loglik(
         shared.append(offset_sd / sd)
     if scale_sd > 0:
         shared.append(scale_sd * pred / sd)
+    if taper_sd > 0:
+        if d0 is None:
+            raise TypeError("width_loglik: expected d0, the predicted base diameter (W, 1) [m], with taper_sd > 0")
+        with np.errstate(divide="ignore", invalid="ignore"):
+            slope = np.where(pred > 0, pred * np.log(pred / d0), 0.0)  # -> 0 at a tip of zero width
+        shared.append(taper_sd * slope / sd)
     return shared_error_loglik(z, scale, rho, first, shared) - np.sum(np.log(sd), axis=-1)
 
 

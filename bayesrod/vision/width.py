@@ -663,7 +663,9 @@ class DiameterProfile:
     sd of an offset and of a scale error that every station shares (:data:`OFFSET_SD_PX` pixels at the
     stem's distance; the camera's ``depth_scale_sd``, the standard error of the frames' mean contrast
     scale and the blur's share of the width (:data:`BLUR_RATIO_OK`), added in quadrature), which no number
-    of stations averages down. ``blur_over_width``: the frames' median of the contrast fit's blur over the
+    of stations averages down; ``shared_taper_sd``: the relative sd of an error in the taper the widths read
+    (the blur's share again, :func:`blur_scale_sd`: a blur wide against the stem reads its thin stations
+    differently from its thick ones). ``blur_over_width``: the frames' median of the contrast fit's blur over the
     width of the profiles it read (NaN where no frame read one).
     """
 
@@ -674,6 +676,7 @@ class DiameterProfile:
     flag: NDArray
     shared_offset_sd_m: float = 0.0
     shared_scale_sd: float = 0.0
+    shared_taper_sd: float = 0.0
     blur_over_width: float = float("nan")
 
     @property
@@ -853,5 +856,9 @@ def combine_profiles(
         flag=flag.astype(str),
         shared_offset_sd_m=offset_sd,
         shared_scale_sd=float(np.linalg.norm([depth_scale_sd, contrast_sd, fit_sd])),
+        # the blur reads thin stations differently from thick ones, so it errs in the taper too (the 3.3- and 5-px
+        # synthetic stems under one blur read 2-4% apart: a slope of 0.06-0.1 in relative error per unit of log
+        # width, against the blur term's 2-7%; docs/validation.md, "The taper under a wide blur")
+        shared_taper_sd=blur_scale_sd(ratio),
         blur_over_width=ratio,
     )
