@@ -542,3 +542,41 @@ def test_an_offset_integrated_out_is_learned_for_the_heldout_third_and_reported(
     draws = offset_draws(lik, nat, np.random.default_rng(0))
     assert set(draws) == {"a", "b"} and draws["a"].size == 50
     assert abs(float(np.median(draws["a"])) - 0.3) < 0.1 and abs(float(np.median(draws["b"]))) < 0.1
+
+
+def test_a_shared_noise_correlation_is_one_parameter_every_condition_reads(cut_pair):
+    """shared=("EI0", "p", "rho_force"): one rho_force (after the stem, before the conditions' own nuisances)
+    read by every condition, each with its own sd; the joint likelihood is the sum of the conditions' with that
+    rho, and each sd is sampled by its innovation sd against it (a shear of unit Jacobian, round-tripped)."""
+    specs = {d.extra["condition"]: d for d in cut_pair}
+    pr = load_prior("woody")
+    own = GroupLikelihood(specs, pr)
+    lik = GroupLikelihood(specs, pr, shared=("rho_force", "EI0", "p"), _liks=own.liks)
+    assert lik.names[:2] == ["EI0", "p"] and lik.names.count("rho_force") == 1
+    assert not any(n.startswith("rho_force__") for n in lik.names)
+    assert {"sigma_force_N__a", "sigma_force_N__b"} <= set(lik.names)
+    params = {
+        "EI0": np.array([2.5, 2.7]),
+        "p": np.array([0.4, 0.45]),
+        "rho_force": np.array([0.8, 0.6]),
+        "sigma_force_N__a": np.array([0.03, 0.05]),
+        "z_base__a": np.array([-0.5, float(z_of_u(0.05))]),
+        "sigma_force_N__b": np.array([0.04, 0.02]),
+        "z_base__b": z_of_u(np.array([0.2, 0.3])),
+    }
+    each = {**params, "rho_force__a": params["rho_force"], "rho_force__b": params["rho_force"]}
+    np.testing.assert_allclose(lik.log_likelihood(params), own.log_likelihood(each), rtol=1e-12)
+    post = GroupPosterior(lik)
+    r = lik.names.index("rho_force")
+    assert sorted(post.noise_pairs()) == sorted((lik.names.index(f"sigma_force_N__{c}"), r) for c in "ab")
+    theta = post.to_sample({k: v[:1] for k, v in params.items()})[0]
+    back = post.to_natural(theta)
+    for k, v in params.items():
+        assert back[k][0] == pytest.approx(v[0], rel=1e-12), k
+    # the sampled sd is the innovation sd: log(sigma sqrt(1 - rho^2))
+    s = lik.names.index("sigma_force_N__b")
+    assert theta[s] == pytest.approx(np.log(0.04 * np.sqrt(1 - 0.8**2)), rel=1e-12)
+    with pytest.raises(ValueError, match="rho_force needs force_noise 'ar1'"):
+        GroupLikelihood(specs, pr, shared=("EI0", "p", "rho_force"), force_noise="iid")
+    with pytest.raises(ValueError, match="sigma_force_N, rho_force, got L"):
+        GroupLikelihood(specs, pr, shared=("EI0", "L"))

@@ -256,8 +256,11 @@ def fit_group(
         scale-free prior uniform on u = c/(1+c) in [0, 0.9], c = EI0 C / L (docs/inference.md, "One stem,
         many conditions"); zero (a rigid clamp) is allowed.
     shared : sequence of str
-        Stem parameters common to all conditions, a subset of ``("EI0", "p")``; the others get a copy per
-        condition.
+        Parameters common to all conditions: a subset of the stem's ``("EI0", "p")`` and of the force noise's
+        ``("sigma_force_N", "rho_force")``; the others get a copy per condition. Share ``rho_force`` where one
+        rig and load cell recorded every condition: with two pushes per condition its own correlation is
+        loosely known and widens the compliances' intervals (docs/validation.md, "The compliances' width is the
+        noise correlation's").
     force_noise : {"ar1", "iid"}
         Force noise per condition (AR(1): sd and lag-1 correlation per condition).
     force_offsets : bool

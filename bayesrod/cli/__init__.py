@@ -119,7 +119,10 @@ def build_parser() -> argparse.ArgumentParser:
     fg.add_argument("--out", required=True, help="output folder (<stem_id>/summary.json, groups.json)")
     fg.add_argument("--prior", default="default", help="prior name or JSON file of EI0, p and the noise")
     fg.add_argument(
-        "--shared", default="EI0,p", help="stem parameters shared by the conditions (default EI0,p; '' for none)"
+        "--shared",
+        default="EI0,p",
+        help="parameters shared by the conditions: of EI0, p (the stem) and sigma_force_N, rho_force (the force "
+        "noise, where one rig recorded them all); default EI0,p; '' for none",
     )
     fg.add_argument("--force-noise", default="ar1", choices=["iid", "ar1"], help="force noise per condition")
     fg.add_argument(

@@ -64,6 +64,8 @@ OFFSET_PRIOR_PEAK = 0.05
 #: 1.4% in EI0 (2.668 vs 2.63), outside its 90% interval; with 25 by 0.2% (2.624), tests/test_group.py)
 U_NODES = 25
 STEM_PARAMETERS = ("EI0", "p")
+#: force-noise parameters the conditions may share (one rig, one load cell: its noise correlation is the rig's)
+NOISE_PARAMETERS = ("sigma_force_N", "rho_force")
 
 
 def condition_name(param: str, condition: str) -> str:
@@ -81,7 +83,9 @@ class GroupLikelihood:
     prior : Prior
         Priors of EI0, p, sigma_force_N (and rho_force) (docs/priors.md).
     shared : sequence of str
-        Stem parameters common to all conditions, a subset of ``("EI0", "p")``.
+        Parameters common to all conditions: a subset of the stem's ``("EI0", "p")`` and of the force noise's
+        ``("sigma_force_N", "rho_force")`` (one rig recorded every condition; by default each condition has
+        its own noise). The others get a copy per condition.
     force_noise : {"ar1", "iid"}
     anchorage : bool
         Fit a base compliance per condition (True), or none (the *separate* model of the sharing check).
@@ -101,13 +105,16 @@ class GroupLikelihood:
         force_offsets: bool = False,
         _liks: dict | None = None,
     ):
-        bad = [s for s in shared if s not in STEM_PARAMETERS]
+        allowed = STEM_PARAMETERS + NOISE_PARAMETERS
+        bad = [s for s in shared if s not in allowed]
         if bad:
-            raise ValueError(f"shared: expected a subset of {', '.join(STEM_PARAMETERS)}, got {', '.join(bad)}")
+            raise ValueError(f"shared: expected a subset of {', '.join(allowed)}, got {', '.join(bad)}")
+        if "rho_force" in shared and force_noise != "ar1":
+            raise ValueError(f"shared: rho_force needs force_noise 'ar1', got force_noise {force_noise!r}")
         if len(specs) < 1:
             raise ValueError("specs: expected at least one condition, got none")
         self.conditions = list(specs)
-        self.shared = tuple(s for s in STEM_PARAMETERS if s in shared)
+        self.shared = tuple(s for s in allowed if s in shared)
         self.anchorage = bool(anchorage)
         self.force_noise = force_noise
         self.force_offsets = bool(force_offsets)
@@ -140,20 +147,19 @@ class GroupLikelihood:
                 if n not in self.shared:
                     loc[n] = condition_name(n, c)
                     priors[loc[n]] = prior.get(n)
-            loc["sigma_force_N"] = condition_name("sigma_force_N", c)
-            priors[loc["sigma_force_N"]] = prior.get("sigma_force_N")
-            if force_noise == "ar1":
-                loc["rho_force"] = condition_name("rho_force", c)
-                priors[loc["rho_force"]] = prior.get("rho_force")
+            for n in NOISE_PARAMETERS if force_noise == "ar1" else NOISE_PARAMETERS[:1]:
+                loc[n] = n if n in self.shared else condition_name(n, c)  # a shared one: the same name in each
+                priors[loc[n]] = prior.get(n)
             if anchorage:
                 loc["z_base"] = condition_name("z_base", c)
                 priors[loc["z_base"]] = ParamPrior(loc["z_base"], "clamp_or_uniform", (Z_CLAMP, U_SCALE, U_MAX), "1")
             self.local[c] = loc
         # the stem parameters first (emcee's ESS target is on the first two), then each condition's nuisances
-        stem = list(self.shared) + [
+        stem = [n for n in self.shared if n in STEM_PARAMETERS] + [
             self.local[c][n] for n in STEM_PARAMETERS if n not in self.shared for c in self.conditions
         ]
-        self.names = stem + [n for c in self.conditions for n in self.local[c].values() if n not in stem]
+        rest = [n for c in self.conditions for n in self.local[c].values() if n not in stem]
+        self.names = stem + list(dict.fromkeys(rest))  # a shared noise parameter once, where it first appears
         self.priors = priors
         self.n_force = int(sum(lik.n_force for lik in self.liks.values()))
 

@@ -193,14 +193,19 @@ class ParameterSpace:
         return len(self.names)
 
     def noise_pairs(self) -> list[tuple[int, int]]:
-        """(sd column, correlation column) of each AR(1) force noise sampled by its innovation sd."""
+        """(sd column, correlation column) of each AR(1) force noise sampled by its innovation sd: each sd with
+        the correlation of the same suffix, or, where one ``rho_force`` is shared by conditions with a sd each
+        (``sigma_force_N__<c>``), every such sd with it."""
         idx = {n: i for i, n in enumerate(self.names)}
         pairs = []
         for n, i in idx.items():
             if n == "rho_force" or n.startswith("rho_force__"):
-                s = idx.get("sigma_force_N" + n[len("rho_force") :])
-                if s is not None and self.priors[s].log_space and not self.priors[i].log_space:
-                    pairs.append((s, i))
+                sds = [idx.get("sigma_force_N" + n[len("rho_force") :])]
+                if n == "rho_force" and sds[0] is None:
+                    sds = [j for m, j in idx.items() if m.startswith("sigma_force_N__")]
+                for s in sds:
+                    if s is not None and self.priors[s].log_space and not self.priors[i].log_space:
+                        pairs.append((s, i))
         return pairs
 
     def _shear(self, theta, sign: float) -> NDArray:
