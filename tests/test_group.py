@@ -479,6 +479,15 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     # a tie (both clamped) is neither softer: P(b softer) + P(a softer) = 1 - P(tie)
     assert pairs["a", "b"]["prob_b_softer"] == pytest.approx(0.875) and pairs["b", "a"]["prob_b_softer"] < 0.01
     np.testing.assert_allclose(fit.samples["base_compliance_rad_per_Nm__b"], C_b, rtol=1e-9)
+    # a shared noise correlation: one interval under "shared", the same one under each condition
+    natural["rho_force"] = rho["b"]
+    both = bayesrod.fit_group(
+        list(cut_pair), prior="woody", progress=False, sharing=False, shared=("EI0", "p", "rho_force")
+    ).doc
+    same(both["shared"]["rho_force"], rho["b"])
+    for c in "ab":
+        same(both["conditions"][c]["rho_force"], rho["b"])
+        same(both["conditions"][c]["sigma_force_N"], sig[c])
 
 
 def test_a_conditions_force_offset_is_integrated_out_exactly(cut_pair):
