@@ -374,6 +374,7 @@ def test_at_one_height_the_soft_bases_are_sampled_relative_to_the_stem(cut_pair)
     rng = np.random.default_rng(3)
     pts = w + rng.normal(0.0, 0.02, (5, w.size)) * np.maximum(np.abs(w), 1.0)
     pts[0, ia] = -0.4
+    pts[1, ib], pts[2, ib] = 0.5, 0.05  # soft bases below w = 1 as well
     zs = in_z.to_sample(in_w.to_natural(pts))
     jac = in_w.log_jacobian(pts)
     assert jac[0] != 0.0 and np.all(np.isfinite(in_w.log_prob(pts)))
@@ -589,3 +590,34 @@ def test_a_shared_noise_correlation_is_one_parameter_every_condition_reads(cut_p
         GroupLikelihood(specs, pr, shared=("EI0", "p", "rho_force"), force_noise="iid")
     with pytest.raises(ValueError, match="sigma_force_N, rho_force, got L"):
         GroupLikelihood(specs, pr, shared=("EI0", "L"))
+
+
+def test_the_group_posteriors_guards(cut_pair, tmp_path):
+    """No conditions refused; a p range capped at the tables' 3 whatever the prior allows; outside the prior a
+    MAP density of -inf (never +inf, which an optimiser would run to); and with the pushes at more than one
+    height (no stiffness coordinate) the start is left in z."""
+    import json
+
+    from bayesrod.inference.group import Z_CLAMP
+
+    specs = {d.extra["condition"]: d for d in cut_pair}
+    with pytest.raises(ValueError, match="at least one condition, got none"):
+        GroupLikelihood({}, load_prior("woody"))
+    wide = {
+        "EI0": {"dist": "lognormal", "median": 3.0, "sigma_log": 1.5},
+        "p": {"dist": "truncnormal", "mean": 0.5, "sd": 0.4, "low": 0.0, "high": 5.0},
+        "sigma_force_N": {"dist": "halfnormal", "scale": 0.5},
+        "sigma_shape_m": {"dist": "halfnormal", "scale": 0.005},
+        "shape_sd_scale": {"dist": "lognormal", "median": 1.0, "sigma_log": 0.5},
+    }
+    (tmp_path / "wide.json").write_text(json.dumps({"name": "wide", "parameters": wide}))
+    lik = GroupLikelihood(specs, load_prior(str(tmp_path / "wide.json")))
+    post = GroupPosterior(lik)
+    assert lik.p_range[1] == 3.0 and post.sample_bounds()[lik.names.index("p")][1] == 3.0
+    t = start_point(GroupPosterior(GroupLikelihood(specs, load_prior("woody"))))
+    post = GroupPosterior(GroupLikelihood(specs, load_prior("woody")))
+    out = t.copy()
+    out[post.names.index("z_base__a")] = -Z_CLAMP - 0.5
+    assert post.map_log_density(out) == -np.inf
+    post.stiffness_at = None  # as at two heights
+    assert np.array_equal(post.settle_base_coordinates(t), t) and not post.relative_bases

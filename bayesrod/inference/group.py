@@ -317,7 +317,8 @@ class GroupPosterior(PosteriorBase):
         # the relative coordinates w the Jacobian dz/dw goes too, leaving the same function of the parameters
         pc = self.prior_coordinates(t)
         z_prior = sum(self.priors[i].logpdf_sample(pc[:, i]) for i in self._z_idx) + self.log_jacobian(t)
-        out = np.where(np.isfinite(out), out - z_prior, -np.inf)
+        with np.errstate(invalid="ignore"):  # outside the prior: -inf - (-inf), replaced by -inf
+            out = np.where(np.isfinite(out), out - z_prior, -np.inf)
         return float(out[0]) if theta_arr.ndim == 1 else out
 
 
