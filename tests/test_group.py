@@ -621,3 +621,36 @@ def test_the_group_posteriors_guards(cut_pair, tmp_path):
     assert post.map_log_density(out) == -np.inf
     post.stiffness_at = None  # as at two heights
     assert np.array_equal(post.settle_base_coordinates(t), t) and not post.relative_bases
+    # the separate model (nothing shared, no anchorage) starts each condition at its own stem
+    sep = GroupPosterior(GroupLikelihood(specs, load_prior("woody"), shared=(), anchorage=False))
+    nat = sep.to_natural(start_point(sep))
+    assert nat["EI0__a"][0] == pytest.approx(EI0, rel=0.05) and nat["p__a"][0] == pytest.approx(P, abs=0.1)
+    assert nat["EI0__b"][0] < 0.9 * EI0  # the cut condition's base read as a softer stem
+    sep.map_log_density = lambda theta: -np.inf
+    with pytest.raises(ValueError, match="expected a starting point with finite posterior density, found none"):
+        start_point(sep)
+
+
+def test_the_sharing_check_hides_one_conditions_third_from_both_models_and_states_its_rule(cut_pair, monkeypatch):
+    """Per condition c, both refits see every sample but c's held-out third (the other conditions whole); the
+    separate model shares nothing and has no anchorage; the default rule rejects beyond 10% and says so."""
+    lik = GroupLikelihood({d.extra["condition"]: d for d in cut_pair}, load_prior("woody"))
+    theta = start_point(GroupPosterior(lik))
+    seen = []
+    real = GroupLikelihood.restricted
+
+    def spy(self, masks):
+        seen.append((self, {k: m.copy() for k, m in masks.items()}))
+        return real(self, masks)
+
+    monkeypatch.setattr(GroupLikelihood, "restricted", spy)
+    check = sharing_check(lik, theta)
+    assert len(seen) == 2 * len(lik.conditions)
+    for i, c in enumerate(lik.conditions):
+        for model, masks in seen[2 * i : 2 * i + 2]:
+            held = last_third_masks(lik.liks[c])
+            assert np.array_equal(masks[c], ~held)
+            assert all(masks[k].all() for k in lik.conditions if k != c)
+        joint, separate = seen[2 * i][0], seen[2 * i + 1][0]
+        assert joint is lik and separate.shared == () and not separate.anchorage
+    assert check.tolerance == 0.10 and check.to_dict()["rule"].endswith("by more than 10%")
