@@ -647,7 +647,7 @@ def test_the_sharing_check_hides_one_conditions_third_from_both_models_and_state
     check = sharing_check(lik, theta)
     assert len(seen) == 2 * len(lik.conditions)
     for i, c in enumerate(lik.conditions):
-        for model, masks in seen[2 * i : 2 * i + 2]:
+        for _, masks in seen[2 * i : 2 * i + 2]:
             held = last_third_masks(lik.liks[c])
             assert np.array_equal(masks[c], ~held)
             assert all(masks[k].all() for k in lik.conditions if k != c)
