@@ -654,3 +654,28 @@ def test_the_sharing_check_hides_one_conditions_third_from_both_models_and_state
         joint, separate = seen[2 * i][0], seen[2 * i + 1][0]
         assert joint is lik and separate.shared == () and not separate.anchorage
     assert check.tolerance == 0.10 and check.to_dict()["rule"].endswith("by more than 10%")
+
+
+def test_map_fit_never_returns_a_point_worse_than_its_start(cut_pair, monkeypatch):
+    """L-BFGS-B's answer is kept only where its density is at least the start's; else the start (within the
+    bounds) comes back, so a failed optimisation cannot move a sharing refit or the sampler's start away."""
+    import types
+
+    import bayesrod.inference.group as G
+
+    post = GroupPosterior(GroupLikelihood({d.extra["condition"]: d for d in cut_pair}, load_prior("woody")))
+    t = start_point(post)
+    worse = t.copy()
+    worse[post.names.index("EI0")] += 0.3
+    for answer, want in ((worse, t), (t, t)):
+        x = answer.copy()
+        x[post._z_idx] *= G.U_SCALE  # map_fit's optimiser works in u for each base
+        fake = types.SimpleNamespace(x=x, fun=-float(post.map_log_density(answer)))
+        monkeypatch.setattr(G, "minimize", lambda *a, fake=fake, **k: fake)
+        np.testing.assert_allclose(map_fit(post, t), want, rtol=1e-12, atol=1e-12)
+    monkeypatch.undo()
+    start = t.copy()
+    start[post.names.index("EI0")] -= 0.2
+    better = map_fit(post, start)  # back to the optimum the start point found (not just uphill)
+    assert post.map_log_density(better) == pytest.approx(post.map_log_density(t), abs=0.05)
+    assert post.map_log_density(start) < post.map_log_density(t) - 5.0
