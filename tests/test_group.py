@@ -654,6 +654,16 @@ def test_the_sharing_check_hides_one_conditions_third_from_both_models_and_state
         joint, separate = seen[2 * i][0], seen[2 * i + 1][0]
         assert joint is lik and separate.shared == () and not separate.anchorage
     assert check.tolerance == 0.10 and check.to_dict()["rule"].endswith("by more than 10%")
+    d = check.to_dict()
+    assert d == {
+        "verdict": check.verdict,
+        "heldout_force_rmse_joint_N": check.heldout_force_rmse_joint_N,
+        "heldout_force_rmse_separate_N": check.heldout_force_rmse_separate_N,
+        "per_condition": check.per_condition,
+        "heldout": "the last third of every push of one condition at a time; both models refitted (MAP) on "
+        "everything else",
+        "rule": "rejected when the joint model's held-out RMSE exceeds the separate fits' by more than 10%",
+    }
 
 
 def test_map_fit_never_returns_a_point_worse_than_its_start(cut_pair, monkeypatch):
