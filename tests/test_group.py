@@ -480,6 +480,24 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     # a tie (both clamped) is neither softer: P(b softer) + P(a softer) = 1 - P(tie)
     assert pairs["a", "b"]["prob_b_softer"] == pytest.approx(0.875) and pairs["b", "a"]["prob_b_softer"] < 0.01
     np.testing.assert_allclose(fit.samples["base_compliance_rad_per_Nm__b"], C_b, rtol=1e-9)
+    # how much of EI0 the data decide, and the one-height warning (cut_pair is pushed at one height)
+    ident = s["identifiability"]
+    assert ident["heights_per_condition"] == {"a": 1, "b": 1}
+    assert ident["EI0_posterior_sd_log"] == pytest.approx(np.std(np.log(EI)), rel=1e-9)
+    assert ident["EI0_posterior_over_prior_sd_log"] == pytest.approx(np.std(np.log(EI)) / 1.5, rel=1e-9)  # woody
+    assert sum(w.startswith("every condition was pushed at one height") for w in s["warnings"]) == 1
+    # EI0 not shared: one per condition, under each condition, none under "shared"
+    natural["EI0__a"], natural["EI0__b"] = EI, 1.1 * EI
+    own = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False, shared=("p",)).doc
+    assert list(own["shared"]) == ["p"] and "EI0_posterior_sd_log" not in own["identifiability"]
+    same(own["conditions"]["a"]["EI0"], EI)
+    same(own["conditions"]["b"]["EI0"], 1.1 * EI)
+    # integrated-out offsets: each condition's drawn from its conditional at the draws (no offset in these data)
+    off = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False, force_offsets=True).doc
+    for c in "ab":
+        got = off["conditions"][c]["force_offset_N"]
+        assert got["q05"] < got["median"] < got["q95"] and abs(got["median"]) < 0.2, got
+    assert "force_offset_N" not in s["conditions"]["a"]
     # a shared noise correlation: one interval under "shared", the same one under each condition
     natural["rho_force"] = rho["b"]
     both = bayesrod.fit_group(
