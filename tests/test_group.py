@@ -3,6 +3,7 @@
 import copy
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -482,6 +483,7 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     np.testing.assert_allclose(fit.samples["base_compliance_rad_per_Nm__b"], C_b, rtol=1e-9)
     # how much of EI0 the data decide, and the one-height warning (cut_pair is pushed at one height)
     ident = s["identifiability"]
+    assert s["stem_id"] == "s1" and s["prior"] == "woody"
     assert ident["heights_per_condition"] == {"a": 1, "b": 1}
     assert ident["EI0_posterior_sd_log"] == pytest.approx(np.std(np.log(EI)), rel=1e-9)
     assert ident["EI0_posterior_over_prior_sd_log"] == pytest.approx(np.std(np.log(EI)) / 1.5, rel=1e-9)  # woody
@@ -707,3 +709,33 @@ def test_map_fit_never_returns_a_point_worse_than_its_start(cut_pair, monkeypatc
     better = map_fit(post, start)  # back to the optimum the start point found (not just uphill)
     assert post.map_log_density(better) == pytest.approx(post.map_log_density(t), abs=0.05)
     assert post.map_log_density(start) < post.map_log_density(t) - 5.0
+
+
+def test_fit_group_refuses_what_it_cannot_fit_and_defaults_as_documented(cut_pair):
+    """Each refusal names the field, what was expected and what came (before any table is built); the defaults
+    are those docs/api.md states."""
+    import dataclasses
+    import inspect
+
+    a, b = cut_pair
+    cases = [
+        ([a, dataclasses.replace(b, extra={**b.extra, "condition": ""})], "expected datasets with a condition"),
+        ([a, dataclasses.replace(b, extra={**b.extra, "condition": "a"})], "one dataset per condition, got 'a' twice"),
+        ([a], "two or more conditions of one stem, got 1"),
+        (
+            [a, dataclasses.replace(b, species="oak")],
+            "one species for the conditions of stem s1, got a: 'woody twig (seed paper)', b: 'oak'",
+        ),
+    ]
+    for conds, msg in cases:
+        with pytest.raises(ValueError, match=re.escape(msg)):
+            bayesrod.fit_group(conds, progress=False)
+    for bad in (99, 100.0):
+        with pytest.raises(ValueError, match=re.escape(f"max_steps: expected an integer >= 100, got {bad!r}")):
+            bayesrod.fit_group(cut_pair, progress=False, max_steps=bad)
+    got = {
+        k: v.default for k, v in inspect.signature(bayesrod.fit_group).parameters.items() if v.default is not v.empty
+    }
+    want = {"prior": None, "shared": ("EI0", "p"), "force_noise": "ar1", "force_offsets": False, "seed": 0}
+    want |= {"progress": True, "max_steps": 6000, "target_ess": 400.0, "sharing": True, "stem_id": None}
+    assert got == want
