@@ -482,6 +482,14 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     assert pairs["a", "b"]["prob_b_softer"] == pytest.approx(0.875) and pairs["b", "a"]["prob_b_softer"] < 0.01
     np.testing.assert_allclose(fit.samples["base_compliance_rad_per_Nm__b"], C_b, rtol=1e-9)
     # how much of EI0 the data decide, and the one-height warning (cut_pair is pushed at one height)
+    # the contract's keys (docs/format.md) and the sampler's numbers as the run gave them
+    keys = {"bayesrod", "conditions", "conditions_order", "contrasts", "convergence", "force_noise", "identifiability"}
+    keys |= {"length_m", "level", "prior", "sampler", "shared", "sharing", "species", "stem_id", "warnings"}
+    assert set(s) == keys and s["conditions_order"] == ["a", "b"] and s["sharing"] is None
+    assert s["level"] == 0.9 and s["force_noise"] == "ar1" and s["bayesrod"] == bayesrod.__version__
+    assert s["sampler"]["steps"] == 2000 and s["sampler"]["burn_in"] == 1000 and s["sampler"]["seconds"] >= 0
+    conv = s["convergence"]
+    assert conv == {"rhat_max": 1.001, "ess_bulk_min": 5000.0, "walkers_restarted": 0, "converged": True}
     ident = s["identifiability"]
     assert s["stem_id"] == "s1" and s["prior"] == "woody"
     assert ident["heights_per_condition"] == {"a": 1, "b": 1}
@@ -494,6 +502,18 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     assert list(own["shared"]) == ["p"] and "EI0_posterior_sd_log" not in own["identifiability"]
     same(own["conditions"]["a"]["EI0"], EI)
     same(own["conditions"]["b"]["EI0"], 1.1 * EI)
+    # a rejected sharing is reported and warned about
+    from bayesrod.inference.group import SharingCheck
+
+    rejected = SharingCheck("rejected", 0.3, 0.1, {"a": {"joint": 0.3, "separate": 0.1}}, 0.1)
+    monkeypatch.setattr(api_group, "refit_start", lambda post, theta0, chain, lp: theta0)
+    monkeypatch.setattr(api_group, "sharing_check", lambda lik, theta: rejected)
+    told = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False).doc
+    assert told["sharing"] == rejected.to_dict()
+    assert sum(
+        w.startswith("sharing rejected: the joint model predicts held-out pushes worse") for w in told["warnings"]
+    )
+    assert not any(w.startswith("sharing rejected") for w in s["warnings"])
     # integrated-out offsets: each condition's drawn from its conditional at the draws (no offset in these data)
     off = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False, force_offsets=True).doc
     for c in "ab":
