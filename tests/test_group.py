@@ -437,6 +437,7 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     seen = {}
 
     def run(post, theta0, **kw):
+        seen["kw"] = kw
         chain = post.to_sample({k: natural[k] for k in post.names}).reshape(4, n // 4, post.ndim)
         diag = {"rhat": dict.fromkeys(post.names, 1.001), "ess_bulk": dict.fromkeys(post.names, 5000.0)}
         seen["post"] = post
@@ -483,6 +484,8 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     np.testing.assert_allclose(fit.samples["base_compliance_rad_per_Nm__b"], C_b, rtol=1e-9)
     # how much of EI0 the data decide, and the one-height warning (cut_pair is pushed at one height)
     # the contract's keys (docs/format.md) and the sampler's numbers as the run gave them
+    assert seen["kw"] == {"seed": 0, "progress": False, "max_steps": 6000, "target_ess": 400.0}
+    assert s["species"] == cut_pair[0].species and s["length_m"] == L
     keys = {"bayesrod", "conditions", "conditions_order", "contrasts", "convergence", "force_noise", "identifiability"}
     keys |= {"length_m", "level", "prior", "sampler", "shared", "sharing", "species", "stem_id", "warnings"}
     assert set(s) == keys and s["conditions_order"] == ["a", "b"] and s["sharing"] is None
@@ -506,9 +509,22 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     from bayesrod.inference.group import SharingCheck
 
     rejected = SharingCheck("rejected", 0.3, 0.1, {"a": {"joint": 0.3, "separate": 0.1}}, 0.1)
-    monkeypatch.setattr(api_group, "refit_start", lambda post, theta0, chain, lp: theta0)
-    monkeypatch.setattr(api_group, "sharing_check", lambda lik, theta: rejected)
-    told = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False).doc
+
+    def refit(post, theta0, chain, lp):
+        seen["refit"] = (post is seen["post"], chain.shape, lp.shape)
+        return theta0 + 1.0
+
+    def check(lik, theta):
+        seen["check"] = (lik is seen["post"].likelihood, theta)
+        return rejected
+
+    monkeypatch.setattr(api_group, "refit_start", refit)
+    monkeypatch.setattr(api_group, "sharing_check", check)
+    told = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, seed=7, max_steps=300).doc
+    assert seen["kw"] == {"seed": 7, "progress": False, "max_steps": 300, "target_ess": 400.0}
+    ndim = seen["post"].ndim
+    assert seen["refit"] == (True, (4, n // 4, ndim), (4, n // 4)) and seen["check"][0]
+    assert seen["check"][1].shape == (ndim,) and np.all(np.isfinite(seen["check"][1]))
     assert told["sharing"] == rejected.to_dict()
     assert sum(
         w.startswith("sharing rejected: the joint model predicts held-out pushes worse") for w in told["warnings"]
