@@ -437,11 +437,12 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     seen = {}
 
     def run(post, theta0, **kw):
-        seen["kw"] = kw
+        seen["kw"], seen["theta0"] = kw, theta0
         chain = post.to_sample({k: natural[k] for k in post.names}).reshape(4, n // 4, post.ndim)
         diag = {"rhat": dict.fromkeys(post.names, 1.001), "ess_bulk": dict.fromkeys(post.names, 5000.0)}
         seen["post"] = post
-        return SamplingResult(chain, np.zeros((4, n // 4)), 2000, 1000, np.ones(post.ndim), 0.3, 4, diag, True, (0,))
+        ok = seen.get("converged", True)
+        return SamplingResult(chain, np.zeros((4, n // 4)), 2000, 1000, np.ones(post.ndim), 0.3, 4, diag, ok, (0,))
 
     monkeypatch.setattr(api_group, "run_ensembles", run)
     monkeypatch.setattr(
@@ -485,6 +486,7 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     # how much of EI0 the data decide, and the one-height warning (cut_pair is pushed at one height)
     # the contract's keys (docs/format.md) and the sampler's numbers as the run gave them
     assert seen["kw"] == {"seed": 0, "progress": False, "max_steps": 6000, "target_ess": 400.0}
+    assert seen["theta0"].shape == (seen["post"].ndim,) and np.all(np.isfinite(seen["theta0"]))
     assert s["species"] == cut_pair[0].species and s["length_m"] == L
     keys = {"bayesrod", "conditions", "conditions_order", "contrasts", "convergence", "force_noise", "identifiability"}
     keys |= {"length_m", "level", "prior", "sampler", "shared", "sharing", "species", "stem_id", "warnings"}
@@ -535,6 +537,14 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     for c in "ab":
         got = off["conditions"][c]["force_offset_N"]
         assert got["q05"] < got["median"] < got["q95"] and abs(got["median"]) < 0.2, got
+    again = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False, force_offsets=True).doc
+    assert again["conditions"] == off["conditions"]  # the offsets' draws are seeded: the same run, the same numbers
+    # a run that spent its budget says so, with the budget and target it was given
+    seen["converged"] = False
+    short = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False, max_steps=300).doc
+    assert short["convergence"]["converged"] is False
+    assert sum("not converged within 300 steps" in w and "target 400" in w for w in short["warnings"]) == 1
+    seen["converged"] = True
     assert "force_offset_N" not in s["conditions"]["a"]
     # a shared noise correlation: one interval under "shared", the same one under each condition
     natural["rho_force"] = rho["b"]
