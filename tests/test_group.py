@@ -677,18 +677,20 @@ def test_the_group_posteriors_guards(cut_pair, tmp_path):
         "shape_sd_scale": {"dist": "lognormal", "median": 1.0, "sigma_log": 0.5},
     }
     (tmp_path / "wide.json").write_text(json.dumps({"name": "wide", "parameters": wide}))
-    lik = GroupLikelihood(specs, load_prior(str(tmp_path / "wide.json")))
+    lik = GroupLikelihood(specs, load_prior("woody"))  # its tables serve every model below
+    wide_lik = GroupLikelihood(specs, load_prior(str(tmp_path / "wide.json")), _liks=lik.liks)
+    assert wide_lik.p_range[1] == 3.0
+    assert GroupPosterior(wide_lik).sample_bounds()[wide_lik.names.index("p")][1] == 3.0
     post = GroupPosterior(lik)
-    assert lik.p_range[1] == 3.0 and post.sample_bounds()[lik.names.index("p")][1] == 3.0
-    t = start_point(GroupPosterior(GroupLikelihood(specs, load_prior("woody"))))
-    post = GroupPosterior(GroupLikelihood(specs, load_prior("woody")))
+    t = start_point(post)
     out = t.copy()
     out[post.names.index("z_base__a")] = -Z_CLAMP - 0.5
     assert post.map_log_density(out) == -np.inf
     post.stiffness_at = None  # as at two heights
     assert np.array_equal(post.settle_base_coordinates(t), t) and not post.relative_bases
     # the separate model (nothing shared, no anchorage) starts each condition at its own stem
-    sep = GroupPosterior(GroupLikelihood(specs, load_prior("woody"), shared=(), anchorage=False))
+    plain = {c: lik.liks[c].without_effect_axis() for c in lik.conditions}  # as sharing_check builds it
+    sep = GroupPosterior(GroupLikelihood(specs, load_prior("woody"), shared=(), anchorage=False, _liks=plain))
     nat = sep.to_natural(start_point(sep))
     assert nat["EI0__a"][0] == pytest.approx(EI0, rel=0.05) and nat["p__a"][0] == pytest.approx(P, abs=0.1)
     assert nat["EI0__b"][0] < 0.9 * EI0  # the cut condition's base read as a softer stem
