@@ -444,6 +444,11 @@ def test_width_term_matches_a_dense_gaussian_reference(offset_sd, scale_sd, tape
     got = lik._diameter_loglik({k: np.atleast_1d(v) for k, v in params.items()})[0]
     cov = np.diag(sd[:3] ** 2) + shared_cov[:3, :3]
     assert got == pytest.approx(multivariate_normal(mean[:3], cov).logpdf(d[:3]), rel=1e-9)
+    if taper_sd > 0:  # the taper column is referred to the base: without it the term refuses
+        from bayesrod.inference.likelihood import width_loglik
+
+        with pytest.raises(TypeError, match="expected d0, the predicted base diameter"):
+            width_loglik(d, mean[None], sd, np.ones((1, 1)), np.zeros((1, 1)), first, 0.0, 0.0, taper_sd)
 
 
 def test_youngs_modulus_from_a_caliper_base_diameter_has_the_propagated_width():
