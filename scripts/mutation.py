@@ -205,6 +205,79 @@ TARGETS["group_summary"] = (
     ["*.x__summary__mutmut_*", "*.x_fit_group__mutmut_*"],
 )
 
+# added in session 38: the force likelihood itself (the tables' interpolation, the residuals, the Gaussian and
+# AR(1) sums, the offsets, the slip term, the posterior's log_prob), which no target held: only its noise
+# densities and shape tables had been mutated. The tests: the likelihood's fast unit tests (no sampling)
+TARGETS["likelihood"] = (
+    "bayesrod/inference/likelihood.py",
+    [
+        *(
+            f"tests/test_inference.py::{t}"
+            for t in (
+                "test_force_table_matches_direct_solves",
+                "test_table_interpolation_weights_are_the_lagrange_cardinals",
+                "test_likelihood_peaks_near_truth",
+                "test_forces_only_and_shapes_only",
+                "test_the_compliance_axis_covers_a_stem_whose_base_spring_dominates",
+                "test_shape_offsets_past_a_nodes_slip_go_on_along_the_secant_of_its_last_step",
+                "test_the_fits_table_check_is_the_mle_shift_of_noise_free_exact_data",
+            )
+        ),
+        *(
+            f"tests/test_noise.py::{t}"
+            for t in (
+                "test_table_log_likelihood_is_the_explicit_gaussian_density_of_its_residuals",
+                "test_ar1_noise_is_sampled_by_its_innovation_sd_with_the_prior_kept_on_the_marginal_sd",
+                "test_predictive_forces_of_a_preloaded_push_are_shifted_by_each_draws_preload",
+            )
+        ),
+        *(
+            f"tests/test_nuisances.py::{t}"
+            for t in (
+                "test_geometry_tables_match_tables_built_at_that_geometry",
+                "test_force_offsets_per_push_enter_the_residuals_of_their_own_push",
+                "test_force_curve_cache_survives_eviction_within_one_batch",
+            )
+        ),
+        "tests/test_slip.py",
+    ],
+    [
+        *(f"*.x_{f}__mutmut_*" for f in ("_lagrange4", "_chain_starts", "scale_fit_rows", "force_scale_fit")),
+        *(
+            f"*.xǁ{c}ǁ{m}__mutmut_*"
+            for c, ms in (
+                ("ForceCurves", ("force", "_solve", "batch")),
+                (
+                    "RodLikelihood",
+                    (
+                        "_weights",
+                        "_interp",
+                        "_gather_weights",
+                        "effect_coordinate",
+                        "in_table",
+                        "predict_nd_force_preloaded",
+                        "predict_nd_force",
+                        "residuals",
+                        "_per_push",
+                        "restricted",
+                        "without_effect_axis",
+                        "log_likelihood",
+                        "_rho",
+                        "_offset_column",
+                        "offset_posterior",
+                        "fit_error",
+                        "slip_loglik",
+                        "_slip_m",
+                    ),
+                ),
+                ("PosteriorBase", ("log_prior", "_in_support", "log_prob")),
+                ("LogPosterior", ("__init__", "_in_support")),
+            )
+            for m in ms
+        ),
+    ],
+)
+
 STATUSES = ("killed", "timeout", "survived", "no tests", "suspicious", "skipped", "segfault")
 
 

@@ -15,6 +15,15 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 threadpool_limits(1)
 
 REPO = Path(__file__).resolve().parents[1]
+
+def pytest_sessionstart(session):
+    """Start every test session with an empty force-curve cache. A plain run starts empty anyway; mutmut
+    (scripts/mutation.py) forks each mutant's session from a process whose clean run filled the cache, and
+    cached curves would hide a mutant of the solves behind them."""
+    from bayesrod.inference import likelihood
+
+    likelihood._CURVE_CACHE.clear()
+
 BLUEBERRY = REPO.parent / "shared" / "data" / "blueberry-canes"
 
 
