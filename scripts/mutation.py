@@ -240,6 +240,7 @@ TARGETS["likelihood"] = (
             )
         ),
         "tests/test_slip.py",
+        "tests/test_likelihood_core.py",
     ],
     [
         *(f"*.x_{f}__mutmut_*" for f in ("_lagrange4", "_chain_starts", "scale_fit_rows", "force_scale_fit")),

@@ -16,6 +16,7 @@ threadpool_limits(1)
 
 REPO = Path(__file__).resolve().parents[1]
 
+
 def pytest_sessionstart(session):
     """Start every test session with an empty force-curve cache. A plain run starts empty anyway; mutmut
     (scripts/mutation.py) forks each mutant's session from a process whose clean run filled the cache, and
@@ -23,6 +24,7 @@ def pytest_sessionstart(session):
     from bayesrod.inference import likelihood
 
     likelihood._CURVE_CACHE.clear()
+
 
 BLUEBERRY = REPO.parent / "shared" / "data" / "blueberry-canes"
 

@@ -1,0 +1,136 @@
+"""The force likelihood's own arithmetic against dense references: the noise models with and without the closed-form
+offset, the offset's conditional, held-out restrictions, and the fit error a summary reports (issue 21: these
+lines had no mutation target before session 38)."""
+
+import numpy as np
+import pytest
+from scipy.stats import multivariate_normal
+
+import bayesrod
+from bayesrod.dataset import read_dataset
+from bayesrod.inference.likelihood import RodLikelihood
+
+
+@pytest.fixture(scope="module")
+def demo():
+    return read_dataset(bayesrod.DEMO_DATASET)
+
+
+def _params(lik, W=2):
+    out = {"EI0": np.array([2.5, 2.8])[:W], "p": np.array([0.41, 0.46])[:W]}
+    if lik.n_force:
+        out["sigma_force_N"] = np.array([0.03, 0.07])[:W]
+    if lik.force_noise == "ar1":
+        out["rho_force"] = np.array([0.6, -0.3])[:W]
+    if lik.n_points:
+        out["shape_sd_scale" if lik.shape_has_sd else "sigma_shape_m"] = np.array([0.8, 1.3])[:W]
+    return out
+
+
+def _force_residuals(lik, params):
+    """F_obs - EI0 / L^2 f(d; p), from the force table alone."""
+    return lik.F_obs[None, :] - params["EI0"][:, None] / lik.L**2 * lik.predict_nd_force(params["p"])
+
+
+def _force_cov(lik, sigma, rho, offset_sd):
+    """Dense covariance of the force noise: AR(1) (stationary, sd sigma) within each push's chain, independent
+    between chains, plus offset_sd^2 shared by every sample."""
+    chain = np.cumsum(lik.F_first)
+    k = np.arange(lik.n_force)
+    same = chain[:, None] == chain[None, :]
+    lag = np.abs(k[:, None] - k[None, :])
+    return np.where(same, sigma**2 * float(rho) ** lag, 0.0) + offset_sd**2
+
+
+@pytest.mark.parametrize("noise", ["iid", "ar1"])
+@pytest.mark.parametrize("offset_sd", [None, 0.05])
+def test_force_term_is_the_dense_gaussian_of_its_noise_model(demo, noise, offset_sd):
+    """iid or AR(1) noise, with or without a force offset integrated out under N(0, offset_sd^2): the likelihood
+    equals scipy's multivariate normal of the residuals with that covariance. An iid likelihood given a
+    correlation ignores it; the offset's conditional is the dense Gaussian conditional."""
+    lik = RodLikelihood(demo, use_shapes=False, force_noise=noise)
+    lik.offset_prior_sd = offset_sd
+    params = _params(lik)
+    r = _force_residuals(lik, params)
+    np.testing.assert_allclose(lik.residuals(params)["force"], r, rtol=0, atol=1e-12)
+    got = lik.log_likelihood(params)
+    rhos = params.get("rho_force", np.zeros(2))
+    for w in range(2):
+        cov = _force_cov(lik, params["sigma_force_N"][w], rhos[w], offset_sd or 0.0)
+        want = multivariate_normal(np.zeros(lik.n_force), cov).logpdf(r[w])
+        assert got[w] == pytest.approx(want, rel=1e-9, abs=1e-7)
+    if noise == "iid":  # a correlation handed to an iid likelihood is not read
+        again = lik.log_likelihood({**params, "rho_force": np.array([0.9, 0.9])})
+        np.testing.assert_allclose(again, got, rtol=1e-12)
+    if offset_sd is None:
+        with pytest.raises(ValueError, match="offset_prior_sd"):
+            lik.offset_posterior(params)
+        return
+    mean, sd = lik.offset_posterior(params)
+    for w in range(2):
+        S = _force_cov(lik, params["sigma_force_N"][w], rhos[w], 0.0)
+        one = np.ones(lik.n_force)
+        K = S + offset_sd**2  # the marginal covariance of the residuals
+        gain = offset_sd**2 * np.linalg.solve(K, one)  # Cov(c, r) K^-1
+        assert mean[w] == pytest.approx(gain @ r[w], rel=1e-8)
+        assert sd[w] == pytest.approx(np.sqrt(offset_sd**2 - offset_sd**2 * gain @ one), rel=1e-8)
+
+
+def test_a_restricted_likelihood_is_the_density_of_the_samples_it_keeps(demo):
+    """Held-out refits use ``restricted(mask)``: the AR(1) chains restart at each push's first kept sample, the
+    slip term (data at the end of a push) is left out, and a mask of 0/1 integers is read as one of booleans."""
+    lik = RodLikelihood(demo, use_shapes=False, force_noise="ar1", slip=True)
+    assert lik.slip
+    keep = np.ones(lik.n_force, bool)
+    keep[np.flatnonzero(lik.F_first) + 2] = False  # a gap inside each push
+    keep[: np.flatnonzero(lik.F_first)[1]] = False  # all of the first push
+    sub = lik.restricted(keep)
+    assert sub.n_force == keep.sum() and not sub.slip
+    params = _params(lik)
+    r = _force_residuals(lik, params)[:, keep]
+    push = lik.F_push[keep]
+    for w in range(2):
+        s, rho = params["sigma_force_N"][w], params["rho_force"][w]
+        want = 0.0
+        for j in np.unique(push):  # a chain per push: consecutive kept samples are neighbours in it
+            x = r[w, push == j]
+            k = np.arange(x.size)
+            want += multivariate_normal(np.zeros(x.size), s**2 * rho ** np.abs(k[:, None] - k[None, :])).logpdf(x)
+        assert sub.log_likelihood(params)[w] == pytest.approx(want, rel=1e-9)
+    as_ints = lik.restricted(list(keep.astype(int)))
+    np.testing.assert_allclose(as_ints.log_likelihood(params), sub.log_likelihood(params))
+    with pytest.raises(ValueError, match=rf"mask: expected shape \({lik.n_force},\), got \(3,\)"):
+        lik.restricted(np.ones(3, bool))
+
+
+def test_fit_error_is_the_rms_of_each_residual_in_the_unit_it_names(demo):
+    """summary.json's fit_error: force RMS [N] over the engaged samples, centerline RMS [mm], width RMS [mm]; the
+    terms a likelihood does not hold are None."""
+    lik = RodLikelihood(demo)
+    params = _params(lik, W=1)
+    point = {k: float(v[0]) for k, v in params.items()}
+    got = lik.fit_error(point)
+    r = _force_residuals(lik, params)[0]
+    assert got["force_rmse_N"] == pytest.approx(np.sqrt(np.mean(r**2)), rel=1e-12)
+    shape = lik.shape_offsets(params["p"])[0]
+    assert got["shape_rmse_mm"] == pytest.approx(1000 * np.sqrt(np.mean(shape**2)), rel=1e-12)
+    assert "diameter_rmse_mm" not in got
+    forces = RodLikelihood(demo, use_shapes=False).fit_error(point)
+    assert forces["shape_rmse_mm"] is None and forces["force_rmse_N"] == pytest.approx(got["force_rmse_N"])
+    shapes = RodLikelihood(demo, use_forces=False).fit_error(point)
+    assert shapes["force_rmse_N"] is None and shapes["shape_rmse_mm"] == pytest.approx(got["shape_rmse_mm"])
+    # widths: d(s) = d0 (1 - s/L)^p_geom against the measured profile
+    import dataclasses
+
+    from bayesrod.dataset.model import Diameters
+
+    s = np.linspace(0.0, 0.6, 7)
+    d = 0.01 * (1 - s / demo.length_m) ** 0.4 * (1 + 0.03 * np.sin(7 * s))
+    wide = RodLikelihood(
+        dataclasses.replace(demo, diameters=Diameters(s, d, np.full(7, 2e-4), "caliper")),
+        use_shapes=False,
+        diameter="free",
+    )
+    point = {**point, "d0_m": 0.0102, "p_geom": 0.37}
+    want = d - 0.0102 * (1 - s / demo.length_m) ** 0.37
+    assert wide.fit_error(point)["diameter_rmse_mm"] == pytest.approx(1000 * np.sqrt(np.mean(want**2)), rel=1e-9)
