@@ -134,3 +134,52 @@ def test_fit_error_is_the_rms_of_each_residual_in_the_unit_it_names(demo):
     point = {**point, "d0_m": 0.0102, "p_geom": 0.37}
     want = d - 0.0102 * (1 - s / demo.length_m) ** 0.37
     assert wide.fit_error(point)["diameter_rmse_mm"] == pytest.approx(1000 * np.sqrt(np.mean(want**2)), rel=1e-9)
+
+
+def test_log_prob_is_prior_plus_likelihood_and_minus_inf_wherever_either_fails(demo):
+    """What emcee sees: log prior + log likelihood, a float for one walker and the same numbers for a batch;
+    -inf (never +inf or nan) for a taper outside the tables, a non-finite coordinate, a noise sd of zero."""
+    from bayesrod.inference.likelihood import LogPosterior
+    from bayesrod.inference.priors import load_prior
+
+    lik = RodLikelihood(demo, use_shapes=False)
+    post = LogPosterior(lik, load_prior("default"))
+    assert post._p_bounds == (0.0, 3.0)
+    theta = post.to_sample(
+        {"EI0": np.array([2.6, 2.6]), "p": np.array([0.43, 0.5]), "sigma_force_N": np.array([0.05, 0.1])}
+    )
+    nat = post.to_natural(theta)
+    want = post.log_prior(theta) + lik.log_likelihood(nat)
+    batch = post.log_prob(theta)
+    np.testing.assert_allclose(batch, want, rtol=1e-12)
+    one = post.log_prob(theta[1])
+    assert isinstance(one, float) and one == pytest.approx(want[1], rel=1e-12)
+    bad = np.repeat(theta[:1], 6, axis=0)
+    bad[0, 1] = 3.0  # the tables' last node: inside
+    bad[1, 1] = 3.0 + 1e-9  # past it
+    bad[2, 1] = -1e-9  # below the first
+    bad[3, 2] = np.nan  # a walker the sampler broke
+    bad[4, 2] = -800.0  # sigma = exp(-800) = 0: the Gaussian is not a density there
+    with np.errstate(divide="ignore", invalid="ignore"):
+        got = post.log_prob(bad)
+    assert np.isfinite(got[0]) and np.isfinite(got[5])
+    assert got[5] == pytest.approx(batch[0], rel=1e-12)  # the others' failures do not reach it
+    assert np.all(got[1:5] == -np.inf), got
+
+
+def test_the_posterior_takes_each_nuisance_prior_from_its_likelihood_and_refuses_a_p_prior_past_the_tables(demo):
+    from bayesrod.inference.likelihood import LogPosterior
+    from bayesrod.inference.priors import load_prior
+
+    prior = load_prior("default")
+    lik = RodLikelihood(demo, use_shapes=False, force_offsets=True)
+    post = LogPosterior(lik, prior)
+    for n in lik.offset_names:  # N(0, 5% of the push's peak force), not a prior file's entry
+        assert post.priors[post.names.index(n)] is lik.nuisance_priors[n]
+    assert post.priors[0] is prior.get("EI0")
+    for p_range in [(0.5, 3.0), (0.0, 2.5)]:  # the prior's p covers [0, 3]
+        narrow = RodLikelihood(demo, p_range=p_range, use_shapes=False)
+        with pytest.raises(
+            ValueError, match=r"prior p: expected support within the table range \[.*\], got \[0.0, 3.0\]"
+        ):
+            LogPosterior(narrow, prior)

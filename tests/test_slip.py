@@ -136,3 +136,33 @@ def test_fit_with_slip_writes_the_window_and_the_model_slip_and_only_then(one_he
     assert m["q05"] < m["median"] < m["q95"] and d.engaged_to_m - 0.01 < m["median"] < d.slipped_by_m + 0.01
     plain = bayesrod.fit(one_height, **kw).to_dict()
     assert "slip" not in plain["data"]
+
+
+def test_the_slip_term_reads_the_tabled_effect_and_moves_its_window_with_the_preload(one_height):
+    """With a base spring the model's slip is the branch end of the rod on that spring (solved directly at the
+    walker's p and spring); a preload moves each push's window (lo, hi] by the preload: the recorded
+    displacement starts that far into the push."""
+    pr = load_prior("default")
+    lik = build_likelihood(one_height, pr, ("base_compliance",), use_shapes=False, slip=True, n_effect=9)
+    p = np.array([0.4, 0.45])
+    params = {"EI0": np.array([2.6, 2.6]), "p": p, "base_compliance": np.array([20.0, 8.0])}
+    u = lik.effect_coordinate(params)
+    assert np.all((u > 0.05) & (u < 0.95))
+    want = [
+        ForceCurves.batch(np.array([0.5 / lik.L]), p[w : w + 1], effects_nd=lik.axis.nondim(u[w : w + 1]))[0].d_end[0]
+        for w in range(2)
+    ]
+    tau = lik.slip_scale_m[0]
+    np.testing.assert_allclose(lik.slip_displacement_m(params)[:, 0], lik.L * np.array(want), atol=0.1 * tau)
+    plain = lik.L * lik._interp(lik.slip_table, p, np.zeros(2))[:, 0]
+    assert np.all(np.abs(lik.L * np.array(want) - plain) > 3 * tau)  # the spring moves the slip by more than the window
+    lo, hi = lik.slip_lo_m[0], lik.slip_hi_m[0]
+    D_s = lik.slip_displacement_m(params)[:, 0]
+    np.testing.assert_allclose(
+        lik.slip_loglik(p, u), log_ndtr((D_s - lo) / tau) + log_ndtr((hi - D_s) / tau), rtol=1e-12
+    )
+    pre = build_likelihood(one_height, pr, use_shapes=False, slip=True, preload=True)
+    D_s = pre.slip_displacement_m(params)[:, 0]
+    shift = np.array([[0.004], [0.012]])
+    want = log_ndtr((D_s - lo - shift[:, 0]) / tau) + log_ndtr((hi + shift[:, 0] - D_s) / tau)
+    np.testing.assert_allclose(pre.slip_loglik(p, None, shift), want, rtol=1e-12)
