@@ -183,3 +183,65 @@ def test_the_posterior_takes_each_nuisance_prior_from_its_likelihood_and_refuses
             ValueError, match=r"prior p: expected support within the table range \[.*\], got \[0.0, 3.0\]"
         ):
             LogPosterior(narrow, prior)
+
+
+@pytest.fixture(scope="module")
+def clean_twig():
+    return bayesrod.simulate("twig", seed=1, noise="none")  # EI0 2.63 N m^2, p 0.43, L 0.8 m, three heights
+
+
+def test_the_least_squares_scale_of_noise_free_forces_is_the_true_ei0(clean_twig):
+    """EI0 is a pure scale of the forces (F = EI0 / L^2 f(d / L; p, h / L)): at the true p the closed-form
+    least squares gives the simulated EI0 and a residual at the tables' error; the effect axes and the
+    sampler's start use it."""
+    from bayesrod.inference.likelihood import force_scale_fit, scale_estimate
+
+    lik = RodLikelihood(clean_twig, use_shapes=False)
+    peak = np.max(np.abs(lik.F_obs))
+    EI0, rms = force_scale_fit(lik, 0.43)
+    assert EI0 == pytest.approx(2.63, rel=2e-4) and rms < 1e-4 * peak
+    off, rms_off = force_scale_fit(lik, 0.43, EI0=2.0)  # given EI0: only its residual
+    assert off == 2.0 and rms_off == pytest.approx(np.sqrt(np.mean((lik.F_obs * (1 - 2.0 / 2.63)) ** 2)), rel=2e-3)
+    assert scale_estimate(lik) == pytest.approx(2.63, rel=0.05)  # at the best node of the p grid (0.05 apart)
+    assert scale_estimate(RodLikelihood(clean_twig, use_forces=False)) is None
+
+
+def test_a_preload_moves_each_push_along_its_own_force_curve(clean_twig):
+    """The preloaded force table (linear in d between PRELOAD_GRID nodes) at preload P equals the force curve
+    read at d + P, push by push; at P = 0 it is the plain table."""
+    from bayesrod.inference.likelihood import ForceCurves
+
+    lik = RodLikelihood(clean_twig, use_shapes=False, preload=True)
+    p = np.array([0.38, 0.5])
+    pre = np.array([[0.0, 0.0, 0.0], [0.004, 0.0, 0.012]])  # walker 2: the first and last push preloaded
+    got = lik.predict_nd_force_preloaded(p, pre)
+    np.testing.assert_allclose(got[0], lik.predict_nd_force(p[:1])[0], atol=2e-4 * np.max(got[0]))
+    for j, d in enumerate(lik.force_data):
+        (c,) = ForceCurves.batch(np.array([d.height_m / lik.L]), p[1:])
+        want = c.force((d.D_m + pre[1, j]) / lik.L)[0]
+        np.testing.assert_allclose(got[1, lik.F_push == j], want, atol=2e-4 * np.max(want))
+
+
+def test_a_likelihood_without_its_effect_axis_is_the_plain_rods(demo):
+    """The u = 0 slice of an effect's tables is the plain rod (the neutral value of every tabled effect): the
+    group's sharing check compares against it."""
+    from bayesrod.inference.likelihood import EffectAxis
+    from bayesrod.inference.priors import load_prior
+
+    axis = EffectAxis.from_prior("base_compliance", load_prior("default").get("base_compliance"), (1.0, 5.0), 0.8, n=5)
+    lik = RodLikelihood(demo, effects=("base_compliance",), use_shapes=False, effect_axis=axis)
+    plain = RodLikelihood(demo, use_shapes=False)
+    cut = lik.without_effect_axis()
+    assert cut.axis is None and cut.effects == () and lik.axis is axis  # the original keeps its axis
+    params = _params(plain)
+    np.testing.assert_allclose(cut.log_likelihood(params), plain.log_likelihood(params), rtol=1e-9)
+    np.testing.assert_allclose(cut.predict_nd_force(params["p"]), plain.predict_nd_force(params["p"]), atol=1e-9)
+    import copy
+    import dataclasses
+
+    shifted = copy.copy(lik)  # the same tables on an axis that does not start at the neutral value
+    shifted.axis = dataclasses.replace(axis, grid=axis.grid + 0.01)
+    with pytest.raises(
+        ValueError, match="effect base_compliance: expected a table axis starting at the neutral value 0"
+    ):
+        shifted.without_effect_axis()
