@@ -16,6 +16,16 @@ def demo():
     return read_dataset(bayesrod.DEMO_DATASET)
 
 
+@pytest.fixture(scope="module")
+def spring(demo):
+    """The demo's forces with a base spring on a 5-node axis (EI0 1-5 N m^2)."""
+    from bayesrod.inference.likelihood import EffectAxis
+    from bayesrod.inference.priors import load_prior
+
+    axis = EffectAxis.from_prior("base_compliance", load_prior("default").get("base_compliance"), (1.0, 5.0), 0.8, n=5)
+    return RodLikelihood(demo, effects=("base_compliance",), use_shapes=False, effect_axis=axis)
+
+
 def _params(lik, W=2):
     out = {"EI0": np.array([2.5, 2.8])[:W], "p": np.array([0.41, 0.46])[:W]}
     if lik.n_force:
@@ -222,14 +232,10 @@ def test_a_preload_moves_each_push_along_its_own_force_curve(clean_twig):
         np.testing.assert_allclose(got[1, lik.F_push == j], want, atol=2e-4 * np.max(want))
 
 
-def test_a_likelihood_without_its_effect_axis_is_the_plain_rods(demo):
+def test_a_likelihood_without_its_effect_axis_is_the_plain_rods(demo, spring):
     """The u = 0 slice of an effect's tables is the plain rod (the neutral value of every tabled effect): the
     group's sharing check compares against it."""
-    from bayesrod.inference.likelihood import EffectAxis
-    from bayesrod.inference.priors import load_prior
-
-    axis = EffectAxis.from_prior("base_compliance", load_prior("default").get("base_compliance"), (1.0, 5.0), 0.8, n=5)
-    lik = RodLikelihood(demo, effects=("base_compliance",), use_shapes=False, effect_axis=axis)
+    lik, axis = spring, spring.axis
     plain = RodLikelihood(demo, use_shapes=False)
     cut = lik.without_effect_axis()
     assert cut.axis is None and cut.effects == () and lik.axis is axis  # the original keeps its axis
@@ -245,3 +251,27 @@ def test_a_likelihood_without_its_effect_axis_is_the_plain_rods(demo):
         ValueError, match="effect base_compliance: expected a table axis starting at the neutral value 0"
     ):
         shifted.without_effect_axis()
+
+
+def test_the_posterior_chooses_its_sampling_coordinates_by_the_data(demo, spring):
+    """The same posterior, sampled in coordinates that suit the data (docs/inference.md, "Sampling"): a base spring
+    by its table coordinate u on forces alone (log k with centerlines); EI0 as the log stiffness at the height when
+    every push is at one height on a known length."""
+    import copy
+
+    from bayesrod.inference.likelihood import LogPosterior
+    from bayesrod.inference.priors import load_prior
+
+    prior = load_prior("default")
+    post = LogPosterior(spring, prior)
+    assert post.base_length_m == spring.L == 0.8 and post.stiffness_at is None  # three heights
+    with_shapes = copy.copy(spring)
+    with_shapes.n_points = 40
+    assert LogPosterior(with_shapes, prior).base_length_m is None
+    assert LogPosterior(RodLikelihood(demo, use_shapes=False), prior).base_length_m is None  # no spring
+    one = RodLikelihood(bayesrod.simulate("twig", seed=4, heights_m=[0.5]), use_shapes=False)
+    assert LogPosterior(one, prior).stiffness_at == (0.5, 0.8)
+    unknown = copy.copy(one)  # the same pushes with the length sampled
+    unknown.names = [*one.names, "length_m"]
+    unknown.nuisance_priors = {"length_m": prior.get("p")}  # any prior: only the name is read here
+    assert LogPosterior(unknown, prior).stiffness_at is None
