@@ -275,3 +275,27 @@ def test_the_posterior_chooses_its_sampling_coordinates_by_the_data(demo, spring
     unknown.names = [*one.names, "length_m"]
     unknown.nuisance_priors = {"length_m": prior.get("p")}  # any prior: only the name is read here
     assert LogPosterior(unknown, prior).stiffness_at is None
+
+
+def test_scale_fit_rows_are_least_squares_and_nan_where_a_row_predicts_no_force():
+    from bayesrod.inference.likelihood import scale_fit_rows
+
+    rng = np.random.default_rng(0)
+    g = np.vstack([0.02 * rng.random(30), np.zeros(30), 3.0 * rng.random(30)])  # a row of small predictions
+    F = 0.05 * g[0] + rng.normal(0, 1e-4, 30)
+    EI0, rms = scale_fit_rows(g, F)
+    assert EI0[0] == pytest.approx(np.linalg.lstsq(g[0][:, None], F, rcond=None)[0][0], rel=1e-12)
+    assert np.isnan(EI0[1]) and np.isfinite(EI0[2])
+    assert rms[0] == pytest.approx(np.sqrt(np.mean((F - EI0[0] * g[0]) ** 2)), rel=1e-12)
+
+
+def test_in_table_is_true_exactly_on_the_effect_axis(spring):
+    """Walkers whose spring lies past the table's last node get zero density (docs/inference.md); the nodes'
+    neighbourhoods at both ends are inside."""
+    grid, L = spring.axis.grid, spring.L
+    EI0 = np.full(5, 2.6)
+    u = np.array([0.5 * (grid[0] + grid[1]), 0.5 * (grid[-2] + grid[-1]), grid[-1] - 1e-9, grid[-1] + 1e-6, 0.5])
+    c = u / (1 - u)  # u = c / (1 + c), c = EI0 / (k L)
+    params = {"EI0": EI0, "p": np.full(5, 0.43), "base_compliance": EI0 / (c * L)}
+    np.testing.assert_allclose(spring.effect_coordinate(params), u, rtol=1e-9)
+    np.testing.assert_array_equal(spring.in_table(params), [True, True, True, False, grid[-1] >= 0.5])

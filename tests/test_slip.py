@@ -166,3 +166,11 @@ def test_the_slip_term_reads_the_tabled_effect_and_moves_its_window_with_the_pre
     shift = np.array([[0.004], [0.012]])
     want = log_ndtr((D_s - lo - shift[:, 0]) / tau) + log_ndtr((hi + shift[:, 0] - D_s) / tau)
     np.testing.assert_allclose(pre.slip_loglik(p, None, shift), want, rtol=1e-12)
+    # and in the likelihood, with each push's preload read from the parameters
+    from scipy.stats import norm
+
+    (name,) = pre.preload_names
+    both = {**params, "sigma_force_N": np.array([0.05, 0.08]), name: shift[:, 0]}
+    r = pre.F_obs - both["EI0"][:, None] / pre.L**2 * pre.predict_nd_force_preloaded(p, shift)
+    force = norm.logpdf(r, 0.0, both["sigma_force_N"][:, None]).sum(axis=1)
+    np.testing.assert_allclose(pre.log_likelihood(both), force + want, rtol=1e-12)
