@@ -299,3 +299,78 @@ def test_in_table_is_true_exactly_on_the_effect_axis(spring):
     params = {"EI0": EI0, "p": np.full(5, 0.43), "base_compliance": EI0 / (c * L)}
     np.testing.assert_allclose(spring.effect_coordinate(params), u, rtol=1e-9)
     np.testing.assert_array_equal(spring.in_table(params), [True, True, True, False, grid[-1] >= 0.5])
+
+
+def test_shapes_without_point_sds_have_one_noise_sd_in_metres(demo):
+    """Centerlines whose points carry no sd: one sigma_shape_m for all, the plain Gaussian density."""
+    import dataclasses
+
+    from scipy.stats import norm
+
+    pushes = [dataclasses.replace(p, shapes=[dataclasses.replace(f, sd_m=None) for f in p.shapes]) for p in demo.pushes]
+    lik = RodLikelihood(dataclasses.replace(demo, pushes=pushes), use_forces=False)
+    assert not lik.shape_has_sd and lik.names == ["EI0", "p", "sigma_shape_m"]
+    params = {"EI0": np.array([2.6, 2.6]), "p": np.array([0.41, 0.47]), "sigma_shape_m": np.array([4e-4, 1e-3])}
+    r = lik.shape_offsets(params["p"])
+    want = norm.logpdf(r, 0.0, params["sigma_shape_m"][:, None]).sum(axis=1)
+    np.testing.assert_allclose(lik.log_likelihood(params), lik.shape_weight * want, rtol=1e-12)
+
+
+def test_the_force_table_reads_the_effect_at_its_nodes(spring):
+    """At a node of p and of the effect axis the interpolation is exact: the residuals are the data minus the rod on
+    that spring, solved directly."""
+    from bayesrod.inference.likelihood import ForceCurves
+
+    grid, L = spring.axis.grid, spring.L
+    p = spring.p_grid[9]  # 0.45
+    u = grid[2]
+    c = u / (1 - u)
+    params = {"EI0": np.array([2.6]), "p": np.array([p]), "base_compliance": np.array([2.6 / (c * L)])}
+    got = spring.residuals(params)["force"][0]
+    for j, d in enumerate(spring.force_data):
+        (curve,) = ForceCurves.batch(
+            np.array([d.height_m / L]), np.array([p]), effects_nd=spring.axis.nondim(np.array([u]))
+        )
+        want = d.F_N - 2.6 / L**2 * curve.force(d.D_m / L)[0]
+        np.testing.assert_allclose(got[spring.F_push == j], want, rtol=0, atol=1e-9 * np.max(np.abs(d.F_N)))
+
+
+def test_the_spring_posteriors_density_carries_the_jacobian_of_u_and_is_zero_past_the_table(spring):
+    """Sampled by u = c / (1 + c) (c = EI0 / (k L)), the prior density gains log |d log k / du| = -log u - log(1 - u);
+    a walker with u outside (0, 1), or inside it but past the table's last node, has density zero."""
+    from bayesrod.inference.likelihood import LogPosterior
+    from bayesrod.inference.priors import load_prior
+
+    post = LogPosterior(spring, load_prior("default"))
+    i = post.names.index("base_compliance")
+    theta = post.to_sample(
+        {
+            "EI0": np.array([2.6]),
+            "p": np.array([0.43]),
+            "sigma_force_N": np.array([0.05]),
+            "base_compliance": np.array([3.0]),
+        }
+    )[0]
+    u = theta[i]
+    assert 0.0 < u < spring.axis.grid[-1]
+    coords = post.prior_coordinates(theta[None])[0]
+    want = (
+        sum(pr.logpdf_sample(np.array([coords[k]]))[0] for k, pr in enumerate(post.priors)) - np.log(u) - np.log1p(-u)
+    )
+    assert post.log_prior(theta[None])[0] == pytest.approx(want, rel=1e-12)
+    bad = np.repeat(theta[None], 3, axis=0)
+    bad[0, i] = 1.2  # not a u
+    bad[1, i] = 0.5 * (spring.axis.grid[-1] + 1.0)  # a u, past the table
+    assert post.log_prior(bad)[0] == -np.inf
+    got = post.log_prob(bad)
+    assert got[0] == -np.inf and got[1] == -np.inf and np.isfinite(got[2])
+
+
+def test_ar1_forces_and_the_slip_term_add(demo):
+    from bayesrod.inference.likelihood import ar1_loglik
+
+    lik = RodLikelihood(demo, use_shapes=False, force_noise="ar1", slip=True)
+    params = _params(lik)
+    s = params["sigma_force_N"][:, None]
+    force = ar1_loglik(_force_residuals(lik, params), s, params["rho_force"][:, None], lik.F_first)
+    np.testing.assert_allclose(lik.log_likelihood(params), force + lik.slip_loglik(params["p"], None), rtol=1e-12)
