@@ -235,6 +235,7 @@ TARGETS["likelihood"] = (
             for t in (
                 "test_force_offsets_per_push_enter_the_residuals_of_their_own_push",
                 "test_force_curve_cache_survives_eviction_within_one_batch",
+                "test_geometry_tables_match_tables_built_at_that_geometry",  # 5 s: the residuals' geometry branch
             )
         ),
         *(

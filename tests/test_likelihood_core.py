@@ -374,3 +374,28 @@ def test_ar1_forces_and_the_slip_term_add(demo):
     s = params["sigma_force_N"][:, None]
     force = ar1_loglik(_force_residuals(lik, params), s, params["rho_force"][:, None], lik.F_first)
     np.testing.assert_allclose(lik.log_likelihood(params), force + lik.slip_loglik(params["p"], None), rtol=1e-12)
+
+
+def test_a_yield_caps_the_force_at_the_yield_moment_over_the_contact_height_and_an_offset_adds():
+    """F = min(EI0 / L^2 f, M_y / h) plus a load-cell offset; with height errors h is the walker's own h + dh."""
+    from bayesrod.inference.likelihood import default_length_prior
+    from tests.test_nuisances import HEIGHTS, _dataset
+
+    spec = _dataset(0.8)
+    grid = {"p_range": (0.0, 1.2), "n_p": 13, "use_shapes": False}
+    plain = RodLikelihood(spec, effects=("yield", "force_offset"), **grid)
+    params = {"EI0": np.array([2.63, 2.4]), "p": np.array([0.43, 0.5]), "sigma_force_N": np.array([0.01, 0.01])}
+    F = params["EI0"][:, None] / 0.8**2 * plain.predict_nd_force(params["p"])
+    h = np.asarray(HEIGHTS)[plain.F_push]
+    My = np.array([0.9 * np.max(F[0] * h), 1e3])  # the first walker yields, the second does not
+    got = plain.residuals({**params, "yield": My, "force_offset": np.array([0.02, -0.03])})["force"]
+    want = plain.F_obs - (np.minimum(F, My[:, None] / h) + np.array([[0.02], [-0.03]]))
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    assert np.any(np.minimum(F, My[:, None] / h)[0] < F[0])
+    geo = RodLikelihood(spec, effects=("yield",), length_prior=default_length_prior(spec), height_sd_m=0.003, **grid)
+    dh = {n: np.array([e, e]) for n, e in zip(geo.height_names, (0.004, -0.006), strict=True)}
+    at = {**params, "length_m": np.array([0.8, 0.85]), **dh}
+    F = geo.F_obs - geo.residuals(at)["force"]
+    h = (np.asarray(HEIGHTS) + np.array([0.004, -0.006]))[geo.F_push]
+    got = geo.residuals({**at, "yield": My})["force"]
+    np.testing.assert_allclose(got, geo.F_obs - np.minimum(F, My[:, None] / h), rtol=0, atol=1e-12)
