@@ -18,6 +18,7 @@ Usage::
     pip install mutmut==3.8.1
     python scripts/mutation.py                         # every target (about 15 min on 2 cores)
     python scripts/mutation.py --only lumped summary   # some targets
+    python scripts/mutation.py --only likelihood --sample 400 --seed 38   # a random 400 of a long target's mutants
 """
 
 from __future__ import annotations
