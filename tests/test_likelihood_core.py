@@ -242,6 +242,8 @@ def test_a_likelihood_without_its_effect_axis_is_the_plain_rods(demo, spring):
     params = _params(plain)
     np.testing.assert_allclose(cut.log_likelihood(params), plain.log_likelihood(params), rtol=1e-9)
     np.testing.assert_allclose(cut.predict_nd_force(params["p"]), plain.predict_nd_force(params["p"]), atol=1e-9)
+    # without a coordinate the effect sits at its neutral value
+    np.testing.assert_allclose(lik.predict_nd_force(params["p"]), plain.predict_nd_force(params["p"]), atol=1e-9)
     import copy
     import dataclasses
 
@@ -399,3 +401,21 @@ def test_a_yield_caps_the_force_at_the_yield_moment_over_the_contact_height_and_
     h = (np.asarray(HEIGHTS) + np.array([0.004, -0.006]))[geo.F_push]
     got = geo.residuals({**at, "yield": My})["force"]
     np.testing.assert_allclose(got, geo.F_obs - np.minimum(F, My[:, None] / h), rtol=0, atol=1e-12)
+
+
+def test_force_curves_find_a_branch_end_above_their_first_guess(monkeypatch):
+    """The branch end is bracketed by doubling from 2 / eta^2 until contact is lost, then bisected: on a stand-in rod
+    whose contact exists up to f = 37 / eta^2 (above the first guess) with displacement d = f, the curve ends there."""
+    from bayesrod.inference import likelihood
+
+    def fake(f, etas, p, eff):
+        f = np.asarray(f, float)
+        end = 37.0 / np.asarray(etas, float) ** 2 * (1.0 + 0.1 * np.asarray(p, float))
+        return {"found": f <= end, "yielded": np.zeros(f.shape, bool), "xi_c": np.where(f <= end, f, np.nan)}
+
+    monkeypatch.setattr(likelihood, "contact_from_force_nd", fake)
+    monkeypatch.setattr(likelihood, "_CURVE_CACHE", {})
+    eta, p = 0.6, np.array([0.0, 2.0])
+    (c,) = likelihood.ForceCurves.batch(np.array([eta]), p, n_f=20)
+    np.testing.assert_allclose(c.d_end, 37.0 / eta**2 * (1.0 + 0.1 * p), rtol=1e-12)
+    np.testing.assert_allclose(c.force(np.array([1.0, 50.0]))[:, 0], 1.0, rtol=1e-9)  # f = d on the branch
