@@ -419,3 +419,29 @@ def test_force_curves_find_a_branch_end_above_their_first_guess(monkeypatch):
     (c,) = likelihood.ForceCurves.batch(np.array([eta]), p, n_f=20)
     np.testing.assert_allclose(c.d_end, 37.0 / eta**2 * (1.0 + 0.1 * p), rtol=1e-12)
     np.testing.assert_allclose(c.force(np.array([1.0, 50.0]))[:, 0], 1.0, rtol=1e-9)  # f = d on the branch
+
+    def never(f, etas, p, eff):  # p = 2 never touches the probe (a stem curled away from it)
+        out = fake(f, etas, p, eff)
+        out["found"] = out["found"] & (np.asarray(p) < 1.0)
+        return out
+
+    monkeypatch.setattr(likelihood, "contact_from_force_nd", never)
+    monkeypatch.setattr(likelihood, "_CURVE_CACHE", {})
+    (c,) = likelihood.ForceCurves.batch(np.array([eta]), p, n_f=20)
+    assert c.d_end[1] == 0.0 and c.end_slope[1] == 0.0
+    np.testing.assert_array_equal(c.force(np.array([0.0, 1.0, 5.0]))[1], 0.0)  # no contact: no force
+
+
+def test_force_curves_count_displacement_from_the_unloaded_stem():
+    """With a rest curvature the unloaded stem already leans: the curve's displacement is the contact's travel from
+    where the unloaded stem meets the probe's height, f(xi(f) - xi(0)) = f, and the same curves serve the shapes."""
+    from bayesrod.inference.likelihood import ForceCurves
+    from bayesrod.physics.elastica import contact_from_force_nd
+
+    eta, p, eff = 0.6, np.array([0.4]), {"kappa0": np.array([0.3])}
+    (c,) = ForceCurves.batch(np.array([eta]), p, n_f=60, effects_nd=eff)
+    assert c.effects_nd == {"kappa0": 0.3}  # what the shape tables solve with
+    f = np.array([0.0, 0.3, 0.6, 0.9]) * c.force(c.d_end)[0, 0]  # up to 90% of the branch end's force
+    r = contact_from_force_nd(f, eta, np.full(4, 0.4), {"kappa0": 0.3})
+    assert abs(r["xi_c"][0]) > 0.01  # the offset matters
+    np.testing.assert_allclose(c.force(r["xi_c"] - r["xi_c"][0])[0], f, atol=1e-3 * f[-1])
