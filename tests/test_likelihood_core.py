@@ -438,10 +438,24 @@ def test_force_curves_count_displacement_from_the_unloaded_stem():
     from bayesrod.inference.likelihood import ForceCurves
     from bayesrod.physics.elastica import contact_from_force_nd
 
-    eta, p, eff = 0.6, np.array([0.4]), {"kappa0": np.array([0.3])}
-    (c,) = ForceCurves.batch(np.array([eta]), p, n_f=60, effects_nd=eff)
-    assert c.effects_nd == {"kappa0": 0.3}  # what the shape tables solve with
+    eta, p = 0.6, np.array([0.4])
+    c, other = ForceCurves.batch(np.array([eta, 0.5]), p, n_f=60, effects_nd={"kappa0": np.array([0.3, 0.1])})
+    # what the shape tables solve with: each height's own value, as a float
+    assert c.effects_nd == {"kappa0": 0.3} and other.effects_nd == {"kappa0": 0.1}
     f = np.array([0.0, 0.3, 0.6, 0.9]) * c.force(c.d_end)[0, 0]  # up to 90% of the branch end's force
     r = contact_from_force_nd(f, eta, np.full(4, 0.4), {"kappa0": 0.3})
     assert abs(r["xi_c"][0]) > 0.01  # the offset matters
     np.testing.assert_allclose(c.force(r["xi_c"] - r["xi_c"][0])[0], f, atol=1e-3 * f[-1])
+
+
+def test_past_its_branch_end_a_curve_goes_on_along_its_end_tangent_by_default():
+    """Contact friction ends the branch with the force still rising: by default the tables continue along that
+    slope (a flat hold would put a kink into the tables in p); ``continued=False`` holds the end value."""
+    from bayesrod.inference.likelihood import ForceCurves
+
+    (c,) = ForceCurves.batch(np.array([0.6]), np.array([0.4]), n_f=60, effects_nd={"mu": np.array([0.3])})
+    assert c.end_slope[0] > 1.0
+    d = c.d_end[0] + np.array([0.0, 0.01, 0.03])
+    end = c.force(c.d_end)[0, 0]
+    np.testing.assert_allclose(c.force(d)[0], end + c.end_slope[0] * (d - c.d_end[0]), rtol=1e-12)
+    np.testing.assert_allclose(c.force(d, continued=False)[0], end, rtol=1e-12)
