@@ -1,6 +1,8 @@
-"""The force likelihood's own arithmetic against dense references: the noise models with and without the closed-form
-offset, the offset's conditional, held-out restrictions, and the fit error a summary reports (issue 21: these
-lines had no mutation target before session 38)."""
+"""The force likelihood's own arithmetic against independent references: the noise models (with and without the
+closed-form offset, and its conditional) against dense Gaussians, held-out restrictions, the fit error a summary
+reports, the residuals' branches (a tabled effect, a yield, offsets, preloads, shapes without sds), the force
+curves' bracket and ends, and what emcee sees (log_prob, its -inf cases and coordinates). Issue 21: no mutation
+target held these lines before session 38 (docs/validation.md, "The force likelihood under mutmut")."""
 
 import numpy as np
 import pytest
