@@ -98,6 +98,7 @@ TARGETS: dict[str, tuple[str, list[str], list[str] | None]] = {
                     "test_dimensional_solutions_report_every_field_in_si_units_and_round_trip",
                     "test_march_finds_a_contact_height_the_rod_only_reaches_inside_one_step",
                     "test_without_effects_the_measured_force_is_the_true_force",
+                    "test_secant_k_theta_is_F_h_over_the_contact_rotation_from_rest_with_its_effects_and_steps",
                 )
             ),
             "tests/test_root_search.py",  # the root search alone, on functions with known roots

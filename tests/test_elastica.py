@@ -99,6 +99,10 @@ def test_slip_reported_not_invented():
     sol = force_from_displacement([0.5 * d_end, 1.05 * d_end, 3.0], h, EI0, p, L)
     assert list(sol.slipped) == [False, True, True]
     assert np.isnan(sol.force_N[1:]).all() and np.isfinite(sol.force_N[0])
+    # every state of a slipped push is a float NaN (not None in an object array), every other one a number
+    nd = force_from_displacement_nd(np.array([0.5, 1.05]) * d_end / L, h / L, p)
+    for k in ("f", "f_measured", "sig_c", "xi_c", "phi_c", "m0"):
+        assert nd[k].dtype == np.float64 and np.isfinite(nd[k][0]) and np.isnan(nd[k][1]), k
     # the reference agrees that 5% past the branch end there is no contact, and 5% before it there is
     # (rtol 1e-9 is ample for a yes/no; at the default 1e-12 the bisection to the branch end took 25 s)
     assert R.solve_displacement(1.05 * d_end / L, h / L, p, rtol=1e-9)["slipped"]
