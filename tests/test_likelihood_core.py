@@ -29,13 +29,13 @@ def spring(demo):
 
 
 def _params(lik, W=2):
-    out = {"EI0": np.array([2.5, 2.8])[:W], "p": np.array([0.41, 0.46])[:W]}
+    out = {"EI0": np.array([2.5, 2.8, 2.6])[:W], "p": np.array([0.41, 0.46, 0.44])[:W]}
     if lik.n_force:
-        out["sigma_force_N"] = np.array([0.03, 0.07])[:W]
+        out["sigma_force_N"] = np.array([0.03, 0.07, 0.05])[:W]
     if lik.force_noise == "ar1":
-        out["rho_force"] = np.array([0.6, -0.3])[:W]
+        out["rho_force"] = np.array([0.6, -0.3, 0.9])[:W]
     if lik.n_points:
-        out["shape_sd_scale" if lik.shape_has_sd else "sigma_shape_m"] = np.array([0.8, 1.3])[:W]
+        out["shape_sd_scale" if lik.shape_has_sd else "sigma_shape_m"] = np.array([0.8, 1.3, 1.0])[:W]
     return out
 
 
@@ -62,24 +62,24 @@ def test_force_term_is_the_dense_gaussian_of_its_noise_model(demo, noise, offset
     correlation ignores it; the offset's conditional is the dense Gaussian conditional."""
     lik = RodLikelihood(demo, use_shapes=False, force_noise=noise)
     lik.offset_prior_sd = offset_sd
-    params = _params(lik)
+    params = _params(lik, W=3)  # three walkers: a term that broadcasts over two by accident fails
     r = _force_residuals(lik, params)
     np.testing.assert_allclose(lik.residuals(params)["force"], r, rtol=0, atol=1e-12)
     got = lik.log_likelihood(params)
-    rhos = params.get("rho_force", np.zeros(2))
-    for w in range(2):
+    rhos = params.get("rho_force", np.zeros(3))
+    for w in range(3):
         cov = _force_cov(lik, params["sigma_force_N"][w], rhos[w], offset_sd or 0.0)
         want = multivariate_normal(np.zeros(lik.n_force), cov).logpdf(r[w])
         assert got[w] == pytest.approx(want, rel=1e-9, abs=1e-7)
     if noise == "iid":  # a correlation handed to an iid likelihood is not read
-        again = lik.log_likelihood({**params, "rho_force": np.array([0.9, 0.9])})
+        again = lik.log_likelihood({**params, "rho_force": np.full(3, 0.9)})
         np.testing.assert_allclose(again, got, rtol=1e-12)
     if offset_sd is None:
         with pytest.raises(ValueError, match="offset_prior_sd"):
             lik.offset_posterior(params)
         return
     mean, sd = lik.offset_posterior(params)
-    for w in range(2):
+    for w in range(3):
         S = _force_cov(lik, params["sigma_force_N"][w], rhos[w], 0.0)
         one = np.ones(lik.n_force)
         K = S + offset_sd**2  # the marginal covariance of the residuals
@@ -461,3 +461,20 @@ def test_past_its_branch_end_a_curve_goes_on_along_its_end_tangent_by_default():
     end = c.force(c.d_end)[0, 0]
     np.testing.assert_allclose(c.force(d)[0], end + c.end_slope[0] * (d - c.d_end[0]), rtol=1e-12)
     np.testing.assert_allclose(c.force(d, continued=False)[0], end, rtol=1e-12)
+
+
+def test_contact_height_errors_on_a_known_length_move_only_the_heights():
+    """A fit with contact-height errors and the length given (``height_sd_m`` without a length prior): the
+    residuals are those of the plain rod with each push's height moved by its error, the stem length the given
+    one."""
+    from tests.test_nuisances import _dataset, _geometry
+
+    spec = _dataset(0.8)
+    grid = {"p_range": (0.0, 1.2), "n_p": 13, "use_shapes": False}
+    lik = RodLikelihood(spec, height_sd_m=0.003, **grid)
+    assert "length_m" not in lik.names and len(lik.height_names) == 2
+    dh = (0.0041, -0.0072)
+    params = {"EI0": np.full(2, 2.63), "p": np.array([0.43, 0.6]), "sigma_force_N": np.full(2, 0.01)}
+    got = lik.residuals({**params, **{n: np.full(2, e) for n, e in zip(lik.height_names, dh, strict=True)}})["force"]
+    ref = RodLikelihood(_geometry(spec, 0.8, dh), **grid).residuals(params)["force"]
+    assert np.max(np.abs(got - ref)) < 1e-4 * np.max(np.abs(lik.F_obs))
