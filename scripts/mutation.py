@@ -397,18 +397,19 @@ def run_target(name: str, work: Path, workers: int, sample: int | None = None, s
         _copy_tree(dest)
     _configure(dest, module, tests)
     t0 = time.perf_counter()
+    drawn = None  # the sample's size, population and seed
     with open(dest / "mutmut.log", "w") as log:
         chosen = patterns or []
         if sample:
             # generate the mutants (and run the clean and stats passes) without testing any: a name none has
             _mutmut(dest, "run", "--max-children", str(workers), "bayesrod.no_such_function__mutmut_0", log=log)
             every = sorted(_statuses(dest, patterns))
-            rng = np.random.default_rng(seed)
-            chosen = sorted(rng.choice(every, size=min(sample, len(every)), replace=False).tolist())
+            chosen = sorted(np.random.default_rng(seed).choice(every, min(sample, len(every)), replace=False).tolist())
+            drawn = {"size": len(chosen), "of": len(every), "seed": seed}
         _mutmut(dest, "run", "--max-children", str(workers), *chosen, log=log)
     seconds = time.perf_counter() - t0
     status = _statuses(dest, patterns)
-    if sample:
+    if drawn:
         status = {k: status[k] for k in chosen}
     counts = {s: sum(v == s for v in status.values()) for s in STATUSES}
     killed = counts["killed"] + counts["timeout"]
@@ -426,7 +427,7 @@ def run_target(name: str, work: Path, workers: int, sample: int | None = None, s
     return {
         "module": module,
         "functions": patterns or "all",
-        "sample": None if not sample else {"size": len(status), "of": len(every), "seed": seed},
+        "sample": drawn,
         "tests": tests,
         "counts": counts,
         "tried": tried,

@@ -4,13 +4,32 @@ reports, the residuals' branches (a tabled effect, a yield, offsets, preloads, s
 curves' bracket and ends, and what emcee sees (log_prob, its -inf cases and coordinates). Issue 21: no mutation
 target held these lines before session 38 (docs/validation.md, "The force likelihood under mutmut")."""
 
+import copy
+import dataclasses
+
 import numpy as np
 import pytest
-from scipy.stats import multivariate_normal
+from scipy.stats import multivariate_normal, norm
 
 import bayesrod
 from bayesrod.dataset import read_dataset
-from bayesrod.inference.likelihood import RodLikelihood
+from bayesrod.dataset.model import Diameters
+from bayesrod.inference import likelihood
+from bayesrod.inference.likelihood import (
+    EffectAxis,
+    ForceCurves,
+    LogPosterior,
+    RodLikelihood,
+    ar1_loglik,
+    default_length_prior,
+    force_scale_fit,
+    scale_estimate,
+    scale_fit_rows,
+)
+from bayesrod.inference.priors import load_prior
+from bayesrod.physics.elastica import contact_from_force_nd
+from tests.test_noise import _ar1_cov
+from tests.test_nuisances import HEIGHTS, _dataset, _geometry
 
 
 @pytest.fixture(scope="module")
@@ -21,8 +40,6 @@ def demo():
 @pytest.fixture(scope="module")
 def spring(demo):
     """The demo's forces with a base spring on a 5-node axis (EI0 1-5 N m^2)."""
-    from bayesrod.inference.likelihood import EffectAxis
-    from bayesrod.inference.priors import load_prior
 
     axis = EffectAxis.from_prior("base_compliance", load_prior("default").get("base_compliance"), (1.0, 5.0), 0.8, n=5)
     return RodLikelihood(demo, effects=("base_compliance",), use_shapes=False, effect_axis=axis)
@@ -95,6 +112,7 @@ def test_a_restricted_likelihood_is_the_density_of_the_samples_it_keeps(demo):
     assert lik.slip
     keep = np.ones(lik.n_force, bool)
     keep[np.flatnonzero(lik.F_first) + 2] = False  # a gap inside each push
+    keep[np.flatnonzero(lik.F_first)] = False  # and each push's first sample: its chain starts at the second
     keep[: np.flatnonzero(lik.F_first)[1]] = False  # all of the first push
     sub = lik.restricted(keep)
     assert sub.n_force == keep.sum() and not sub.slip
@@ -106,8 +124,7 @@ def test_a_restricted_likelihood_is_the_density_of_the_samples_it_keeps(demo):
         want = 0.0
         for j in np.unique(push):  # a chain per push: consecutive kept samples are neighbours in it
             x = r[w, push == j]
-            k = np.arange(x.size)
-            want += multivariate_normal(np.zeros(x.size), s**2 * rho ** np.abs(k[:, None] - k[None, :])).logpdf(x)
+            want += multivariate_normal(np.zeros(x.size), _ar1_cov(x.size, s, rho)).logpdf(x)
         assert sub.log_likelihood(params)[w] == pytest.approx(want, rel=1e-9)
     as_ints = lik.restricted(list(keep.astype(int)))
     np.testing.assert_allclose(as_ints.log_likelihood(params), sub.log_likelihood(params))
@@ -132,9 +149,6 @@ def test_fit_error_is_the_rms_of_each_residual_in_the_unit_it_names(demo):
     shapes = RodLikelihood(demo, use_forces=False).fit_error(point)
     assert shapes["force_rmse_N"] is None and shapes["shape_rmse_mm"] == pytest.approx(got["shape_rmse_mm"])
     # widths: d(s) = d0 (1 - s/L)^p_geom against the measured profile
-    import dataclasses
-
-    from bayesrod.dataset.model import Diameters
 
     s = np.linspace(0.0, 0.6, 7)
     d = 0.01 * (1 - s / demo.length_m) ** 0.4 * (1 + 0.03 * np.sin(7 * s))
@@ -151,8 +165,6 @@ def test_fit_error_is_the_rms_of_each_residual_in_the_unit_it_names(demo):
 def test_log_prob_is_prior_plus_likelihood_and_minus_inf_wherever_either_fails(demo):
     """What emcee sees: log prior + log likelihood, a float for one walker and the same numbers for a batch;
     -inf (never +inf or nan) for a taper outside the tables, a non-finite coordinate, a noise sd of zero."""
-    from bayesrod.inference.likelihood import LogPosterior
-    from bayesrod.inference.priors import load_prior
 
     lik = RodLikelihood(demo, use_shapes=False)
     post = LogPosterior(lik, load_prior("default"))
@@ -180,8 +192,6 @@ def test_log_prob_is_prior_plus_likelihood_and_minus_inf_wherever_either_fails(d
 
 
 def test_the_posterior_takes_each_nuisance_prior_from_its_likelihood_and_refuses_a_p_prior_past_the_tables(demo):
-    from bayesrod.inference.likelihood import LogPosterior
-    from bayesrod.inference.priors import load_prior
 
     prior = load_prior("default")
     lik = RodLikelihood(demo, use_shapes=False, force_offsets=True)
@@ -206,7 +216,6 @@ def test_the_least_squares_scale_of_noise_free_forces_is_the_true_ei0(clean_twig
     """EI0 is a pure scale of the forces (F = EI0 / L^2 f(d / L; p, h / L)): at the true p the closed-form
     least squares gives the simulated EI0 and a residual at the tables' error; the effect axes and the
     sampler's start use it."""
-    from bayesrod.inference.likelihood import force_scale_fit, scale_estimate
 
     lik = RodLikelihood(clean_twig, use_shapes=False)
     peak = np.max(np.abs(lik.F_obs))
@@ -221,7 +230,6 @@ def test_the_least_squares_scale_of_noise_free_forces_is_the_true_ei0(clean_twig
 def test_a_preload_moves_each_push_along_its_own_force_curve(clean_twig):
     """The preloaded force table (linear in d between PRELOAD_GRID nodes) at preload P equals the force curve
     read at d + P, push by push; at P = 0 it is the plain table."""
-    from bayesrod.inference.likelihood import ForceCurves
 
     lik = RodLikelihood(clean_twig, use_shapes=False, preload=True)
     p = np.array([0.38, 0.5])
@@ -246,8 +254,6 @@ def test_a_likelihood_without_its_effect_axis_is_the_plain_rods(demo, spring):
     np.testing.assert_allclose(cut.predict_nd_force(params["p"]), plain.predict_nd_force(params["p"]), atol=1e-9)
     # without a coordinate the effect sits at its neutral value
     np.testing.assert_allclose(lik.predict_nd_force(params["p"]), plain.predict_nd_force(params["p"]), atol=1e-9)
-    import copy
-    import dataclasses
 
     shifted = copy.copy(lik)  # the same tables on an axis that does not start at the neutral value
     shifted.axis = dataclasses.replace(axis, grid=axis.grid + 0.01)
@@ -261,10 +267,6 @@ def test_the_posterior_chooses_its_sampling_coordinates_by_the_data(demo, spring
     """The same posterior, sampled in coordinates that suit the data (docs/inference.md, "Sampling"): a base spring
     by its table coordinate u on forces alone (log k with centerlines); EI0 as the log stiffness at the height when
     every push is at one height on a known length."""
-    import copy
-
-    from bayesrod.inference.likelihood import LogPosterior
-    from bayesrod.inference.priors import load_prior
 
     prior = load_prior("default")
     post = LogPosterior(spring, prior)
@@ -282,7 +284,6 @@ def test_the_posterior_chooses_its_sampling_coordinates_by_the_data(demo, spring
 
 
 def test_scale_fit_rows_are_least_squares_and_nan_where_a_row_predicts_no_force():
-    from bayesrod.inference.likelihood import scale_fit_rows
 
     rng = np.random.default_rng(0)
     g = np.vstack([0.02 * rng.random(30), np.zeros(30), 3.0 * rng.random(30)])  # a row of small predictions
@@ -307,9 +308,6 @@ def test_in_table_is_true_exactly_on_the_effect_axis(spring):
 
 def test_shapes_without_point_sds_have_one_noise_sd_in_metres(demo):
     """Centerlines whose points carry no sd: one sigma_shape_m for all, the plain Gaussian density."""
-    import dataclasses
-
-    from scipy.stats import norm
 
     pushes = [dataclasses.replace(p, shapes=[dataclasses.replace(f, sd_m=None) for f in p.shapes]) for p in demo.pushes]
     lik = RodLikelihood(dataclasses.replace(demo, pushes=pushes), use_forces=False)
@@ -323,7 +321,6 @@ def test_shapes_without_point_sds_have_one_noise_sd_in_metres(demo):
 def test_the_force_table_reads_the_effect_at_its_nodes(spring):
     """At a node of p and of the effect axis the interpolation is exact: the residuals are the data minus the rod on
     that spring, solved directly."""
-    from bayesrod.inference.likelihood import ForceCurves
 
     grid, L = spring.axis.grid, spring.L
     p = spring.p_grid[9]  # 0.45
@@ -342,8 +339,6 @@ def test_the_force_table_reads_the_effect_at_its_nodes(spring):
 def test_the_spring_posteriors_density_carries_the_jacobian_of_u_and_is_zero_past_the_table(spring):
     """Sampled by u = c / (1 + c) (c = EI0 / (k L)), the prior density gains log |d log k / du| = -log u - log(1 - u);
     a walker with u outside (0, 1), or inside it but past the table's last node, has density zero."""
-    from bayesrod.inference.likelihood import LogPosterior
-    from bayesrod.inference.priors import load_prior
 
     post = LogPosterior(spring, load_prior("default"))
     i = post.names.index("base_compliance")
@@ -371,7 +366,6 @@ def test_the_spring_posteriors_density_carries_the_jacobian_of_u_and_is_zero_pas
 
 
 def test_ar1_forces_and_the_slip_term_add(demo):
-    from bayesrod.inference.likelihood import ar1_loglik
 
     lik = RodLikelihood(demo, use_shapes=False, force_noise="ar1", slip=True)
     params = _params(lik)
@@ -382,8 +376,6 @@ def test_ar1_forces_and_the_slip_term_add(demo):
 
 def test_a_yield_caps_the_force_at_the_yield_moment_over_the_contact_height_and_an_offset_adds():
     """F = min(EI0 / L^2 f, M_y / h) plus a load-cell offset; with height errors h is the walker's own h + dh."""
-    from bayesrod.inference.likelihood import default_length_prior
-    from tests.test_nuisances import HEIGHTS, _dataset
 
     spec = _dataset(0.8)
     grid = {"p_range": (0.0, 1.2), "n_p": 13, "use_shapes": False}
@@ -408,7 +400,6 @@ def test_a_yield_caps_the_force_at_the_yield_moment_over_the_contact_height_and_
 def test_force_curves_find_a_branch_end_above_their_first_guess(monkeypatch):
     """The branch end is bracketed by doubling from 2 / eta^2 until contact is lost, then bisected: on a stand-in rod
     whose contact exists up to f = 37 / eta^2 (above the first guess) with displacement d = f, the curve ends there."""
-    from bayesrod.inference import likelihood
 
     def fake(f, etas, p, eff):
         f = np.asarray(f, float)
@@ -437,8 +428,6 @@ def test_force_curves_find_a_branch_end_above_their_first_guess(monkeypatch):
 def test_force_curves_count_displacement_from_the_unloaded_stem():
     """With a rest curvature the unloaded stem already leans: the curve's displacement is the contact's travel from
     where the unloaded stem meets the probe's height, f(xi(f) - xi(0)) = f, and the same curves serve the shapes."""
-    from bayesrod.inference.likelihood import ForceCurves
-    from bayesrod.physics.elastica import contact_from_force_nd
 
     eta, p = 0.6, np.array([0.4])
     c, other = ForceCurves.batch(np.array([eta, 0.5]), p, n_f=60, effects_nd={"kappa0": np.array([0.3, 0.1])})
@@ -453,7 +442,6 @@ def test_force_curves_count_displacement_from_the_unloaded_stem():
 def test_past_its_branch_end_a_curve_goes_on_along_its_end_tangent_by_default():
     """Contact friction ends the branch with the force still rising: by default the tables continue along that
     slope (a flat hold would put a kink into the tables in p); ``continued=False`` holds the end value."""
-    from bayesrod.inference.likelihood import ForceCurves
 
     (c,) = ForceCurves.batch(np.array([0.6]), np.array([0.4]), n_f=60, effects_nd={"mu": np.array([0.3])})
     assert c.end_slope[0] > 1.0
@@ -467,7 +455,6 @@ def test_contact_height_errors_on_a_known_length_move_only_the_heights():
     """A fit with contact-height errors and the length given (``height_sd_m`` without a length prior): the
     residuals are those of the plain rod with each push's height moved by its error, the stem length the given
     one."""
-    from tests.test_nuisances import _dataset, _geometry
 
     spec = _dataset(0.8)
     grid = {"p_range": (0.0, 1.2), "n_p": 13, "use_shapes": False}
