@@ -561,9 +561,11 @@ def _check_level(level) -> float:
 
 
 def _q_names(level: float) -> tuple[str, str]:
+    """Column names of the interval's quantiles: the digits of the fraction, at least two (0.05 -> ``q05``,
+    0.025 -> ``q025``, 0.1 -> ``q10``), so that no name of one level is another quantile's."""
+
     def name(q):
-        txt = f"{100 * q:.10g}".replace(".", "")
-        return "q" + (txt.zfill(2) if q < 0.1 else txt)
+        return "q" + f"{q:.10f}".rstrip("0").split(".")[1].ljust(2, "0")
 
     return name((1 - level) / 2), name((1 + level) / 2)
 

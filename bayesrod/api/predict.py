@@ -130,12 +130,13 @@ def _predict_posterior(posterior, height_m, displacement_m, effects: Effects, n_
     n = samples["EI0"].size
     idx = rng.choice(n, size=min(n_draws, n), replace=False)
     EI0, p = samples["EI0"][idx], samples["p"][idx]
+    L_draw = L if "length_m" not in samples else np.asarray(samples["length_m"], float)[idx]  # a sampled length
     pred = predictive_forces(samples, idx, D, h, L, effects)
     F = pred["force_N"]
     slip_prob = pred["slipped"].mean(axis=0)
     kb = samples["base_compliance"][idx] if "base_compliance" in samples else effects.base_compliance
-    kt = k_theta(h, EI0, p, L, kb)
-    kx = k_x(h, EI0, p, L, kb)
+    kt = k_theta(h, EI0, p, L_draw, kb)
+    kx = k_x(h, EI0, p, L_draw, kb)
 
     def q(x):
         return {k: (None if not np.isfinite(v) else float(v)) for k, v in quantiles(x).items()}
