@@ -289,6 +289,35 @@ TARGETS["likelihood"] = (
     ],
 )
 
+# added in session 39: the bands and predictions a user reads (issue 21, deliverable 4: the stated level is the
+# level used), tested on posteriors made by hand (tests/test_bands_units.py: no fit, 15 s)
+TARGETS["bands"] = (
+    "bayesrod/api/fitting.py",
+    ["tests/test_bands_units.py"],
+    [
+        *(f"*.x_{f}__mutmut_*" for f in ("_check_level", "_q_names", "_grid", "unseen_height")),
+        *(
+            f"*.xǁPosteriorǁ{m}__mutmut_*"
+            for m in (
+                "summary",
+                "thinned",
+                "_base_stiffness",
+                "ei_band",
+                "youngs_modulus",
+                "modulus_band",
+                "diameter_band",
+                "k_theta_band",
+                "_stiffness_band",
+                "k_x_band",
+                "predict_force",
+            )
+        ),
+    ],
+)
+TARGETS["predict"] = ("bayesrod/api/predict.py", ["tests/test_bands_units.py", "tests/test_cli_predict.py"], None)
+TARGETS["checks"] = ("bayesrod/inference/checks.py", ["tests/test_model_check_units.py"], None)
+TARGETS["interval"] = ("bayesrod/api/_common.py", ["tests/test_bands_units.py"], ["*.x_interval__mutmut_*"])
+
 STATUSES = ("killed", "timeout", "survived", "no tests", "suspicious", "skipped", "segfault")
 
 

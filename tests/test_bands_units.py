@@ -369,3 +369,99 @@ def test_predict_over_a_posterior_reads_each_draws_length_and_spring():
     assert doc["level"] == 0.9 and doc["posterior"]["draws"] == 60
     with pytest.raises(TypeError, match="posterior"):
         bayesrod.predict(0.5, [0.01], posterior={"EI0": 1.0})
+
+
+@pytest.mark.parametrize(
+    "kw, err, field",
+    [
+        ({"EI0": 0.0, "p": 0.0, "length_m": 1.0}, ValueError, "EI0: expected a flexural rigidity > 0"),
+        ({"EI0": 1.0, "p": -0.1, "length_m": 1.0}, ValueError, "p: expected a taper exponent >= 0"),
+        ({"EI0": 1.0, "p": 0.0, "length_m": 0.0}, ValueError, "length_m: expected a stem length > 0"),
+        ({"EI0": 1.0, "p": 0.0, "length_m": np.inf}, ValueError, "length_m: expected a finite number"),
+        ({"EI0": "stiff", "p": 0.0, "length_m": 1.0}, TypeError, "EI0: expected a number, got str"),
+        ({"EI0": 1.0, "p": 0.0}, ValueError, "length_m: expected a value"),
+        ({"p": 0.0}, ValueError, "EI0, length_m: expected a value"),
+    ],
+)
+def test_predict_names_the_bad_rod_parameter(kw, err, field):
+    with pytest.raises(err, match=f"^{field}"):
+        bayesrod.predict(0.4, [0.01], **kw)
+
+
+@pytest.mark.parametrize(
+    "h, D, field",
+    [
+        (0.0, [0.01], "height_m: expected 0 < height < length"),
+        (1.0, [0.01], "height_m"),
+        (np.nan, [0.01], "height_m"),
+        (0.4, [-0.01], "displacement_m: expected values >= 0 m, got -0.01"),
+        (0.4, [np.nan], "displacement_m: expected finite numbers"),
+        (0.4, [[0.01, 0.02]], "displacement_m: expected finite numbers"),
+    ],
+)
+def test_predict_names_the_bad_push(h, D, field):
+    with pytest.raises(ValueError, match=f"^{field}"):
+        bayesrod.predict(h, D, EI0=1.0, p=0.0, length_m=1.0)
+
+
+def test_predict_for_one_rod_reads_its_preset_its_effects_and_reports_a_yield():
+    tw = bayesrod.predict(0.4, [0.01], preset="twig").to_dict()["model"]
+    assert (tw["EI0"], tw["length_m"]) == pytest.approx((2.63, 0.8), rel=0.01) and 0 < tw["p"] < 1
+    mixed = bayesrod.predict(0.4, [0.01], preset="twig", p=0.2, length_m=0.9).to_dict()["model"]
+    assert (mixed["EI0"], mixed["p"], mixed["length_m"]) == (tw["EI0"], 0.2, 0.9)
+    assert bayesrod.predict(0.4, [0.01], EI0=0.5, p=0.0, length_m=1.0).to_dict()["model"]["EI0"] == 0.5
+    # a base spring softens the force itself, and Effects or a mapping say the same
+    kb, D = 30.0, 0.001
+    f_spring = bayesrod.predict(0.4, [D], EI0=2.0, p=0.0, length_m=1.0, effects={"base_compliance": kb})
+    f_same = bayesrod.predict(0.4, [D], EI0=2.0, p=0.0, length_m=1.0, effects=Effects(base_compliance=kb))
+    kx = 1 / (0.4**3 / 6.0 + 0.4**2 / kb)
+    assert f_spring.to_dict()["points"][0]["force_N"] == pytest.approx(kx * D, rel=3e-3)
+    assert f_same.to_dict() == f_spring.to_dict()
+    # a base that yields: flagged where it has
+    y = bayesrod.predict(0.4, [0.001, 0.3], EI0=2.0, p=0.0, length_m=1.0, effects={"yield": 0.5}).to_dict()
+    assert [q["yielded"] for q in y["points"]] == [False, True]
+    assert y["points"][1]["force_N"] <= 0.5 / 0.4 + 1e-9  # capped at M_y / h (before the arm shortens)
+
+
+def test_predict_over_a_posterior_with_a_known_length_and_given_effects():
+    post = _posterior(n=40, spring=False, length=False, widths=False)
+    post = Posterior(**{**post.__dict__, "config": MappingProxyType({"seed": 7, "run": "runs/by-hand"})})
+    D = np.array([0.0, 0.03])
+    plain = bayesrod.predict(0.5, D, posterior=post).to_dict()
+    assert plain["posterior"] == {"run": "runs/by-hand", "draws": 40, "length_m": L_NOMINAL}
+    sm = post.samples
+    lo, med, hi = _q(k_theta(0.5, sm["EI0"], sm["p"], L_NOMINAL), 0.9)
+    kt = plain["k_theta_Nm_per_rad"]
+    assert (kt["q05"], kt["median"], kt["q95"]) == pytest.approx((lo, med, hi), rel=1e-9)
+    c = plain["points"][1]["contact_s_m"]
+    assert c is not None and 0.5 < c["q05"] <= c["median"] <= c["q95"] < 0.51  # the arc to the contact
+    # given effects: an offset shifts every force, a spring softens the stiffnesses
+    shifted = bayesrod.predict(0.5, D, posterior=post, effects={"force_offset": 0.3}).to_dict()
+    for a, b in zip(plain["points"], shifted["points"], strict=True):
+        assert b["force_N"]["median"] == pytest.approx(a["force_N"]["median"] + 0.3, rel=1e-9)
+    soft = bayesrod.predict(0.5, D, posterior=post, effects={"base_compliance": 20.0}).to_dict()
+    lo, med, hi = _q(k_theta(0.5, sm["EI0"], sm["p"], L_NOMINAL, 20.0), 0.9)
+    kt = soft["k_theta_Nm_per_rad"]
+    assert (kt["q05"], kt["median"], kt["q95"]) == pytest.approx((lo, med, hi), rel=1e-9)
+    # the run's specimen names it when no run directory does; a fixed subset of the draws
+    unnamed = _posterior(n=1000, spring=False, length=False, widths=False)
+    one = bayesrod.predict(0.5, D, posterior=unnamed).to_dict()
+    assert one["posterior"]["run"] == "by-hand" and one["posterior"]["draws"] == 400
+    assert bayesrod.predict(0.5, D, posterior=unnamed).to_dict() == one
+
+
+def test_predict_over_a_posterior_marks_slips_and_drops_forces_held_by_fewer_than_two_draws():
+    post = _posterior(n=3, spring=False, length=False, widths=False)
+    s = {**post.samples, "EI0": np.full(3, 2.6), "p": np.array([0.2, 0.5, 0.9])}
+    post = Posterior(**{**post.__dict__, "samples": MappingProxyType(s)})
+    pts = bayesrod.predict(0.55, [0.2, 0.42, 0.49, 0.6], posterior=post).to_dict()["points"]
+    assert [q["slip_probability"] for q in pts] == pytest.approx([0, 1 / 3, 2 / 3, 1])
+    assert [q["slipped"] for q in pts] == [False, False, True, True]
+    assert [q["force_N"] is None for q in pts] == [False, False, True, True]
+    assert [q["contact_s_m"] is None for q in pts] == [False, False, True, True]
+    F = _solve_each(post, range(3), 0.55, np.array([0.42]))[:, 0]
+    assert pts[1]["force_N"]["median"] == pytest.approx(np.nanmedian(F), rel=1e-6)
+    # half the draws slipped is not yet "slipped"
+    two = Posterior(**{**post.__dict__, "samples": MappingProxyType({k: v[[0, 2]] for k, v in s.items()})})
+    half = bayesrod.predict(0.55, [0.42], posterior=two).to_dict()["points"][0]
+    assert half["slip_probability"] == 0.5 and half["slipped"] is False
