@@ -50,6 +50,10 @@ def test_lag1_and_longest_run_by_hand():
     z = rng.normal(size=(3, 17)) + np.linspace(0, 2, 17)
     np.testing.assert_allclose(_lag1(z), [_lag1_by_hand(row) for row in z], rtol=1e-12)
     assert _lag1(np.array([1.0, -1.0])) == 0.0  # fewer than 3 samples
+    assert _lag1(np.ones((4, 2))).shape == (4,) and not _lag1(np.ones((4, 2))).any()  # per row
+    x3 = np.array([1.0, 3.0, -2.0])
+    assert _lag1(x3) == pytest.approx(_lag1_by_hand(x3), rel=1e-12) != 0.0  # three are enough
+    assert _lag1(1e-3 * z[0]) == pytest.approx(_lag1(z[0]), rel=1e-9)  # scale-free, also below 1
     assert _lag1(np.full(5, 2.0)) == 0.0  # no spread: 0, not nan
     x = np.array([1.0, 2.0, -1.0, -3.0, -2.0, 4.0, 5.0, -1.0])
     assert _longest_run(x) == 3 == _run_by_hand(x)
@@ -81,15 +85,15 @@ def _draws(n=300, seed=2, sd=1.0):
 
 def test_white_residuals_pass_and_each_pushs_numbers_are_those_at_the_median():
     rng = np.random.default_rng(3)
-    push = np.repeat([0, 1, 2], [40, 2, 50])  # the 2-sample push is too short to check
+    push = np.repeat([0, 1, 2, 3], [40, 2, 50, 3])  # the 2-sample push is too short to check, 3 are enough
     r = rng.normal(size=push.size)
     draws = _draws()
     out = model_check(_Lik(r, push), draws, n_draws=150, alpha=0.01, seed=4)
     assert out["verdict"] == "ok" and "message" not in out
     assert out["noise_model"] == "iid" and out["alpha"] == 0.01 and out["draws"] == 150
-    assert [p["push"] for p in out["pushes"]] == ["push-0", "push-2"]
+    assert [p["push"] for p in out["pushes"]] == ["push-0", "push-2", "push-3"]
     z_med = (r - np.median(draws["offset"])) / np.median(draws["sigma_force_N"])
-    for p, sel in zip(out["pushes"], (push == 0, push == 2), strict=True):
+    for p, sel in zip(out["pushes"], (push == 0, push == 2, push == 3), strict=True):
         assert p["n"] == sel.sum()
         assert p["residual_lag1"] == pytest.approx(_lag1_by_hand(r[sel] - np.median(draws["offset"])), rel=1e-12)
         assert p["innovation_lag1"] == pytest.approx(_lag1_by_hand(z_med[sel]), rel=1e-12)
@@ -97,6 +101,16 @@ def test_white_residuals_pass_and_each_pushs_numbers_are_those_at_the_median():
         assert p["rmse_over_sigma"] == pytest.approx(np.sqrt(np.mean(z_med[sel] ** 2)), rel=1e-12)
     assert 0.05 < out["ppc_p_value_lag1"] < 1 and 0.05 < out["ppc_p_value_runs"] <= 1
     assert model_check(_Lik(r, push), _draws(n=80), n_draws=150)["draws"] == 80  # no more draws than there are
+    # the defaults: 200 draws, alpha 0.01, seed 0; a likelihood that names no noise model is iid
+    default = model_check(_Lik(r, push), _draws(n=1000))
+    assert default["draws"] == 200 and default["alpha"] == 0.01
+    assert default == model_check(_Lik(r, push), _draws(n=1000), n_draws=200, alpha=0.01, seed=0)
+    unnamed = _Lik(r, push)
+    del unnamed.force_noise
+    assert model_check(unnamed, draws, n_draws=150, seed=4)["noise_model"] == "iid"
+    # pushes all too short to check: nothing observed, nothing called a misfit
+    short = model_check(_Lik(rng.normal(size=6), np.repeat([0, 1, 2], 2)), draws)
+    assert short["verdict"] == "ok" and short["pushes"] == [] and short["ppc_p_value_lag1"] == 1.0
 
 
 def test_structured_residuals_fail_and_the_message_names_the_worst_push():
@@ -107,6 +121,7 @@ def test_structured_residuals_fail_and_the_message_names_the_worst_push():
     out = model_check(_Lik(r, push), _draws(), seed=1)
     assert out["verdict"] == "misfit" and out["ppc_p_value_lag1"] == 0.0
     assert "push push-1" in out["message"] and "force_noise ar1" in out["message"]
+    assert "whitening" not in out["message"]
     worst = out["pushes"][1]
     assert f"lag-1 autocorrelation {worst['residual_lag1']:.2f}," in out["message"]
     assert f"a run of {worst['longest_run']} residuals" in out["message"]
@@ -116,7 +131,7 @@ def test_structured_residuals_fail_and_the_message_names_the_worst_push():
     assert "after AR(1) whitening" in ar["message"] and "force_noise ar1" not in ar["message"]
     # a model with no forces checks nothing
     none = model_check(SimpleNamespace(n_force=0), {})
-    assert none["verdict"] == "ok" and none["pushes"] == []
+    assert none == {"verdict": "ok", "checked": "nothing (no force samples)", "pushes": []}
 
 
 def test_the_verdict_is_misfit_below_half_alpha_and_the_p_values_are_predictive_tail_areas():
@@ -132,6 +147,7 @@ def test_the_verdict_is_misfit_below_half_alpha_and_the_p_values_are_predictive_
     assert 0.005 < p < 0.4
     assert model_check(_Lik(r, push), draws, n_draws=400, seed=6, alpha=1.9 * p)["verdict"] == "ok"
     assert model_check(_Lik(r, push), draws, n_draws=400, seed=6, alpha=2.1 * p)["verdict"] == "misfit"
+    assert model_check(_Lik(r, push), draws, n_draws=400, seed=6, alpha=2 * p)["verdict"] == "ok"  # strictly below
     # the p-value of lag 1 by hand, with the replicates the check draws (its seed's generator, after the subset)
     rng = np.random.default_rng(6)
     idx = rng.choice(400, size=400, replace=False)
