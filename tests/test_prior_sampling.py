@@ -56,8 +56,8 @@ def test_the_sampler_returns_the_prior_when_the_likelihood_is_off(case):
     ref = _prior_draws(post, prior, lik, 100_000, np.random.default_rng(2))
     pairs = {k: (np.asarray(chain[k])[::20], ref[k][:20000]) for k in post.names}
     if "base_compliance" in post.names:
-        u = [e / (k * lik.L) / (1 + e / (k * lik.L)) for e, k in ((d["EI0"], d["base_compliance"]) for d in (chain, ref))]
-        pairs["u"] = (u[0][::20], u[1][:20000])
+        c = [np.asarray(d["EI0"]) / (np.asarray(d["base_compliance"]) * lik.L) for d in (chain, ref)]
+        pairs["u"] = ((c[0] / (1 + c[0]))[::20], (c[1] / (1 + c[1]))[:20000])
     for name, (a, b) in pairs.items():
         ks = stats.ks_2samp(a, b).statistic
         assert ks < KS_MAX, f"{name}: KS distance {ks:.3f} from the prior"
