@@ -429,6 +429,7 @@ def test_predict_over_a_posterior_with_a_known_length_and_given_effects():
     D = np.array([0.0, 0.03])
     plain = bayesrod.predict(0.5, D, posterior=post).to_dict()
     assert plain["posterior"] == {"run": "runs/by-hand", "draws": 40, "length_m": L_NOMINAL}
+    assert plain["height_m"] == 0.5 and [q["displacement_m"] for q in plain["points"]] == [0.0, 0.03]
     sm = post.samples
     lo, med, hi = _q(k_theta(0.5, sm["EI0"], sm["p"], L_NOMINAL), 0.9)
     kt = plain["k_theta_Nm_per_rad"]

@@ -313,6 +313,7 @@ def test_predict_posterior_json(tmp_path, capsys, twig_noisy):
     doc = json.loads(capsys.readouterr().out)
     for key in ("k_theta_Nm_per_rad", "k_x_N_per_m"):
         assert set(doc[key]) == {"median", "q05", "q95"}
+    assert doc["posterior"]["run"] == str(run) and doc["posterior"]["length_m"] == 0.8
     f = doc["points"][0]["force_N"]
     assert f["q05"] <= f["median"] <= f["q95"]
     from bayesrod.physics import force_from_displacement
