@@ -134,8 +134,33 @@ def test_fit_with_slip_writes_the_window_and_the_model_slip_and_only_then(one_he
     assert row["push"] == d.id and row["engaged_to_m"] == d.engaged_to_m and row["slipped_by_m"] == d.slipped_by_m
     m = row["model_slip_m"]
     assert m["q05"] < m["median"] < m["q95"] and d.engaged_to_m - 0.01 < m["median"] < d.slipped_by_m + 0.01
-    plain = bayesrod.fit(one_height, **kw).to_dict()
+    plain_post = bayesrod.fit(one_height, **kw)
+    plain = plain_post.to_dict()
     assert "slip" not in plain["data"]
+    # one height, forces only, a slip seen: without the term the summary and the report say the intervals are
+    # likely too narrow (docs/validation.md, "One height, forces only"); with it, they do not
+    assert "about 80%" in plain["calibration"]["message"] and "calibration" not in summary
+    assert "Intervals likely too narrow" in plain_post.report_html(pngs={})
+    assert "Intervals likely too narrow" not in post.report_html(pngs={})
+
+
+def test_the_calibration_caution_is_for_one_height_forces_only_and_a_slip_seen(one_height):
+    from bayesrod.api.fitting import one_height_slip_caution
+
+    pr = load_prior("default")
+
+    def caution(ds, **kw):
+        return one_height_slip_caution(build_likelihood(ds, pr, **kw), ds.heights_m)
+
+    assert "one height" in caution(one_height, use_shapes=False)
+    assert caution(one_height, use_shapes=True) is None  # centerlines
+    assert caution(one_height, use_shapes=False, slip=True) is None  # the slip term reads where it stopped
+    two = bayesrod.simulate("twig", seed=4, heights_m=[0.45, 0.6], config_overrides={"n_frames_engaged": 2})
+    assert caution(two, use_shapes=False) is None
+    short = bayesrod.simulate(
+        "twig", seed=4, heights_m=[0.5], config_overrides={"n_frames_engaged": 2, "max_contact_displacement_m": 0.1}
+    )
+    assert caution(short, use_shapes=False) is None  # stopped before the slip: the stop says nothing
 
 
 def test_the_slip_term_reads_the_tabled_effect_and_moves_its_window_with_the_preload(one_height):
