@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from bayesrod.inference.checks import _lag1, _longest_run, model_check, standardised_innovations
+from bayesrod.inference.likelihood import _chain_starts
 
 
 class _Lik:
@@ -22,7 +23,7 @@ class _Lik:
     def __init__(self, r, F_push, force_noise="iid"):
         self.r = np.asarray(r, float)
         self.F_push = np.asarray(F_push)
-        self.F_first = np.r_[True, self.F_push[1:] != self.F_push[:-1]]
+        self.F_first = _chain_starts(self.F_push)
         self.n_force = self.r.size
         self.force_noise = force_noise
         self.data = [SimpleNamespace(id=f"push-{j}") for j in range(int(self.F_push.max()) + 1)]

@@ -33,6 +33,7 @@ from ..inference.likelihood import (
     effective_shape_weight,
     geometry_blocker,
     length_is_approximate,
+    one_height_stiffness,
     table_check,
 )
 from ..inference.priors import load_prior
@@ -613,7 +614,7 @@ def one_height_slip_caution(lik, heights_m) -> str | None:
     Where a push stops then depends on the stem, which the likelihood (without its slip term) does not read:
     over 44 simulated replicates the 90% intervals of p covered 0.80 (0.91 with the same pushes stopped at a
     fixed fraction of L)."""
-    if lik.n_points or lik.slip or len({round(float(h), 9) for h in heights_m}) != 1:
+    if lik.n_points or lik.slip or one_height_stiffness(heights_m, [lik.L], False) is None:
         return None
     if not any(np.isfinite(d.slipped_by_m) for d in lik.force_data):
         return None

@@ -114,7 +114,7 @@ def predict(
 
 
 def _predict_posterior(posterior, height_m, displacement_m, effects: Effects, n_draws: int) -> Prediction:
-    from ..inference.summary import predictive_forces, quantiles
+    from ..inference.summary import draw_lengths, predictive_forces, quantiles
     from .fitting import Posterior
 
     if isinstance(posterior, (str, Path)):
@@ -130,7 +130,7 @@ def _predict_posterior(posterior, height_m, displacement_m, effects: Effects, n_
     n = samples["EI0"].size
     idx = rng.choice(n, size=min(n_draws, n), replace=False)
     EI0, p = samples["EI0"][idx], samples["p"][idx]
-    L_draw = L if "length_m" not in samples else np.asarray(samples["length_m"], float)[idx]  # a sampled length
+    L_draw = np.broadcast_to(draw_lengths(samples, L), (n, 1))[idx, 0]  # each draw's, where the length was sampled
     pred = predictive_forces(samples, idx, D, h, L, effects)
     F = pred["force_N"]
     slip_prob = pred["slipped"].mean(axis=0)
