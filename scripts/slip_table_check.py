@@ -48,6 +48,7 @@ def check(seed: int, prior) -> dict:
     if case["effect"]:
         truth[case["effect"]] = np.array([case["effect_value"]])
     D_tab = float(lik.slip_displacement_m(truth)[0, 0])
+    D_early = float(lik.slip_displacement_m(truth, early=True)[0, 0])
     lo, hi, tau = float(lik.slip_lo_m[0]), float(lik.slip_hi_m[0]), float(lik.slip_scale_m[0])
     dp = 1e-3
     slope = (float(lik.slip_displacement_m({**truth, "p": truth["p"] + dp})[0, 0]) - D_tab) / dp
@@ -60,7 +61,11 @@ def check(seed: int, prior) -> dict:
         "window_lo_m": lo,
         "window_hi_m": hi,
         "tau_m": tau,
+        "D_table_early_m": D_early,
         "table_minus_sim_over_tau": (D_tab - D_sim) / tau,
+        # the slip term asks only that [D_early, D_table] meet the window: the simulator's slip must lie in it
+        "sim_in_model_range": bool(D_early - 1e-9 <= D_sim <= D_tab + 1e-9),
+        "model_range_over_tau": (D_tab - D_early) / tau,
         "sim_in_window": bool(lo < D_sim <= hi),
         "p_shift": (D_tab - D_sim) / slope if slope else float("nan"),
     }
@@ -88,6 +93,11 @@ def main(argv=None) -> None:
     err = d.table_minus_sim_over_tau
     big = int((err.abs() > 1).sum())
     print(f"{len(d)} cases: |table - simulator| over tau, median {err.abs().median():.2f}, above 1 in {big}")
+    width = d.model_range_over_tau
+    print(
+        f"the simulator's slip inside the model's range [early, end] in {int(d.sim_in_model_range.sum())}/{len(d)}; "
+        f"range over tau median {width.median():.2f}, max {width.max():.2f}"
+    )
 
 
 if __name__ == "__main__":
