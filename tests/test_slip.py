@@ -60,10 +60,10 @@ def test_slip_term_is_the_probability_that_the_window_meets_the_model_slip_range
 @pytest.mark.parametrize(
     "stem",
     [
-        {"EI0": 2.6, "p": 0.43, "length_m": 1.0, "heights_m": (0.5,), "specimen": "twig-like"},
+        {"EI0": 2.6, "p": 0.43, "length_m": 1.0, "heights_m": (0.5,), "specimen": "twig-like", "span_m": 0.1074},
         # SBC seed 240's stem: its branch ends on a plateau (D 0.51 m at 99.9% of the end force, 0.77 m at
         # the end), so the end's displacement is ill-conditioned and a solver stops anywhere along it
-        {"EI0": 1.0706, "p": 0.5273, "length_m": 0.94379, "heights_m": (0.33622,), "specimen": "plateau"},
+        {"EI0": 1.0706, "p": 0.5273, "length_m": 0.94379, "heights_m": (0.33622,), "specimen": "plateau", "span_m": 0.2563},
     ],
     ids=["fold", "plateau"],
 )
@@ -74,7 +74,8 @@ def test_the_model_slip_range_holds_the_simulators_slip_and_starts_where_the_for
     from bayesrod.inference.likelihood import SLIP_FORCE_REL
     from bayesrod.physics.elastica import force_from_displacement
 
-    ds = bayesrod.simulate(stem, seed=1, config_overrides={"robot_step_m": 0.01 * stem["length_m"]})
+    sim_stem = {k: v for k, v in stem.items() if k != "span_m"}
+    ds = bayesrod.simulate(sim_stem, seed=1, config_overrides={"robot_step_m": 0.01 * stem["length_m"]})
     cfg, _ = ds.simulation
     L, (h,) = stem["length_m"], stem["heights_m"]
     D_sim = _loading_branch(cfg, h)[0][-1]
@@ -83,7 +84,8 @@ def test_the_model_slip_range_holds_the_simulators_slip_and_starts_where_the_for
     # the end itself is ill-conditioned on the plateau (dF/dD ~ 0): the two solvers' ends differ by up to a
     # few mm either way (measured 0.45 mm past d_end on the fold case; docs/validation.md), the start is not
     assert D_early <= D_sim <= D_end + 1e-3 * L
-    assert D_end - D_early > 0.05 * L  # both stems end on a plateau: 99.9% of the end force 0.1-0.26 L before it
+    # both stems end on a plateau: 99.9% of the end force 0.107 m and 0.256 m before its end (measured)
+    assert D_end - D_early == pytest.approx(stem["span_m"], rel=0.02)
     F = force_from_displacement(np.array([D_early, D_sim]), h, stem["EI0"], stem["p"], L).true_force_N
     F_end = c._interp[0](c.d_end[0]) * stem["EI0"] / L**2
     assert F[0] == pytest.approx((1 - SLIP_FORCE_REL) * F_end, rel=1e-6)
@@ -116,6 +118,9 @@ def test_the_summary_reports_the_data_slip_window_beside_the_model_slip(one_heig
     D = lik.slip_displacement_m({"p": p})[:, 0]
     assert row["model_slip_m"]["median"] == pytest.approx(np.median(D), rel=1e-3)
     assert row["engaged_to_m"] < row["model_slip_m"]["median"] < row["slipped_by_m"]
+    early = lik.slip_displacement_m({"p": p}, early=True)[:, 0]
+    assert row["model_slip_from_m"]["median"] == pytest.approx(np.median(early), rel=1e-3)
+    assert row["model_slip_from_m"]["q95"] < row["engaged_to_m"]  # the range starts well before the window
 
 
 def test_a_rig_with_a_fixed_robot_step_samples_until_the_slip_and_the_window_holds_it():

@@ -711,12 +711,14 @@ def _slip_report(lik, samples: Mapping) -> list[dict]:
     (summary.json ``data.slip``, docs/format.md)."""
     thin = {k: np.asarray(v)[:: max(1, np.asarray(v).size // 2000)] for k, v in samples.items()}
     model = lik.slip_displacement_m(thin)  # (draws, J)
+    early = lik.slip_displacement_m(thin, early=True)
     return [
         {
             "push": d.id,
             "engaged_to_m": float(d.engaged_to_m),
             "slipped_by_m": float(d.slipped_by_m) if np.isfinite(d.slipped_by_m) else None,
             "model_slip_m": credible_interval(model[:, j]),
+            "model_slip_from_m": credible_interval(early[:, j]),
         }
         for j, d in enumerate(lik.force_data)
     ]
