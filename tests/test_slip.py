@@ -63,7 +63,14 @@ def test_slip_term_is_the_probability_that_the_window_meets_the_model_slip_range
         {"EI0": 2.6, "p": 0.43, "length_m": 1.0, "heights_m": (0.5,), "specimen": "twig-like", "span_m": 0.1074},
         # SBC seed 240's stem: its branch ends on a plateau (D 0.51 m at 99.9% of the end force, 0.77 m at
         # the end), so the end's displacement is ill-conditioned and a solver stops anywhere along it
-        {"EI0": 1.0706, "p": 0.5273, "length_m": 0.94379, "heights_m": (0.33622,), "specimen": "plateau", "span_m": 0.2563},
+        {
+            "EI0": 1.0706,
+            "p": 0.5273,
+            "length_m": 0.94379,
+            "heights_m": (0.33622,),
+            "specimen": "plateau",
+            "span_m": 0.2563,
+        },
     ],
     ids=["fold", "plateau"],
 )
