@@ -202,6 +202,10 @@ def test_the_calibration_caution_is_for_one_height_forces_only_and_a_slip_seen(o
         return one_height_slip_caution(build_likelihood(ds, pr, **kw), ds.heights_m)
 
     assert "one height" in caution(one_height, use_shapes=False)
+    assert "--slip" in caution(one_height, use_shapes=False)  # the remedy where it applies
+    # with the length sampled the slip term is off (its table has no length axis): not offered
+    unknown = caution(one_height, use_shapes=False, length="unknown")
+    assert "one height" in unknown and "--slip" not in unknown
     assert caution(one_height, use_shapes=True) is None  # centerlines
     assert caution(one_height, use_shapes=False, slip=True) is None  # the slip term reads where it stopped
     two = bayesrod.simulate("twig", seed=4, heights_m=[0.45, 0.6], config_overrides={"n_frames_engaged": 2})

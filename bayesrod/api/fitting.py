@@ -613,16 +613,21 @@ def one_height_slip_caution(lik, heights_m) -> str | None:
 
     Where a push stops then depends on the stem, which the likelihood (without its slip term) does not read:
     over 44 simulated replicates the 90% intervals of p covered 0.80 (0.91 with the same pushes stopped at a
-    fixed fraction of L)."""
+    fixed fraction of L; 0.86, EI0 0.91, with the slip term). The slip term is suggested where it applies
+    (a known length, no height errors, no yield)."""
     if lik.n_points or lik.slip or one_height_stiffness(heights_m, [lik.L], False) is None:
         return None
     if not any(np.isfinite(d.slipped_by_m) for d in lik.force_data):
         return None
+    slip_applies = not lik.geometry and "yield" not in lik.effects
+    remedy = (
+        "fit with the slip term (--slip, fit(slip=True): 0.86-0.91 in the same simulation), " if slip_applies else ""
+    )
     return (
         "all pushes at one height, forces only, ending where the stem slipped off the probe: in simulation the "
         "90% intervals of EI0 and p covered the truth in about 80% of such fits, not 90% (where a push stops "
-        "depends on the stem; docs/validation.md, 'One height, forces only'). Read them as too narrow, or push "
-        "at a second height (bayesrod design) or record centerlines"
+        "depends on the stem; docs/validation.md, 'One height, forces only'). Read them as too narrow, or "
+        f"{remedy}push at a second height (bayesrod design) or record centerlines"
     )
 
 
