@@ -245,7 +245,8 @@ TARGETS["likelihood"] = (
             for t in (
                 "test_the_slip_window_brackets_the_simulated_slip_within_one_robot_step",
                 "test_a_push_stopped_short_says_only_how_far_the_stem_held",
-                "test_slip_term_is_the_probability_of_the_window_at_the_model_slip",
+                "test_slip_term_is_the_probability_that_the_window_meets_the_model_slip_range",
+                "test_the_model_slip_range_holds_the_simulators_slip_and_starts_where_the_force_is_within_its_tolerance",
                 "test_the_slip_term_adds_to_the_likelihood_and_stays_out_of_held_out_refits",
                 "test_the_slip_term_reads_the_tabled_effect_and_moves_its_window_with_the_preload",
             )
@@ -317,6 +318,38 @@ TARGETS["bands"] = (
 TARGETS["predict"] = ("bayesrod/api/predict.py", ["tests/test_bands_units.py", "tests/test_cli_predict.py"], None)
 TARGETS["checks"] = ("bayesrod/inference/checks.py", ["tests/test_model_check_units.py"], None)
 TARGETS["interval"] = ("bayesrod/api/_common.py", ["tests/test_bands_units.py"], ["*.x_interval__mutmut_*"])
+
+# added in session 40: the slip as a range (the term, its tables' lookup, the summary's report) and the
+# engagement's change point (docs/validation.md, "The slip as a range; the engagement's change point")
+TARGETS["slip"] = (
+    "bayesrod/inference/likelihood.py",
+    [
+        *(
+            f"tests/test_slip.py::{t}"
+            for t in (
+                "test_slip_term_is_the_probability_that_the_window_meets_the_model_slip_range",
+                "test_the_model_slip_range_holds_the_simulators_slip_and_starts_where_the_force_is_within_its_tolerance",
+                "test_the_slip_term_adds_to_the_likelihood_and_stays_out_of_held_out_refits",
+                "test_the_slip_term_reads_the_tabled_effect_and_moves_its_window_with_the_preload",
+                "test_the_summary_reports_the_data_slip_window_beside_the_model_slip",
+                "test_a_push_stopped_short_says_only_how_far_the_stem_held",
+            )
+        ),
+    ],
+    [
+        *(f"*.xǁRodLikelihoodǁ{m}__mutmut_*" for m in ("_init_slip", "_slip_m", "slip_displacement_m", "slip_loglik")),
+        "*.x__slip_window__mutmut_*",
+    ],
+)
+TARGETS["engagement"] = (
+    "bayesrod/dataset/engagement.py",
+    [
+        "tests/test_engagement_units.py",
+        "tests/test_slip.py::test_the_slip_window_brackets_the_simulated_slip_within_one_robot_step",
+        "tests/test_importer.py",
+    ],
+    None,
+)
 
 STATUSES = ("killed", "timeout", "survived", "no tests", "suspicious", "skipped", "segfault")
 
