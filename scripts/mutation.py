@@ -102,6 +102,7 @@ TARGETS: dict[str, tuple[str, list[str], list[str] | None]] = {
                 )
             ),
             "tests/test_root_search.py",  # the root search alone, on functions with known roots
+            "tests/test_elastica_units.py",  # input checks and defaults (session 40)
             "tests/test_effects.py",
             "tests/test_lumped.py",  # secant_k_theta's tests
         ],
