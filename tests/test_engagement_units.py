@@ -1,6 +1,7 @@
 """Where a push's engagement ends (bayesrod.dataset.engagement), on force series made by hand."""
 
 import numpy as np
+import pytest
 
 from bayesrod.dataset.engagement import detect_engagement
 
@@ -34,3 +35,55 @@ def test_noise_after_a_slip_is_not_taken_for_a_loaded_stretch():
         F = _push(rng, end_N=0.3, peak_N=0.47, sd_N=0.03, n_after=40)
         F[58:] += 0.02 * np.sin(np.arange(40) / 6.0)  # a slow ring of the sensor after the slip
         assert detect_engagement(F).slip_index == 58
+
+
+def test_robust_noise_reads_the_sd_of_white_noise_through_a_trend_and_needs_two_second_differences():
+    from bayesrod.dataset.engagement import robust_noise
+
+    rng = np.random.default_rng(3)
+    x = np.arange(20000.0)
+    F = 0.07 * rng.standard_normal(x.size) + 1e-4 * x + 2e-8 * x**2  # a trend with a curvature
+    assert robust_noise(F) == pytest.approx(0.07, rel=0.02)
+    # by hand: second differences (-2, 2), their median 0, MAD 2: 1.4826 * 2 / sqrt(6)
+    assert robust_noise([0.0, 1.0, 0.0, 1.0]) == pytest.approx(1.4826 * 2 / np.sqrt(6.0), rel=1e-12)
+    assert robust_noise([1.0, 2.0, 4.0]) == 0.0  # one second difference: no spread to read
+
+
+def test_an_empty_or_one_sample_push():
+    eng = detect_engagement([])
+    assert eng.mask.dtype == bool and eng.mask.size == 0
+    assert (eng.baseline_N, eng.noise_N, eng.slip_index) == (0.0, 0.0, None)
+    one = detect_engagement([0.3])
+    assert one.mask.tolist() == [True] and one.slip_index is None and one.baseline_N == 0.3
+
+
+def test_a_push_that_never_slips_keeps_every_sample_and_the_first_three_set_its_baseline():
+    eng = detect_engagement([0.0, 0.2, 0.1, 1.0, 2.0, 3.0, 4.0])
+    assert eng.slip_index is None and eng.mask.all() and eng.baseline_N == 0.1
+
+
+@pytest.mark.parametrize("case", ["noisy", "ring"])
+def test_an_unzeroed_sensor_moves_the_baseline_and_nothing_else(case):
+    """An offset of 3 N on every sample (a load cell not tared): the same slip, mask and noise; the baseline
+    (the post-slip median) moves by the offset."""
+    for seed in range(10):
+        rng = np.random.default_rng(seed)
+        if case == "noisy":
+            F = _push(rng, end_N=0.2)
+        else:
+            F = _push(rng, end_N=0.3, sd_N=0.03, n_after=40)
+            F[58:] += 0.02 * np.sin(np.arange(40) / 6.0)
+        a, b = detect_engagement(F), detect_engagement(F + 3.0)
+        assert a.slip_index == b.slip_index and (a.mask == b.mask).all()
+        assert b.noise_N == pytest.approx(a.noise_N, rel=1e-9) and a.noise_N > 0
+        assert b.baseline_N == pytest.approx(a.baseline_N + 3.0, abs=1e-9)
+        assert a.baseline_N == pytest.approx(np.median(F[a.slip_index :]), abs=1e-12)
+
+
+def test_a_dip_mid_push_is_not_a_slip():
+    """Three samples near zero mid-push (the probe lost the stem for an instant), then the force comes back:
+    the slip is the real one at the end, where the force stays at the baseline."""
+    rng = np.random.default_rng(0)
+    F = _push(rng, end_N=0.47, peak_N=0.47, sd_N=0.02, n_after=20)
+    F[40:43] = 0.0
+    assert detect_engagement(F).slip_index == 58
