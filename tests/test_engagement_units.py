@@ -19,20 +19,24 @@ def test_a_clear_push_ends_at_its_slip():
         assert eng.slip_index == 58 and eng.mask.sum() == 58
 
 
-def test_a_noisy_push_whose_force_falls_before_the_slip_ends_near_its_slip():
-    """Signal-to-noise 5, the force falling to 2 sigma before the slip (SBC seeds 272 and 334): the threshold
-    rule alone cut 8-31 samples early; the change point from there (a falling line, then the unloaded sensor)
-    puts the slip within 3 samples in 20 of 20 (measured)."""
-    ends = [detect_engagement(_push(np.random.default_rng(s), end_N=0.2)).slip_index for s in range(20)]
-    assert np.mean([e is not None and abs(e - 58) <= 3 for e in ends]) >= 0.8
+@pytest.mark.parametrize(("end_N", "rate"), [(0.1, 0.7), (0.2, 0.9), (0.3, 0.98)])
+def test_a_noisy_push_whose_force_falls_before_the_slip_ends_near_its_slip(end_N, rate):
+    """Signal-to-noise 5, the force falling to 1-3 sigma before the slip (SBC seeds 272 and 334): the threshold
+    rule alone put the slip within 3 samples in 0.5-2.5% of 200 pushes; the change point from there (a
+    falling line, then at least four samples of the unloaded sensor) in 77%, 94.5% and 99.5% (measured; the
+    bounds leave a margin). Two unloaded samples were allowed before: chance lows among them drew the slip
+    6 samples late."""
+    ends = np.array([detect_engagement(_push(np.random.default_rng(s), end_N=end_N)).slip_index for s in range(200)])
+    assert np.mean(np.abs(ends - 58) <= 3) >= rate
+    assert np.all(ends <= 62)  # never far past the slip: the unloaded samples are not taken for loaded ones
 
 
 def test_noise_after_a_slip_is_not_taken_for_a_loaded_stretch():
     """The unloaded sensor's noise (white, or slowly wandering) after a clear slip does not move the slip later."""
     rng = np.random.default_rng(7)
-    for seed in range(20):
+    for seed in range(200):
         rng = np.random.default_rng(seed)
-        F = _push(rng, end_N=0.3, peak_N=0.47, sd_N=0.03, n_after=40)
+        F = _push(rng, end_N=0.3, peak_N=0.47, sd_N=0.02, n_after=40)
         F[58:] += 0.02 * np.sin(np.arange(40) / 6.0)  # a slow ring of the sensor after the slip
         assert detect_engagement(F).slip_index == 58
 
@@ -42,7 +46,7 @@ def test_robust_noise_reads_the_sd_of_white_noise_through_a_trend_and_needs_two_
 
     rng = np.random.default_rng(3)
     x = np.arange(20000.0)
-    F = 0.07 * rng.standard_normal(x.size) + 1e-4 * x + 2e-8 * x**2  # a trend with a curvature
+    F = 0.07 * rng.standard_normal(x.size) + 1e-4 * x + 0.05 * x**2  # a trend whose second difference is 0.1
     assert robust_noise(F) == pytest.approx(0.07, rel=0.02)
     # by hand: second differences (-2, 2), their median 0, MAD 2: 1.4826 * 2 / sqrt(6)
     assert robust_noise([0.0, 1.0, 0.0, 1.0]) == pytest.approx(1.4826 * 2 / np.sqrt(6.0), rel=1e-12)

@@ -89,20 +89,21 @@ def _slip_change_point(F: NDArray, first_low: int, sigma: float) -> int:
     At a low signal-to-noise ratio a force that falls along the branch before the slip dips below the
     threshold while still in contact (SBC seeds 272 and 334 lost 8 and 16 engaged samples; docs/validation.md).
     The split is taken only where it beats "all unloaded" by the BIC of its three extra parameters (line and
-    change point) with the noise sd ``sigma``, where the loaded part (at least three samples) lies above the
+    change point) with the noise sd ``sigma``; where the loaded part (at least three samples, with at least
+    four unloaded after it: with two, chance lows among them drew the slip 6 samples late) lies above the
     constant by 1.5 sigma and by three standard errors of the difference of their means (the noise taken as
-    independent), and where the line starts at least 0.4 of the way from the constant up to the force just
-    before ``first_low`` (the stem does not jump); otherwise the slip stays at ``first_low``. Never moves the
+    independent); and where the line starts at least 0.4 of the way from the constant up to the force just
+    before ``first_low`` (the stem does not jump). Otherwise the slip stays at ``first_low``. Never moves the
     slip earlier.
     """
     W = F[first_low:]
     m = W.size
-    if m < 4 or sigma <= 0:
+    if m < 7 or sigma <= 0:  # three loaded and four unloaded samples at least
         return first_low
     sse_flat = float(np.sum((W - W.mean()) ** 2))
     best, best_s = sse_flat - 3.0 * sigma**2 * np.log(m), 0
     pre = float(np.median(F[max(0, first_low - 3) : first_low])) if first_low else float(W[0])
-    for s in range(3, m - 1):  # at least three loaded and two unloaded samples
+    for s in range(3, m - 3):  # at least three loaded and four unloaded samples
         before, after = W[:s], W[s:]
         line = np.polyval(np.polyfit(np.arange(s), before, 1), np.arange(s))
         sse = float(np.sum((before - line) ** 2) + np.sum((after - after.mean()) ** 2))
