@@ -259,3 +259,43 @@ def test_the_slip_term_reads_the_tabled_effect_and_moves_its_window_with_the_pre
     r = pre.F_obs - both["EI0"][:, None] / pre.L**2 * pre.predict_nd_force_preloaded(p, shift)
     force = norm.logpdf(r, 0.0, both["sigma_force_N"][:, None]).sum(axis=1)
     np.testing.assert_allclose(pre.log_likelihood(both), force + want, rtol=1e-12)
+
+
+def _window(robot, force, slip_index, contact=None):
+    """_slip_window of a hand-made push: contact displacement = robot position (no wire) unless given,
+    engaged up to ``slip_index``."""
+    from types import SimpleNamespace
+
+    from bayesrod.dataset.engagement import Engagement
+    from bayesrod.inference.likelihood import _slip_window
+
+    robot, n = np.asarray(robot, float), len(robot)
+    mask = np.arange(n) < (n if slip_index is None else slip_index)
+    contact = robot if contact is None else np.asarray(contact, float)
+    push = SimpleNamespace(contact_x_m=contact, robot_x_m=robot, force_N=np.asarray(force, float))
+    return _slip_window(push, Engagement(mask, 0.0, 0.01, slip_index))
+
+
+def test_the_slip_window_by_hand_with_a_stalled_robot_and_a_two_sample_push():
+    # the robot advanced 0.01 m a sample and the force fell at sample 4: held to 0.03, slipped by 0.04
+    w = _window([0.0, 0.01, 0.02, 0.03, 0.04], [0.0, 1.0, 2.0, 3.0, 0.0], 4)
+    assert w == pytest.approx({"engaged_to_m": 0.03, "slip_step_m": 0.01, "slipped_by_m": 0.04})
+    # the robot stood still for the last engaged sample (the contact crept on): no step to read (NaN), and no
+    # slip where the robot had not moved on when the force fell
+    w = _window([0.0, 0.01, 0.02, 0.02, 0.02], [0.0, 1.0, 2.0, 3.0, 0.0], 4, contact=[0.0, 0.01, 0.02, 0.025, 0.0])
+    assert np.isnan(w["slip_step_m"]) and w["engaged_to_m"] == 0.025 and "slipped_by_m" not in w
+    # two engaged samples: the step is the first one's (k = 1 reads R[1] - R[0])
+    w = _window([0.0, 0.01, 0.02], [0.0, 1.0, 0.0], 2)
+    assert w == pytest.approx({"engaged_to_m": 0.01, "slip_step_m": 0.01, "slipped_by_m": 0.02})
+
+
+def test_without_a_robot_step_the_slip_softening_is_half_a_percent_of_the_displacement():
+    from types import SimpleNamespace
+
+    from bayesrod.inference.likelihood import RodLikelihood
+
+    lik = object.__new__(RodLikelihood)
+    lik.data = [SimpleNamespace(D_m=np.ones(3), engaged_to_m=0.5, slipped_by_m=np.nan, slip_step_m=np.nan)]
+    lik.geometry, lik.effects = False, ()
+    lik._init_slip(True)
+    assert lik.slip_scale_m == pytest.approx([0.0025]) and np.isinf(lik.slip_hi_m).all()
