@@ -334,6 +334,8 @@ TARGETS["slip"] = (
                 "test_the_slip_term_reads_the_tabled_effect_and_moves_its_window_with_the_preload",
                 "test_the_summary_reports_the_data_slip_window_beside_the_model_slip",
                 "test_a_push_stopped_short_says_only_how_far_the_stem_held",
+                "test_the_slip_window_by_hand_with_a_stalled_robot_and_a_two_sample_push",
+                "test_without_a_robot_step_the_slip_softening_is_half_a_percent_of_the_displacement",
             )
         ),
     ],
