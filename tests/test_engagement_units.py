@@ -91,3 +91,44 @@ def test_a_dip_mid_push_is_not_a_slip():
     F = _push(rng, end_N=0.47, peak_N=0.47, sd_N=0.02, n_after=20)
     F[40:43] = 0.0
     assert detect_engagement(F).slip_index == 58
+
+
+@pytest.mark.parametrize(("level", "moved"), [(1.9, False), (2.2, True)])
+def test_the_change_point_needs_its_bic_where_the_gaps_alone_would_pass(level, moved):
+    """Three loaded samples at ``level`` sigma, then 57 at the sensor's zero, noise-free, sigma 0.5 given.
+    The split removes level^2 sigma^2 * 3 * 57 / 60 of the squared error; its BIC asks 3 sigma^2 log 60.
+    At 1.9 sigma the gaps (1.5 sigma; 3 se = 1.78 sigma) and the join pass and the BIC does not: the slip
+    stays where the threshold rule put it. At 2.2 sigma all pass and the slip moves past the three."""
+    from bayesrod.dataset.engagement import _slip_change_point
+
+    sigma = 0.5
+    a = level * sigma
+    F = np.r_[np.full(3, a), np.full(3, a), np.zeros(57)]  # three before the first low, then the window
+    reduction, bic = a**2 * 3 * 57 / 60, 3 * sigma**2 * np.log(60)
+    assert (reduction > bic) == moved  # the case sits on the side of the BIC it is meant to
+    assert a > 3 * sigma * np.sqrt(1 / 3 + 1 / 57) and a > 1.5 * sigma  # the gaps pass in both cases
+    assert _slip_change_point(F, 3, sigma) == (6 if moved else 3)
+
+
+@pytest.mark.parametrize(
+    ("n_loaded", "n_unloaded", "level", "pre", "moved"),
+    [
+        # 30 and 30: 3 se is 0.77 sigma and the BIC passes; the 1.5-sigma gap decides
+        (30, 30, 1.4, 1.4, False),
+        (30, 30, 1.6, 1.6, True),
+        # 3 and 4: 1.5 sigma and the BIC (5.8 sigma^2 against 1.71 level^2 sigma^2) pass; 3 se, 2.29 sigma, decides
+        (3, 4, 2.1, 2.1, False),
+        (3, 4, 2.4, 2.4, True),
+        # the join: the line starts at 2.4 sigma; the force just before the first low was 3 or 8 sigma
+        (3, 4, 2.4, 3.0, True),
+        (3, 4, 2.4, 8.0, False),
+    ],
+)
+def test_the_change_point_gaps_and_join_each_decide_somewhere(n_loaded, n_unloaded, level, pre, moved):
+    """Noise-free stretches on an untared sensor (baseline 1 N), sigma 0.5 N given: each condition of the
+    change point is the one that decides in one pair of cases."""
+    from bayesrod.dataset.engagement import _slip_change_point
+
+    sigma, base = 0.5, 1.0
+    F = base + np.r_[np.full(3, pre * sigma), np.full(n_loaded, level * sigma), np.zeros(n_unloaded)]
+    assert _slip_change_point(F, 3, sigma) == (3 + n_loaded if moved else 3)
