@@ -132,3 +132,13 @@ def test_the_change_point_gaps_and_join_each_decide_somewhere(n_loaded, n_unload
     sigma, base = 0.5, 1.0
     F = base + np.r_[np.full(3, pre * sigma), np.full(n_loaded, level * sigma), np.zeros(n_unloaded)]
     assert _slip_change_point(F, 3, sigma) == (3 + n_loaded if moved else 3)
+
+
+def test_without_a_noise_estimate_the_change_point_is_not_tried():
+    """sigma 0 (a sensor quantised so coarsely that the second differences' MAD is 0): no scale for the gaps
+    or the BIC, so the slip stays where the threshold rule put it, even where a split would fit better."""
+    from bayesrod.dataset.engagement import _slip_change_point
+
+    F = np.r_[np.full(3, 1.2), np.full(10, 1.0), np.zeros(10)]
+    assert _slip_change_point(F, 3, 0.0) == 3
+    assert _slip_change_point(F, 3, 0.1) == 13  # with a noise scale the stretch at 1.0 is loaded
