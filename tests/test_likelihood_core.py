@@ -304,6 +304,9 @@ def test_in_table_is_true_exactly_on_the_effect_axis(spring):
     params = {"EI0": EI0, "p": np.full(5, 0.43), "base_compliance": EI0 / (c * L)}
     np.testing.assert_allclose(spring.effect_coordinate(params), u, rtol=1e-9)
     np.testing.assert_array_equal(spring.in_table(params), [True, True, True, False, grid[-1] >= 0.5])
+    # the table's first node, u = 0 (an infinitely stiff spring: the clamp), is inside too
+    clamp = {"EI0": np.array([2.6]), "p": np.array([0.43]), "base_compliance": np.array([np.inf])}
+    assert grid[0] == 0.0 and spring.effect_coordinate(clamp)[0] == 0.0 and spring.in_table(clamp).all()
 
 
 def test_shapes_without_point_sds_have_one_noise_sd_in_metres(demo):
