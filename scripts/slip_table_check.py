@@ -4,8 +4,10 @@ For each one-height, forces-only SBC case of ``scripts/sbc_geometry.py`` (the se
 case's true parameters: the simulator's slip (the end of its loading branch, ``_loading_branch``: the largest
 contact displacement that ``force_from_displacement`` solves), the slip displacement the likelihood's table
 gives (``RodLikelihood.slip_displacement_m``: the branch end of ``ForceCurves``, the largest force with
-contact), the data's window (lo, hi] and the term's softening tau. Their difference over tau says how far
-the slip term pulls p, and ``p_shift`` by how much (the difference over the table's dD_s/dp).
+contact), the start of the model's slip range (``slip_displacement_m(..., early=True)``: where the force
+first comes within ``SLIP_FORCE_REL`` of the end's), the data's window (lo, hi] and the term's softening tau.
+Their difference over tau says how far the slip term pulls p, ``p_shift`` by how much (the difference over the
+table's dD_s/dp), and ``sim_in_model_range`` whether the simulator's slip lies in the model's range.
 
 Usage::
 

@@ -102,7 +102,7 @@ def _slip_change_point(F: NDArray, first_low: int, sigma: float) -> int:
         return first_low
     sse_flat = float(np.sum((W - W.mean()) ** 2))
     best, best_s = sse_flat - 3.0 * sigma**2 * np.log(m), 0
-    pre = float(np.median(F[max(0, first_low - 3) : first_low])) if first_low else float(W[0])
+    pre = float(np.median(F[max(0, first_low - 3) : first_low]))  # first_low >= 1: it comes after the peak
     for s in range(3, m - 3):  # at least three loaded and four unloaded samples
         before, after = W[:s], W[s:]
         line = np.polyval(np.polyfit(np.arange(s), before, 1), np.arange(s))

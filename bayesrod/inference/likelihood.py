@@ -269,20 +269,20 @@ class ForceCurves:
             lo, hi = np.where(found, mid, lo), np.where(found, hi, mid)
         u = np.linspace(0.0, 1.0, n_f)
         f = lo[..., None] * (1.0 - (1.0 - u) ** 2)  # (Q, P, n_f)
-        r = contact_from_force_nd(f, etas[..., None], pg[..., None], eff3)
-        d_all = r["xi_c"] - r["xi_c"][..., :1]
-        # the displacement where the force first comes within SLIP_FORCE_REL of the branch end's: where the
-        # branch ends on a plateau the end's displacement is ill-conditioned (docs/inference.md, "The slip")
-        r_e = contact_from_force_nd(lo * (1.0 - SLIP_FORCE_REL), etas, pg, eff2)
-        d_early_all = r_e["xi_c"] - r["xi_c"][..., 0]
+        # one more column in the same solve: the force SLIP_FORCE_REL below the branch end's, where the earliest
+        # slip the model allows lies (on a plateau the end's displacement is ill-conditioned; docs/inference.md)
+        f_early = lo[..., None] * (1.0 - SLIP_FORCE_REL)
+        r = contact_from_force_nd(np.concatenate([f, f_early], axis=-1), etas[..., None], pg[..., None], eff3)
+        d_both = r["xi_c"] - r["xi_c"][..., :1]
+        d_all, d_early_all = d_both[..., :-1], d_both[..., -1]
         out = []
         for q in range(Q):
             c = cls.__new__(cls)
             c.effects_nd = effects_nd
             d = d_all[q]
             c.d_end = d[:, -1].copy()
-            # at most d_end; where the solve found no contact (no branch), the end itself
-            c.d_early = np.fmin(np.where(np.isfinite(d_early_all[q]), d_early_all[q], c.d_end), c.d_end)
+            # at most d_end; where the solve found no contact (NaN), the end itself
+            c.d_early = np.fmin(d_early_all[q], c.d_end)
             c.end_slope = np.zeros(P)
             c._interp = []
             for k in range(P):
