@@ -142,3 +142,37 @@ def test_without_a_noise_estimate_the_change_point_is_not_tried():
     F = np.r_[np.full(3, 1.2), np.full(10, 1.0), np.zeros(10)]
     assert _slip_change_point(F, 3, 0.0) == 3
     assert _slip_change_point(F, 3, 0.1) == 13  # with a noise scale the stretch at 1.0 is loaded
+
+
+def test_the_fast_change_point_is_the_reference_loop_on_random_pushes():
+    """The cumulative-sum change point against one least-squares line per split, on 800 random windows:
+    a falling loaded stretch (0-30 samples, 0-5 sigma) then the unloaded sensor (0-40 samples), three samples
+    before the first low, white noise, offsets up to 1e3 N (an untared sensor). The splits' sums of squares
+    differ by rounding only, so the two pick the same sample; both outcomes occur (about three quarters move
+    the slip)."""
+    from bayesrod.dataset.engagement import _slip_change_point, _slip_change_point_reference
+
+    rng = np.random.default_rng(7)
+    moved = 0
+    for _ in range(800):
+        sigma = rng.uniform(0.01, 1.0)
+        n_loaded, n_unloaded = rng.integers(0, 31), rng.integers(0, 41)
+        start, end = rng.uniform(0.0, 5.0, 2) * sigma
+        loaded = np.linspace(max(start, end), min(start, end), n_loaded)
+        pre = rng.uniform(0.0, 8.0, 3) * sigma
+        F = rng.choice([0.0, 1.0, 1e3]) + np.r_[pre, loaded, np.zeros(n_unloaded)]
+        F = F + rng.normal(0.0, sigma, F.size) * rng.choice([0.0, 1.0], p=[0.1, 0.9])
+        got = _slip_change_point(F, 3, sigma)
+        assert got == _slip_change_point_reference(F, 3, sigma), (n_loaded, n_unloaded, sigma)
+        moved += got > 3
+    assert 300 < moved < 750
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 7, 60])
+def test_the_running_median_is_the_median_of_each_sample_and_its_neighbours(n):
+    """Against its definition, window by window, cut at the ends (where two samples' median is their mean)."""
+    from bayesrod.dataset.engagement import _running_median3
+
+    F = np.random.default_rng(n).normal(size=n)
+    want = [np.median(F[max(0, i - 1) : i + 2]) for i in range(n)]
+    np.testing.assert_allclose(_running_median3(F), want, rtol=1e-15, atol=0)
