@@ -354,6 +354,11 @@ TARGETS["engagement"] = (
     None,
 )
 
+# added in session 41: the diameter profile and Young's modulus's inputs (issue 22), and the corrected snooker move
+# every sampler uses (a wrong Hastings factor changes every posterior)
+TARGETS["width"] = ("bayesrod/vision/width.py", ["tests/test_width.py"], None)
+TARGETS["moves"] = ("bayesrod/inference/moves.py", ["tests/test_moves.py"], None)
+
 STATUSES = ("killed", "timeout", "survived", "no tests", "suspicious", "skipped", "segfault")
 
 
