@@ -84,6 +84,16 @@ def test_an_unzeroed_sensor_moves_the_baseline_and_nothing_else(case):
         assert a.baseline_N == pytest.approx(np.median(F[a.slip_index :]), abs=1e-12)
 
 
+def test_an_untared_sensor_and_a_short_fall_after_the_peak_where_the_change_point_cannot_help():
+    """Noise-free (sigma 0: no change point), a 10 N offset, the peak 5 N above it, two loaded samples after
+    the peak, then the slip: the threshold is a quarter of the rise above the first samples, wherever the
+    sensor's zero sits; the same push tared gives the same slip."""
+    rise = np.array([0.0, 0.0, 0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 4.9, 4.8, 0.0, 0.0, 0.0, 0.0, 0.0])
+    for offset in (0.0, 10.0):
+        eng = detect_engagement(offset + rise)
+        assert eng.noise_N == 0.0 and eng.slip_index == 10 and eng.baseline_N == offset
+
+
 def test_a_dip_mid_push_is_not_a_slip():
     """Three samples near zero mid-push (the probe lost the stem for an instant), then the force comes back:
     the slip is the real one at the end, where the force stays at the baseline."""
@@ -162,6 +172,7 @@ def test_the_fast_change_point_is_the_reference_loop_on_random_pushes():
         pre = rng.uniform(0.0, 8.0, 3) * sigma
         F = rng.choice([0.0, 1.0, 1e3]) + np.r_[pre, loaded, np.zeros(n_unloaded)]
         F = F + rng.normal(0.0, sigma, F.size) * rng.choice([0.0, 1.0], p=[0.1, 0.9])
+        sigma *= rng.choice([0.0, 1.0], p=[0.05, 0.95])  # now and then no noise estimate: no change point
         got = _slip_change_point(F, 3, sigma)
         assert got == _slip_change_point_reference(F, 3, sigma), (n_loaded, n_unloaded, sigma)
         moved += got > 3
