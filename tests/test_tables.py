@@ -362,3 +362,108 @@ def test_stem_and_condition_come_from_the_importer_and_group_the_datasets(tmp_pa
     assert doc["stem_id"] == "stalk7" and doc["condition"] == "cut1"
     groups, problems = find_groups(out)
     assert list(groups) == ["stalk7"] and sorted(groups["stalk7"]) == ["cut1", "intact"] and problems == []
+
+
+# --------------------------------------------------------------------------- long tables of many pushes
+def _long_table(path, recordings, header, sep=";"):
+    """One table holding many recordings: each is (leading id cells, force, position in mm); its time restarts
+    at 0. Returns the file line of each recording's first data row."""
+    lines, first = [sep.join(header), sep.join("" for _ in header)], []  # a blank-celled units row, skipped
+    for ids, F, x_mm in recordings:
+        first.append(len(lines) + 1)
+        lines += [
+            sep.join([*ids, f"{0.1 * i:.2f}", f"{f:.6f}", f"{x:.4f}"])
+            for i, (f, x) in enumerate(zip(F, x_mm, strict=True))
+        ]
+    path.write_text("\n".join(lines) + "\n")
+    return first
+
+
+def test_a_long_table_splits_into_one_dataset_per_stem_and_condition(tmp_path, capsys):
+    """A brace-root style long table (plant, treatment, time, load, position: two plants, two treatments, one
+    push each, in one file) imports into one dataset per plant and treatment, grouped for fit-group, every
+    force as written, every row traced to its line; a row without its plant is skipped and reported."""
+    from bayesrod.api.group import find_groups
+
+    rng = np.random.default_rng(3)
+    recs = []
+    for plant in ("P1", "P2"):
+        for treat, EI in (("intact", 1.8), ("cut", 1.1)):
+            x = np.linspace(0.0, 0.05, 40)
+            F = bayesrod.force_from_displacement(x, 0.5, EI, 0.5, 0.9).force_N + rng.normal(0, 0.005, x.size)
+            recs.append(((plant, treat), F, 1000 * x))
+    src = tmp_path / "series.csv"
+    first = _long_table(src, recs, ["Plant", "Treatment", "Time (s)", "Load (N)", "Position (mm)"])
+    text = src.read_text().splitlines()
+    text.insert(first[2] + 3, ";cut;9.99;0.5;1.0")  # a row without its plant, amid P2's intact push
+    src.write_text("\n".join(text) + "\n")
+    out = tmp_path / "out"
+    flags = ["--time", "Time (s)", "--force", "Load (N)", "--displacement", "Position (mm)"]
+    flags += ["--displacement-unit", "mm", "--height-m", "0.5", "--length-m", "0.9"]
+    code = main(
+        ["import", "table", str(src), "--out", str(out), *flags, "--stem-id-column", "Plant"]
+        + ["--condition-column", "Treatment"]
+    )
+    assert code == 0, capsys.readouterr().err
+    groups, problems = find_groups(out)
+    assert problems == [] and {k: sorted(v) for k, v in groups.items()} == {
+        "P1": ["cut", "intact"],
+        "P2": ["cut", "intact"],
+    }
+    for k, ((plant, treat), F, _) in enumerate(recs):
+        ds = read_dataset(out / f"{plant}_{treat}")
+        assert (ds.extra["stem_id"], ds.extra["condition"]) == (plant, treat)
+        (push,) = ds.pushes
+        np.testing.assert_allclose(push.force.force_N, F, atol=5e-7)
+        doc = json.loads((out / f"{plant}_{treat}" / "specimen.json").read_text())
+        start, end = first[k] + (k >= 3), first[k] + len(F) - 1 + (k >= 2)  # the inserted row shifts the rest
+        assert doc["pushes"][0]["source_rows"] == [start, end]
+    report = json.loads((out / "import_report.json").read_text())
+    skipped = [r for f in report["files"] for r in f["rows_skipped"]]
+    assert [r["line"] for r in skipped] == [2, first[2] + 4]  # the units row and the row without a plant
+    assert "column 'Plant'" in skipped[1]["reason"] and "empty" in skipped[1]["reason"]
+    assert [f["group"] for f in report["files"]][1] == {"stem_id": "P1", "condition": "cut"}
+
+
+def test_a_long_table_with_a_height_column_makes_one_dataset_of_several_heights(tmp_path, capsys):
+    """One stem pushed at three heights (in cm, a column), twice at 50 cm (a test column): one dataset, four
+    pushes at their heights, each naming its test; a height given twice, or a height of 0, is refused in one
+    line naming the file, the column and the recording."""
+    recs = []
+    for test, h_cm in (("t1", 40), ("t2", 50), ("t3", 50), ("t4", 60)):
+        x = np.linspace(0.0, 0.04, 30)
+        F = bayesrod.force_from_displacement(x, h_cm / 100, 1.8, 0.5, 0.9).force_N
+        recs.append(((test, str(h_cm)), F, 1000 * x))
+    src = tmp_path / "heights.csv"
+    _long_table(src, recs, ["Test", "Height (cm)", "Time (s)", "Load (N)", "Position (mm)"], sep=",")
+    flags = ["--time", "Time (s)", "--force", "Load (N)", "--displacement", "Position (mm)"]
+    flags += ["--displacement-unit", "mm", "--length-m", "0.9", "--specimen", "stem9"]
+    out = tmp_path / "out"
+    long = ["--test-column", "Test", "--height-column", "Height (cm)", "--height-unit", "cm"]
+    assert main(["import", "table", str(src), "--out", str(out), *flags, *long]) == 0, capsys.readouterr().err
+    doc = json.loads((out / "stem9" / "specimen.json").read_text())
+    got = [(p["id"], p["height_m"], p["source_test"]) for p in doc["pushes"]]
+    assert got == [("h400", 0.4, "t1"), ("h500", 0.5, "t2"), ("h500-2", 0.5, "t3"), ("h600", 0.6, "t4")]
+    assert main(["import", "table", str(src), "--out", str(tmp_path / "o2"), *flags, *long, "--height-m", "0.5"]) == 2
+    err = capsys.readouterr().err
+    assert "--height-m: expected either one contact height or a height column ('Height (cm)'), got both" in err
+    src.write_text(src.read_text().replace("t4,60,", "t4,0,"))
+    assert main(["import", "table", str(src), "--out", str(tmp_path / "o3"), *flags, *long]) == 2
+    err = capsys.readouterr().err
+    assert "heights.csv (Test = t4, Height (cm) = 0): column 'Height (cm)': height_m: expected a number > 0" in err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_two_tests_of_one_stem_without_a_test_column_are_refused_at_the_row_where_time_restarts(tmp_path, capsys):
+    x = np.linspace(0.0, 0.04, 30)
+    F = bayesrod.force_from_displacement(x, 0.5, 1.8, 0.5, 0.9).force_N
+    src = tmp_path / "twice.csv"
+    first = _long_table(src, [(("S1",), F, 1000 * x)] * 2, ["Stem", "Time (s)", "Load (N)", "Position (mm)"])
+    flags = ["--time", "Time (s)", "--force", "Load (N)", "--displacement", "Position (mm)", "--displacement-unit"]
+    flags += ["mm", "--height-m", "0.5", "--length-m", "0.9", "--stem-id-column", "Stem"]
+    assert main(["import", "table", str(src), "--out", str(tmp_path / "o"), *flags]) == 2
+    err = capsys.readouterr().err
+    assert (
+        f"twice.csv (Stem = S1), line {first[1]}: column 'Time (s)': expected increasing times, got 0 after 2.9" in err
+    )
+    assert "--test-column" in err and len(err.strip().splitlines()) == 1

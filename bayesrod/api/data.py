@@ -279,8 +279,11 @@ def import_table(files, *, metadata=None, **options):
         As :class:`bayesrod.dataset.importers.TableOptions`: ``time``, ``force`` (column names), either
         ``displacement`` or ``angle`` with ``arm_height_m``; units ``time_unit`` (s, ms, min), ``force_unit``
         (N, mN, kN, gf, kgf, lbf, ozf), ``displacement_unit`` (m, cm, mm, um, in), ``angle_unit`` (deg, rad);
-        ``height_m``, ``length_m``, ``length_unknown``, ``specimen``, ``species``, ``header_row``, ``cycles``
-        (``all``: every loading ramp a push; ``first``), ``force_sign``, ``tare`` (auto, none).
+        ``height_m``, ``length_m``, ``length_unknown``, ``specimen``, ``species``, ``stem_id``, ``condition``,
+        ``header_row``, ``cycles`` (``all``: every loading ramp a push; ``first``), ``force_sign``, ``tare``
+        (auto, none). A long table of many pushes: ``specimen_column``, ``stem_id_column``,
+        ``condition_column``, ``test_column`` (text ids) and ``height_column`` (with ``height_unit``, in place
+        of ``height_m``) name the columns whose values split it; rows sharing them are one recording.
 
     Returns
     -------

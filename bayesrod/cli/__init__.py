@@ -15,6 +15,7 @@ import argparse
 import json
 import logging
 import os
+import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -203,7 +204,26 @@ def build_parser() -> argparse.ArgumentParser:
         "--metadata",
         metavar="CSV",
         help="table: a CSV with a column file and any of height_m, "
-        "length_m, specimen, species, arm_height_m, force_sign, per file",
+        "length_m, specimen, species, arm_height_m, force_sign, stem_id, condition, per file",
+    )
+    im.add_argument(
+        "--stem-id-column",
+        metavar="COL",
+        help="table: a long table of many pushes: the column naming each row's stem (rows sharing the values of "
+        "every --*-column are one recording; docs/data.md)",
+    )
+    im.add_argument("--condition-column", metavar="COL", help="table: a long table: the column naming the condition")
+    im.add_argument("--specimen-column", metavar="COL", help="table: a long table: the column naming the specimen")
+    im.add_argument(
+        "--test-column", metavar="COL", help="table: a long table: the column naming each test (one push or cycle run)"
+    )
+    im.add_argument(
+        "--height-column",
+        metavar="COL",
+        help="table: a long table: the column of the contact height (in place of --height-m)",
+    )
+    im.add_argument(
+        "--height-unit", default="m", choices=list(DISPLACEMENT_UNITS), help="table: the height column's unit"
     )
     im.add_argument(
         "--header-row",
@@ -446,6 +466,12 @@ FLAGS = {
     "force_sign": "--force-sign",
     "tare": "--tare",
     "metadata": "--metadata",
+    "specimen_column": "--specimen-column",
+    "stem_id_column": "--stem-id-column",
+    "condition_column": "--condition-column",
+    "test_column": "--test-column",
+    "height_column": "--height-column",
+    "height_unit": "--height-unit",
 }
 
 
@@ -454,9 +480,11 @@ _COMMAND_FLAGS = {"predict": {"length_m": "--length"}, "import": {"height_m": "-
 
 
 def _flag_message(message: str, command: str) -> str:
-    """A library error ``name: ...`` shown with the flag that sets ``name``; output-exists hints."""
-    name, sep, rest = message.partition(":")
+    """A library error ``name: ...`` shown with the flag that sets ``name``, and every ``option name`` it
+    suggests shown as that flag."""
     flags = {**FLAGS, **_COMMAND_FLAGS.get(command, {})}
+    message = re.sub(r"\boption (\w+)", lambda m: flags.get(m.group(1), m.group(0)), message)
+    name, sep, rest = message.partition(":")
     if sep and name in flags:
         return f"{flags[name]}:{rest}"
     return message
@@ -725,6 +753,12 @@ def _import_table(args: argparse.Namespace) -> int:
         condition=args.condition,
         metadata=args.metadata,
         header_row=args.header_row,
+        specimen_column=args.specimen_column,
+        stem_id_column=args.stem_id_column,
+        condition_column=args.condition_column,
+        test_column=args.test_column,
+        height_column=args.height_column,
+        height_unit=args.height_unit,
         cycles=args.cycles,
         force_sign=args.force_sign,
         tare=args.tare,

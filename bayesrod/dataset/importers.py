@@ -402,6 +402,12 @@ class TableOptions:
     cycles: str = "all"
     force_sign: int = 1
     tare: str = "auto"
+    specimen_column: str | None = None
+    stem_id_column: str | None = None
+    condition_column: str | None = None
+    height_column: str | None = None
+    height_unit: str = "m"
+    test_column: str | None = None
 
     def __post_init__(self) -> None:
         for fld, val, allowed in (
@@ -409,6 +415,7 @@ class TableOptions:
             ("force_unit", self.force_unit, FORCE_UNITS),
             ("displacement_unit", self.displacement_unit, DISPLACEMENT_UNITS),
             ("angle_unit", self.angle_unit, ANGLE_UNITS),
+            ("height_unit", self.height_unit, DISPLACEMENT_UNITS),
             ("cycles", self.cycles, ("first", "all")),
             ("tare", self.tare, ("auto", "none")),
         ):
@@ -421,6 +428,24 @@ class TableOptions:
             )
         if self.force_sign not in (1, -1):
             raise ValueError(f"force_sign: expected +1 or -1, got {self.force_sign!r}")
+        if self.height_column is not None and self.height_m is not None:
+            raise ValueError(
+                f"height_m: expected either one contact height or a height column ({self.height_column!r}), "
+                f"got both ({self.height_m:g} m)"
+            )
+
+    @property
+    def group_columns(self) -> dict[str, str]:
+        """The columns that split one table into recordings: {option: header name} (text columns, and the
+        height column read as a number)."""
+        named = {
+            "specimen": self.specimen_column,
+            "stem_id": self.stem_id_column,
+            "condition": self.condition_column,
+            "test": self.test_column,
+            "height_m": self.height_column,
+        }
+        return {k: v for k, v in named.items() if v is not None}
 
 
 def _file_options(base: TableOptions, meta: dict) -> TableOptions:
@@ -448,8 +473,65 @@ def _positive(name: str, v) -> float:
     return float(v)
 
 
-def import_recording(path: Path, opt: TableOptions) -> dict:
+def read_recordings(path: Path, opt: TableOptions) -> list[dict]:
+    """The recordings of one table file, each read, converted to SI and split into loading ramps; in memory.
+
+    A file is one recording, unless ``opt`` names columns that split it (:attr:`TableOptions.group_columns`:
+    a specimen's, a stem's, a condition's or a test's id, or the contact height): then the rows sharing
+    their values, in file order, are one recording each (a long table of many pushes).
+
+    Returns a list of dicts as :func:`import_recording` returns, each with ``group`` ({option: value} of
+    the splitting columns; empty for a whole file) and ``options`` (``opt`` with the group's values set).
+    """
+    from dataclasses import replace
+
+    from .tables import read_table
+
+    groups = opt.group_columns
+    cols = [opt.time, opt.force] + ([opt.displacement] if opt.displacement else [opt.angle])
+    numeric = cols + ([opt.height_column] if opt.height_column else [])
+    texts = [c for k, c in groups.items() if k != "height_m"]
+    tab = read_table(path, numeric, header_row=opt.header_row, name=str(path), text_columns=texts)
+    if not groups:
+        return [{**import_recording(path, opt, tab), "group": {}, "options": opt}]
+    keys = list(
+        zip(
+            *(
+                tab.columns[c] * DISPLACEMENT_UNITS[opt.height_unit] if k == "height_m" else tab.text[c]
+                for k, c in groups.items()
+            ),
+            strict=True,
+        )
+    )
+    order = list(dict.fromkeys(keys))  # the recordings in the order their first rows appear
+    out = []
+    for key in order:
+        rows = np.flatnonzero([k == key for k in keys])
+        group = {k: (float(v) if k == "height_m" else str(v)) for k, v in zip(groups, key, strict=True)}
+        sub = replace(
+            tab,
+            columns={c: v[rows] for c, v in tab.columns.items()},
+            text={c: v[rows] for c, v in tab.text.items()},
+            lines=tab.lines[rows],
+            skipped=tab.skipped if key == order[0] else (),  # the file's skipped lines, reported once
+        )
+        gopt = replace(opt, height_column=None, **{k: v for k, v in group.items() if k != "test"})
+        unit = DISPLACEMENT_UNITS[opt.height_unit]  # the height named as the column holds it
+        named = (f"{groups[k]} = {v / unit:g}" if k == "height_m" else f"{groups[k]} = {v}" for k, v in group.items())
+        where = f"{path} ({', '.join(named)})"
+        if "height_m" in group and not group["height_m"] > 0:
+            raise ValueError(
+                f"{where}: column {opt.height_column!r}: height_m: expected a number > 0, got {group['height_m']:g}"
+            )
+        out.append({**import_recording(path, gopt, sub, where=where), "group": group, "options": gopt})
+    return out
+
+
+def import_recording(path: Path, opt: TableOptions, tab=None, *, where: str | None = None) -> dict:
     """One recording read, converted to SI, split into loading ramps; in memory.
+
+    ``tab``: the recording's rows already read (:func:`read_recordings`), else the whole file is read;
+    ``where`` names the recording in messages (default: the file).
 
     Returns a dict: ``pushes`` (list of dicts with ``cycle``, ``force`` columns, ``unloading`` columns or
     None, ``preload_N``, ``tared_N``, ``rows`` (first and last file line)), ``report`` (what was done).
@@ -457,6 +539,8 @@ def import_recording(path: Path, opt: TableOptions) -> dict:
     from .plausibility import noise_sd, reversal_tolerance
     from .tables import delimiter_name, read_table
 
+    prefix = f"{where}: " if where else ""  # a recording of a long table is named in every message
+    where = where or str(path)
     height = _positive("height_m", opt.height_m)
     if opt.length_m is None:
         raise ValueError(
@@ -466,9 +550,12 @@ def import_recording(path: Path, opt: TableOptions) -> dict:
         )
     length = _positive("length_m", opt.length_m)
     if not height < length:
-        raise ValueError(f"height_m: expected a contact height below the stem length {length:g} m, got {height:g}")
+        raise ValueError(
+            f"{prefix}height_m: expected a contact height below the stem length {length:g} m, got {height:g}"
+        )
     cols = [opt.time, opt.force] + ([opt.displacement] if opt.displacement else [opt.angle])
-    tab = read_table(path, cols, header_row=opt.header_row, name=str(path))
+    if tab is None:
+        tab = read_table(path, cols, header_row=opt.header_row, name=str(path))
     t = tab.columns[opt.time] * TIME_UNITS[opt.time_unit]
     F = opt.force_sign * tab.columns[opt.force] * FORCE_UNITS[opt.force_unit]
     if opt.displacement:
@@ -481,17 +568,22 @@ def import_recording(path: Path, opt: TableOptions) -> dict:
     if np.any(dt <= 0):
         k = int(np.flatnonzero(dt <= 0)[0])
         raise ValueError(
-            f"{path}, line {tab.lines[k + 1]}: column {opt.time!r}: expected increasing times, got "
+            f"{where}, line {tab.lines[k + 1]}: column {opt.time!r}: expected increasing times, got "
             f"{tab.columns[opt.time][k + 1]:g} after {tab.columns[opt.time][k]:g}"
+            + (
+                " (two tests in one recording? name the column that tells them apart: option test_column)"
+                if prefix
+                else ""
+            )
         )
     if tab.n_rows < 5:
-        raise ValueError(f"{path}: expected at least 5 data rows, got {tab.n_rows}")
+        raise ValueError(f"{where}: expected at least 5 data rows, got {tab.n_rows}")
     segs = split_cycles(x)
     loads = [s for s in segs if s.loading and s.stop - s.start >= 5]
     tol = reversal_tolerance(x)
     loads = [s for s in loads if x[s.stop - 1] - x[s.start] > 2 * tol]
     if not loads:
-        raise ValueError(f"{path}: expected at least one loading ramp (displacement advancing), got none")
+        raise ValueError(f"{where}: expected at least one loading ramp (displacement advancing), got none")
     if opt.cycles == "first":
         loads = loads[:1]
     pushes = []
@@ -615,6 +707,56 @@ def _expand(files) -> list[Path]:
     return out
 
 
+def _add_recording(specimens: dict, report: dict, p: Path, rec: dict) -> None:
+    """File one recording's pushes under its specimen (``specimens``: name -> options, pushes, files, sources)
+    and its report under ``report["files"]``."""
+    opt = rec["options"]
+    split = {k for k in rec["group"] if k in ("stem_id", "condition")}
+    # a long table split by stem or condition: one dataset per stem and condition, named by them
+    default = "_".join(v for v in (opt.stem_id, opt.condition) if v) if split else ""
+    name = opt.specimen or default or p.stem
+    spec = specimens.setdefault(name, {"opt": opt, "pushes": [], "files": {}, "sources": []})
+    for k in ("stem_id", "condition"):  # one stem under one condition per dataset (docs/format.md)
+        if getattr(spec["opt"], k) != getattr(opt, k):
+            raise ValueError(
+                f"{p}: {k}: expected the same {k} as the other recordings of {name} "
+                f"({getattr(spec['opt'], k)!r}), got {getattr(opt, k)!r}"
+            )
+    if spec["opt"].length_m != opt.length_m:
+        raise ValueError(
+            f"{p}: length_m: expected the same stem length as the other recordings of {name} "
+            f"({spec['opt'].length_m:g} m), got {opt.length_m:g}"
+        )
+    if p.name not in spec["sources"]:
+        spec["sources"].append(p.name)
+    multi = len(rec["pushes"]) > 1
+    for push in rec["pushes"]:
+        pid = f"h{round(rec['height_m'] * 1000):d}" + (f"-c{push['cycle']}" if multi else "")
+        taken = {e["id"] for e in spec["pushes"]}
+        base, j = pid, 2
+        while pid in taken:
+            pid, j = f"{base}-{j}", j + 1
+        entry = {
+            "id": pid,
+            "height_m": rec["height_m"],
+            "direction": 1,
+            "force": f"{pid}/force.csv",
+            "cycle": push["cycle"],
+            "source_file": p.name,
+            "source_rows": push["rows"],
+        }
+        if "test" in rec["group"]:
+            entry["source_test"] = rec["group"]["test"]
+        spec["files"][f"{pid}/force.csv"] = push["force"]
+        if push["unloading"] is not None:
+            entry["unloading"] = f"{pid}/unloading.csv"
+            spec["files"][f"{pid}/unloading.csv"] = push["unloading"]
+        if push["preload_N"]:
+            entry["preload_N"] = push["preload_N"]
+        spec["pushes"].append(entry)
+    report["files"].append({**rec["report"], **({"group": rec["group"]} if rec["group"] else {}), "specimen": name})
+
+
 def import_tables(files, options: TableOptions, metadata=None) -> TableImport:
     """Turn raw rig tables into datasets (one per specimen; one push per loading ramp); nothing written.
 
@@ -630,46 +772,8 @@ def import_tables(files, options: TableOptions, metadata=None) -> TableImport:
     report = {"importer": "bayesrod import table", "options": asdict(options), "files": []}
     for p in paths:
         fmeta = meta.get(p.name, meta.get(str(p), {}))
-        opt = _file_options(options, fmeta)
-        rec = import_recording(p, opt)
-        name = opt.specimen or p.stem
-        spec = specimens.setdefault(name, {"opt": opt, "pushes": [], "files": {}, "sources": []})
-        for k in ("stem_id", "condition"):  # one stem under one condition per dataset (docs/format.md)
-            if getattr(spec["opt"], k) != getattr(opt, k):
-                raise ValueError(
-                    f"{p}: {k}: expected the same {k} as the other files of {name} "
-                    f"({getattr(spec['opt'], k)!r}), got {getattr(opt, k)!r}"
-                )
-        if spec["opt"].length_m != opt.length_m:
-            raise ValueError(
-                f"{p}: length_m: expected the same stem length as the other files of {name} "
-                f"({spec['opt'].length_m:g} m), got {opt.length_m:g}"
-            )
-        spec["sources"].append(p.name)
-        multi = len(rec["pushes"]) > 1
-        for push in rec["pushes"]:
-            pid = f"h{round(rec['height_m'] * 1000):d}" + (f"-c{push['cycle']}" if multi else "")
-            taken = {e["id"] for e in spec["pushes"]}
-            base, j = pid, 2
-            while pid in taken:
-                pid, j = f"{base}-{j}", j + 1
-            entry = {
-                "id": pid,
-                "height_m": rec["height_m"],
-                "direction": 1,
-                "force": f"{pid}/force.csv",
-                "cycle": push["cycle"],
-                "source_file": p.name,
-                "source_rows": push["rows"],
-            }
-            spec["files"][f"{pid}/force.csv"] = push["force"]
-            if push["unloading"] is not None:
-                entry["unloading"] = f"{pid}/unloading.csv"
-                spec["files"][f"{pid}/unloading.csv"] = push["unloading"]
-            if push["preload_N"]:
-                entry["preload_N"] = push["preload_N"]
-            spec["pushes"].append(entry)
-        report["files"].append({**rec["report"], "specimen": name})
+        for rec in read_recordings(p, _file_options(options, fmeta)):
+            _add_recording(specimens, report, p, rec)
     docs = []
     for name, spec in specimens.items():
         opt = spec["opt"]

@@ -13,7 +13,7 @@ import csv
 import math
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +30,8 @@ class Table:
     """Numeric columns of one table, by header name, shape (n,) each, in file order.
 
     ``header_line`` is the 1-based line of the header; ``metadata`` the lines above it; ``skipped`` the
-    (line, reason) of every data line that was not read.
+    (line, reason) of every data line that was not read; ``text`` the columns read as text (ids, names),
+    by header name, shape (n,) of str each.
     """
 
     columns: dict
@@ -41,6 +42,7 @@ class Table:
     metadata: tuple[str, ...]
     skipped: tuple[tuple[int, str], ...]
     lines: NDArray  # 1-based file line of each row read, shape (n,)
+    text: dict = field(default_factory=dict)
 
     @property
     def n_rows(self) -> int:
@@ -74,7 +76,14 @@ def _number(cell: str, decimal: str) -> float | None:
     return v if math.isfinite(v) else None
 
 
-def read_table(source, columns: Sequence[str], *, header_row: int | None = None, name: str | None = None) -> Table:
+def read_table(
+    source,
+    columns: Sequence[str],
+    *,
+    header_row: int | None = None,
+    name: str | None = None,
+    text_columns: Sequence[str] = (),
+) -> Table:
     """Read the asked ``columns`` (header names) of a delimited table.
 
     Parameters
@@ -85,6 +94,9 @@ def read_table(source, columns: Sequence[str], *, header_row: int | None = None,
         Header names to read; each must appear in the header row.
     header_row : int or None
         1-based line of the header; default: the first line naming every column.
+    text_columns : sequence of str
+        Header names read as text (a specimen's or a test's id, a condition's name); a row whose cell is
+        empty there is skipped and reported like a row whose number is not one.
     """
     if isinstance(source, Path) or (isinstance(source, str) and "\n" not in source and Path(source).is_file()):
         path = Path(source)
@@ -102,6 +114,9 @@ def read_table(source, columns: Sequence[str], *, header_row: int | None = None,
     columns = list(dict.fromkeys(columns))
     if not columns:
         raise ValueError(f"{name}: expected at least one column name to read, got none")
+    texts = [c for c in dict.fromkeys(text_columns) if c not in columns]
+    numeric = columns
+    columns = columns + texts
     lines = text.splitlines()
     found = None
     if header_row is not None:
@@ -143,7 +158,7 @@ def read_table(source, columns: Sequence[str], *, header_row: int | None = None,
     decimal = "."
     if delim != ",":
         sample = [_cells(line, delim) for _, line in body[:200]]
-        cells = [r[idx[c]] for r in sample for c in columns if len(r) == len(header) and r[idx[c]]]
+        cells = [r[idx[c]] for r in sample for c in numeric if len(r) == len(header) and r[idx[c]]]
         commas = sum(bool(_DECIMAL_COMMA.match(x)) for x in cells)
         dots = sum(bool(_DECIMAL_DOT.match(x)) for x in cells)
         if commas and commas >= dots:  # integers say nothing; more comma decimals than dot decimals decide
@@ -157,10 +172,11 @@ def read_table(source, columns: Sequence[str], *, header_row: int | None = None,
             continue
         row = {}
         for c in columns:
-            v = _number(cells[idx[c]], decimal)
-            if v is None:
+            v = cells[idx[c]] if c in texts else _number(cells[idx[c]], decimal)
+            if v is None or v == "":
                 row = None
-                skipped.append((lineno, f"column {c!r}: {cells[idx[c]]!r} is not a finite number"))
+                why = "is empty" if c in texts else "is not a finite number"
+                skipped.append((lineno, f"column {c!r}: {cells[idx[c]]!r} {why}"))
                 break
             row[c] = v
         if row is None:
@@ -172,7 +188,7 @@ def read_table(source, columns: Sequence[str], *, header_row: int | None = None,
         why = f" (first: line {skipped[0][0]}, {skipped[0][1]})" if skipped else ""
         raise ValueError(f"{name}: expected numeric data rows below the header (line {i0 + 1}), got none{why}")
     return Table(
-        columns={c: np.asarray(v, float) for c, v in vals.items()},
+        columns={c: np.asarray(vals[c], float) for c in numeric},
         header=tuple(header),
         header_line=i0 + 1,
         delimiter=delim,
@@ -180,6 +196,7 @@ def read_table(source, columns: Sequence[str], *, header_row: int | None = None,
         metadata=tuple(lines[:i0]),
         skipped=tuple(skipped),
         lines=np.asarray(kept, int),
+        text={c: np.asarray(vals[c], str) for c in texts},
     )
 
 
