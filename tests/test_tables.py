@@ -467,3 +467,30 @@ def test_two_tests_of_one_stem_without_a_test_column_are_refused_at_the_row_wher
         f"twice.csv (Stem = S1), line {first[1]}: column 'Time (s)': expected increasing times, got 0 after 2.9" in err
     )
     assert "--test-column" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_table_without_time_and_a_rig_counting_the_push_as_negative(tmp_path, capsys):
+    """Force and displacement only, the displacement falling as the push advances: refused with the flag that
+    fixes it named; with --displacement-sign -1 and no --time, the same push as the positive table's, the
+    sample index as its time and the assumption recorded."""
+    x = np.linspace(0.0, 0.04, 30)
+    F = bayesrod.force_from_displacement(x, 0.5, 1.8, 0.5, 0.9).force_N
+    for name, sign in (("pos.csv", 1), ("neg.csv", -1)):
+        lines = ["Load (N),Stroke (mm)"] + [f"{f:.6f},{sign * 1000 * d:.4f}" for f, d in zip(F, x, strict=True)]
+        (tmp_path / name).write_text("\n".join(lines) + "\n")
+    flags = ["--force", "Load (N)", "--displacement", "Stroke (mm)", "--displacement-unit", "mm"]
+    flags += ["--height-m", "0.5", "--length-m", "0.9"]
+    assert main(["import", "table", str(tmp_path / "neg.csv"), "--out", str(tmp_path / "bad"), *flags]) == 2
+    err = capsys.readouterr().err
+    assert "expected at least one loading ramp" in err and "needs --displacement-sign -1" in err
+    outs = {}
+    for name, extra in (("pos.csv", []), ("neg.csv", ["--displacement-sign", "-1"])):
+        out = tmp_path / f"out-{name}"
+        assert main(["import", "table", str(tmp_path / name), "--out", str(out), *flags, *extra]) == 0
+        outs[name] = read_dataset(out / Path(name).stem).pushes[0].force
+    for col in ("time_s", "force_N", "robot_x_m"):
+        np.testing.assert_array_equal(getattr(outs["neg.csv"], col), getattr(outs["pos.csv"], col))
+    np.testing.assert_array_equal(outs["pos.csv"].time_s, np.arange(30.0))
+    doc = json.loads((tmp_path / "out-neg.csv" / "neg" / "specimen.json").read_text())
+    assert "sample index" in doc["provenance"]["assumptions"]["time_s"]
+    assert doc["provenance"]["options"]["displacement_sign"] == -1

@@ -162,7 +162,11 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="table: the length is a rough guess (marked length_m_approximate in specimen.json)",
     )
-    im.add_argument("--time", metavar="COL", help="table: the time column's header name")
+    im.add_argument(
+        "--time",
+        metavar="COL",
+        help="table: the time column's header name (without it, the sample index is the time: forces only)",
+    )
     im.add_argument(
         "--force",
         nargs="?",
@@ -204,7 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--metadata",
         metavar="CSV",
         help="table: a CSV with a column file and any of height_m, "
-        "length_m, specimen, species, arm_height_m, force_sign, stem_id, condition, per file",
+        "length_m, specimen, species, arm_height_m, force_sign, displacement_sign, stem_id, condition, per file",
     )
     im.add_argument(
         "--stem-id-column",
@@ -243,6 +247,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=1,
         choices=[1, -1],
         help="table: -1 when the load cell reads the push as negative",
+    )
+    im.add_argument(
+        "--displacement-sign",
+        type=int,
+        default=1,
+        choices=[1, -1],
+        help="table: -1 when the rig counts the push's displacement (or arm angle) as negative",
     )
     im.add_argument(
         "--tare",
@@ -464,6 +475,7 @@ FLAGS = {
     "header_row": "--header-row",
     "cycles": "--cycles",
     "force_sign": "--force-sign",
+    "displacement_sign": "--displacement-sign",
     "tare": "--tare",
     "metadata": "--metadata",
     "specimen_column": "--specimen-column",
@@ -729,9 +741,8 @@ def _import_table(args: argparse.Namespace) -> int:
     from ..api import import_table
     from ..dataset import validate_dataset
 
-    for flag, val in (("--time", args.time), ("--force", args.force_col)):
-        if not val:
-            raise ValueError(f"{flag}: expected the column's header name, got none")
+    if not args.force_col:
+        raise ValueError("--force: expected the column's header name, got none")
     out = _prepare_out(args)
     res = import_table(
         args.src,
@@ -761,6 +772,7 @@ def _import_table(args: argparse.Namespace) -> int:
         height_unit=args.height_unit,
         cycles=args.cycles,
         force_sign=args.force_sign,
+        displacement_sign=args.displacement_sign,
         tare=args.tare,
     )
     res.save(out, overwrite=args.force)

@@ -326,6 +326,7 @@ METADATA_FIELDS = (
     "species",
     "arm_height_m",
     "force_sign",
+    "displacement_sign",
     "stem_id",
     "condition",
 )
@@ -378,12 +379,15 @@ def split_cycles(x, tol: float | None = None) -> list[Segment]:
     return segs
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TableOptions:
-    """How to read one kind of rig table (the flags of ``bayesrod import table``)."""
+    """How to read one kind of rig table (the flags of ``bayesrod import table``).
 
-    time: str
+    ``time`` may be None for a table without a time column: the sample index (0, 1, 2, ... s) is then the
+    time, which a forces-only fit never reads (shapes are matched to forces by time)."""
+
     force: str
+    time: str | None = None
     displacement: str | None = None
     angle: str | None = None
     arm_height_m: float | None = None
@@ -401,6 +405,7 @@ class TableOptions:
     header_row: int | None = None
     cycles: str = "all"
     force_sign: int = 1
+    displacement_sign: int = 1
     tare: str = "auto"
     specimen_column: str | None = None
     stem_id_column: str | None = None
@@ -426,8 +431,9 @@ class TableOptions:
                 "displacement: expected either a displacement column or an angle column with an arm height, "
                 f"got {'both' if self.displacement else 'neither'}"
             )
-        if self.force_sign not in (1, -1):
-            raise ValueError(f"force_sign: expected +1 or -1, got {self.force_sign!r}")
+        for fld in ("force_sign", "displacement_sign"):
+            if getattr(self, fld) not in (1, -1):
+                raise ValueError(f"{fld}: expected +1 or -1, got {getattr(self, fld)!r}")
         if self.height_column is not None and self.height_m is not None:
             raise ValueError(
                 f"height_m: expected either one contact height or a height column ({self.height_column!r}), "
@@ -461,8 +467,11 @@ def _file_options(base: TableOptions, meta: dict) -> TableOptions:
                 v = float(v)
             except ValueError:
                 raise ValueError(f"metadata: column {k}: expected a number, got {v!r}") from None
-        if k == "force_sign":
-            v = int(float(v))
+        if k in ("force_sign", "displacement_sign"):
+            try:
+                v = int(float(v))
+            except ValueError:
+                raise ValueError(f"metadata: column {k}: expected +1 or -1, got {v!r}") from None
         kw[k] = v
     return replace(base, **kw)
 
@@ -488,7 +497,7 @@ def read_recordings(path: Path, opt: TableOptions) -> list[dict]:
     from .tables import read_table
 
     groups = opt.group_columns
-    cols = [opt.time, opt.force] + ([opt.displacement] if opt.displacement else [opt.angle])
+    cols = [c for c in (opt.time, opt.force) if c] + ([opt.displacement] if opt.displacement else [opt.angle])
     numeric = cols + ([opt.height_column] if opt.height_column else [])
     texts = [c for k, c in groups.items() if k != "height_m"]
     tab = read_table(path, numeric, header_row=opt.header_row, name=str(path), text_columns=texts)
@@ -553,10 +562,13 @@ def import_recording(path: Path, opt: TableOptions, tab=None, *, where: str | No
         raise ValueError(
             f"{prefix}height_m: expected a contact height below the stem length {length:g} m, got {height:g}"
         )
-    cols = [opt.time, opt.force] + ([opt.displacement] if opt.displacement else [opt.angle])
+    cols = [c for c in (opt.time, opt.force) if c] + ([opt.displacement] if opt.displacement else [opt.angle])
     if tab is None:
         tab = read_table(path, cols, header_row=opt.header_row, name=str(path))
-    t = tab.columns[opt.time] * TIME_UNITS[opt.time_unit]
+    if opt.time is None:  # no time column: the sample index, which only shapes (matched by time) would read
+        t = np.arange(tab.n_rows, dtype=float)
+    else:
+        t = tab.columns[opt.time] * TIME_UNITS[opt.time_unit]
     F = opt.force_sign * tab.columns[opt.force] * FORCE_UNITS[opt.force_unit]
     if opt.displacement:
         x = tab.columns[opt.displacement] * DISPLACEMENT_UNITS[opt.displacement_unit]
@@ -564,6 +576,7 @@ def import_recording(path: Path, opt: TableOptions, tab=None, *, where: str | No
         arm = _positive("arm_height_m", opt.arm_height_m)
         a = tab.columns[opt.angle] * ANGLE_UNITS[opt.angle_unit]
         x = arm * np.sin(a - a[0])  # the contact advances by H sin(angle - angle at the start)
+    x = opt.displacement_sign * x
     dt = np.diff(t)
     if np.any(dt <= 0):
         k = int(np.flatnonzero(dt <= 0)[0])
@@ -583,7 +596,16 @@ def import_recording(path: Path, opt: TableOptions, tab=None, *, where: str | No
     tol = reversal_tolerance(x)
     loads = [s for s in loads if x[s.stop - 1] - x[s.start] > 2 * tol]
     if not loads:
-        raise ValueError(f"{where}: expected at least one loading ramp (displacement advancing), got none")
+        backwards = bool(x[int(np.argmax(F))] < x[0] - 2 * tol)  # the force peaks where the sensor went back
+        raise ValueError(
+            f"{where}: expected at least one loading ramp (displacement advancing), got none"
+            + (
+                " (the force rises while the displacement falls: a rig that counts the push as negative needs "
+                "option displacement_sign -1)"
+                if backwards
+                else ""
+            )
+        )
     if opt.cycles == "first":
         loads = loads[:1]
     pushes = []
@@ -797,6 +819,11 @@ def import_tables(files, options: TableOptions, metadata=None) -> TableImport:
                 + (" (a rough guess: the length is unknown)" if opt.length_unknown else ""),
                 "displacement": "the sensor's advance since contact onset (or since the first sample of a "
                 "ramp that starts loaded); probe compliance neglected",
+                **(
+                    {"time_s": "no time column: the sample index (0, 1, 2, ... s); shapes cannot be matched"}
+                    if opt.time is None
+                    else {}
+                ),
             },
         }
         docs.append((name, doc, spec["files"]))
