@@ -525,11 +525,43 @@ def test_predictor_slip_is_where_the_forward_solve_slips_with_a_sampled_spring()
     EI0, p, kb = _sampled_compliance(3)
     axis, u = _effect_axis({"EI0": EI0, "p": p, "base_compliance": kb}, L)
     pred = HeightPredictor(h, L, np.linspace(0, 0.1, 5), (p.min(), p.max()), effect_axis=axis)
-    slip = pred.slip_m(p, u)
+    slip, early = pred.slip_m(p, u), pred.slip_m(p, u, early=True)
     D = np.linspace(0.0, 1.2 * L, 2401)
     for k in range(3):
-        first = D[force_from_displacement(D, h, EI0[k], p[k], L, Effects(base_compliance=kb[k])).slipped][0]
+        eff = Effects(base_compliance=kb[k])
+        solved = force_from_displacement(D, h, EI0[k], p[k], L, eff)
+        first = D[solved.slipped][0]
         assert slip[k] == pytest.approx(first, rel=5e-3), (k, slip[k], first)  # measured: within 0.3%
+        # the plateau's start on the spring's axis too: the force within 0.1% of the branch's largest
+        F_early = force_from_displacement(np.array([early[k]]), h, EI0[k], p[k], L, eff).force_N[0]
+        assert early[k] < slip[k] and 0.997 < F_early / np.nanmax(solved.force_N) < 0.9995, (k, early[k])
+
+
+def test_the_plateau_before_the_slip_starts_where_the_force_is_within_its_tolerance_of_the_branch_end():
+    """The early slip (the plateau's start, where the stem may already leave the probe) lies before the branch
+    end, with the force there within SLIP_FORCE_REL (0.1%) of the branch's largest force, by forward solves on
+    a fine grid; design.json reports it beside the slip, from the same draws."""
+    from bayesrod.inference.likelihood import SLIP_FORCE_REL
+    from bayesrod.physics import force_from_displacement
+
+    L, h = 0.8, 0.6
+    p = np.array([0.35, 0.43, 0.5])
+    pred = HeightPredictor(h, L, np.linspace(0, 0.1, 5), (0.3, 0.55))
+    early, end = pred.slip_m(p, early=True), pred.slip_m(p)
+    for k in range(3):
+        F = force_from_displacement(np.linspace(0.8 * early[k], 1.05 * end[k], 301), h, 1.0, p[k], L).force_N
+        top = np.nanmax(F)
+        F_early = force_from_displacement(np.array([early[k]]), h, 1.0, p[k], L).force_N[0]
+        assert early[k] < end[k] - 0.003  # the plateau is millimetres long: 3.9, 9.4 and 18 mm here
+        assert 1 - 2 * SLIP_FORCE_REL < F_early / top < 1 - 0.5 * SLIP_FORCE_REL, (k, F_early / top)
+    rng = np.random.default_rng(0)
+    draws = {"EI0": 2.6 * np.exp(0.05 * rng.standard_normal(50)), "p": 0.43 + 0.03 * rng.standard_normal(50)}
+    res = design_heights(
+        {**draws, "sigma_force_N": np.full(50, 0.03)}, L, [h], PushPlan(0.3, 10, None), method="gaussian"
+    )
+    row = res["candidates"][0]
+    assert row["slip_from_displacement_m"] == pytest.approx(np.median(pred.slip_m(draws["p"], early=True)), rel=1e-3)
+    assert row["slip_from_displacement_m"] < row["slip_displacement_m"]
 
 
 def test_a_varying_tabled_effect_is_an_axis_however_small_its_spread_and_only_one_may_vary():

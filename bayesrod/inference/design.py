@@ -143,11 +143,13 @@ class HeightPredictor:
             rows = ForceCurves.batch(eta, self.p_grid, effects_nd=effect_axis.nondim(effect_axis.grid))
             self.f_table = np.stack([c.force(self.D / self.L) for c in rows])  # (E, P, n)
             self.d_end = np.stack([c.d_end for c in rows])  # (E, P)
+            self.d_early = np.stack([c.d_early for c in rows])  # (E, P)
         else:
             eff_nd = Effects.from_mapping(tabled).nondim(self.L, EI0_ref) if tabled else None
             curves = ForceCurves(self.h / self.L, self.p_grid, effects_nd=eff_nd)
             self.f_table = curves.force(self.D / self.L)  # (P, n)
             self.d_end = curves.d_end  # (P,)
+            self.d_early = curves.d_early  # (P,): where the force comes within SLIP_FORCE_REL of the end's
         self.offset = eff.force_offset
         self.yield_moment = eff.yield_moment
 
@@ -181,11 +183,14 @@ class HeightPredictor:
         off = self.offset if offset is None else np.atleast_1d(offset)[:, None]
         return F + off
 
-    def slip_m(self, p: NDArray, u: NDArray | None = None) -> NDArray:
-        """Contact displacement at which each draw slips (K,) [m] (inf: beyond the table)."""
+    def slip_m(self, p: NDArray, u: NDArray | None = None, *, early: bool = False) -> NDArray:
+        """Contact displacement at which each draw slips (K,) [m] (inf: beyond the table): the branch's end,
+        or with ``early`` where its force first comes within ``SLIP_FORCE_REL`` of the end's (the start of the
+        plateau on which the stem may leave the probe; docs/inference.md, "The slip")."""
+        table = self.d_early if early else self.d_end
         if self.effect_axis is None:
-            return np.interp(np.atleast_1d(p), self.p_grid, self.d_end) * self.L
-        return self._interp(self.d_end, p, u) * self.L
+            return np.interp(np.atleast_1d(p), self.p_grid, table) * self.L
+        return self._interp(table, p, u) * self.L
 
     def observed(self, p: NDArray, u: NDArray | None = None) -> NDArray:
         """(K, n) True where the planned sample is taken before the draw's slip."""
@@ -499,6 +504,7 @@ def design_heights(
         F = pred.forces(th_o[:, 0], th_o[:, 1], u=u_o, **kw_o)
         mask = pred.observed(th_o[:, 1], u_o)
         feas = feasibility(F, mask, pred.slip_m(th_o[:, 1], u_o), sig_o, plan)
+        slip_from = float(np.median(pred.slip_m(th_o[:, 1], u_o, early=True)))
         if method == "gaussian":
             J = pred.jacobian(th_o[:, 0], th_o[:, 1], u=u_o, **kw_o)
             eig = eig_gaussian(th_o, J, mask, sig_o, target=target, length_m=L, target_height_m=target_height_m)
@@ -515,6 +521,7 @@ def design_heights(
             peak_force_N=feas["peak_force_N"],
             prob_in_range=feas["prob_in_range"],
             slip_displacement_m=feas["slip_displacement_m"],
+            slip_from_displacement_m=slip_from if np.isfinite(slip_from) else None,
             recorded_fraction=float(mask.mean()),
         )
         if se is not None:
