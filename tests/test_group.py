@@ -139,7 +139,8 @@ def test_a_clamped_cut_is_released_where_the_gradient_cannot(cut_pair):
     assert stuck[i] <= 0.0 and post.map_log_density(stuck) < post.map_log_density(best) - 5.0
     released = release_clamps(post, stuck)
     assert clamp_or_u(released[i]) > 0.02
-    assert post.map_log_density(released) > post.map_log_density(best) - 0.05  # the optimum again (or a hair above it)
+    # the optimum again, up to the noise correlation's two optima (0.81 and its bound 0.995: 0.24 nats apart)
+    assert post.map_log_density(released) > post.map_log_density(best) - 0.5
     assert post.to_natural(released)["EI0"][0] == pytest.approx(EI0, rel=0.03)
 
 
@@ -374,6 +375,8 @@ def test_at_one_height_the_soft_bases_are_sampled_relative_to_the_stem(cut_pair)
         np.testing.assert_allclose(in_w.to_natural(w)[k], v, rtol=1e-12)
     rng = np.random.default_rng(3)
     pts = w + rng.normal(0.0, 0.02, (5, w.size)) * np.maximum(np.abs(w), 1.0)
+    for n in ("rho_force__a", "rho_force__b"):  # inside the correlation's support (the start may sit at 0.995)
+        pts[:, in_w.names.index(n)] = np.minimum(pts[:, in_w.names.index(n)], 0.99)
     pts[0, ia] = -0.4
     pts[1, ib], pts[2, ib] = 0.5, 0.05  # soft bases below w = 1 as well
     zs = in_z.to_sample(in_w.to_natural(pts))
@@ -787,3 +790,39 @@ def test_fit_group_refuses_what_it_cannot_fit_and_defaults_as_documented(cut_pai
     want = {"prior": None, "shared": ("EI0", "p"), "force_noise": "ar1", "force_offsets": False, "seed": 0}
     want |= {"progress": True, "max_steps": 6000, "target_ess": 400.0, "sharing": True, "stem_id": None}
     assert got == want
+
+
+def test_at_one_height_the_stiffest_condition_starts_as_a_clamp_not_on_the_ridge(tmp_path):
+    """A brace-root series of one height from a model that is not bayesrod's (a linear tapered cantilever on a
+    base spring; scripts/brace_root_tables.py --long, imported as a long table): a soft base and a stiffer stem
+    bend it alike, so the density is flat along the ridge where the intact base softens as EI0 rises. Started
+    soft (u = 0.02), stalk3 stayed there: EI0 137 at the start and 162 [107, 266] N m^2 after sampling, for a
+    true 37.5, the intact base soft in every draw. The stiffest condition now starts as a clamp: the start sits
+    at the truth's end of the ridge, with the same MAP density (the data cannot tell them apart)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "scripts" / "brace_root_tables.py"
+    subprocess.run([sys.executable, str(script), "--out", str(tmp_path), "--long"], check=True, capture_output=True)
+    imp = bayesrod.import_table(
+        tmp_path / "series.csv",
+        time="Time (s)",
+        force="Load (N)",
+        displacement="Position (mm)",
+        displacement_unit="mm",
+        height_m=0.5,
+        length_m=1.8,
+        stem_id_column="Plant",
+        condition_column="Treatment",
+    )
+    specs = {doc["condition"]: name for name, doc, _ in imp.documents if doc["stem_id"] == "stalk3"}
+    imp.save(tmp_path / "ds")
+    lik = GroupLikelihood(
+        {c: bayesrod.load(tmp_path / "ds" / name) for c, name in specs.items()}, load_prior(None), force_offsets=True
+    )
+    post = GroupPosterior(lik)
+    t = start_point(post)
+    nat = post.to_natural(t)
+    assert clamp_or_u(nat["z_base__intact"])[0] == 0.0 and 30.0 < nat["EI0"][0] < 50.0  # truth 37.5
+    assert all(clamp_or_u(nat[f"z_base__{c}"])[0] > 0 for c in ("cut1", "cut2", "cut3"))

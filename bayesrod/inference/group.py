@@ -262,7 +262,8 @@ class GroupPosterior(PosteriorBase):
         for i in self._z_idx:
             w = theta[..., i]
             c = gain * np.maximum(w, 0.0)
-            out.append((i, w, c / (1.0 + c), gain / (1.0 + c) ** 2))
+            with np.errstate(over="ignore"):  # a proposal far out on the soft arm: du/dw underflows to 0
+                out.append((i, w, c / (1.0 + c), gain / (1.0 + c) ** 2))
         return out
 
     def prior_coordinates(self, theta) -> NDArray:
@@ -276,7 +277,8 @@ class GroupPosterior(PosteriorBase):
         out = super().log_jacobian(theta)
         if self.relative_bases:
             for _, w, _, dudw in self._soft_bases(theta):
-                out = out + np.where(w > 0, np.log(dudw / U_SCALE), 0.0)  # dz/dw on the soft arm, 1 on the clamp
+                with np.errstate(divide="ignore"):  # du/dw = 0 far out: -inf, outside the prior's u < U_MAX anyway
+                    out = out + np.where(w > 0, np.log(dudw / U_SCALE), 0.0)  # dz/dw on the soft arm, 1 on the clamp
         return out
 
     def to_sample(self, natural: dict) -> NDArray:
@@ -347,9 +349,12 @@ def start_point(post: GroupPosterior) -> NDArray:
                 if n not in lik.shared:
                     nat[loc[n]] = scales[c] if n == "EI0" else p
             if "z_base" in loc:
-                # the apparent softening top / EI0_c - 1 ~ c at small deflection (an upper bound at the tip)
+                # the apparent softening top / EI0_c - 1 ~ c at small deflection (an upper bound at the tip); the
+                # stiffest condition starts as a clamp (release_clamps frees it where a soft base fits better):
+                # started soft, at one height it stayed on the ridge where its base softens as EI0 rises
                 c_app = top / scales[c] - 1.0 if "EI0" in lik.shared else 0.0
-                nat[loc["z_base"]] = float(z_of_u(np.clip(c_app / (1.0 + c_app), 0.02, 0.8 * U_MAX)))
+                soft = float(z_of_u(np.clip(c_app / (1.0 + c_app), 0.02, 0.8 * U_MAX)))
+                nat[loc["z_base"]] = -0.5 * Z_CLAMP if "EI0" in lik.shared and scales[c] == top else soft
         if "EI0" in lik.shared:
             nat["EI0"] = top
         if "p" in lik.shared:
