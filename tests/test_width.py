@@ -739,3 +739,76 @@ def test_contrast_fit_is_not_biased_by_the_noise_of_each_profiles_integral(monke
     own = [W.contrast_scale(p, s) for p in draws]
     assert abs(np.mean(tied) - 1.0) < 0.05, tied
     assert np.mean(own) < 0.96, own  # what the trend tie removes
+
+
+def _median_sd_by_hand(sd, n):
+    """The median of n independent values: sd sqrt((1 + (pi/2 - 1)(1 - 1/n)) / n) (docstring of _median_sd)."""
+    return sd * np.sqrt((1.0 + (np.pi / 2 - 1.0) * (1.0 - 1.0 / n)) / n)
+
+
+@pytest.mark.parametrize("zigzag", [False, True])
+def test_combine_profiles_by_hand(zigzag):
+    """Five frames, twelve stations, every number written down: the median width; its sd the larger of the
+    frames' spread (1.4826 MAD) and their own sd's median, each as the sd of a median (over the frames, and over
+    the frames that saw the station over other pixels: 1 where all five read the same pixel, 5 where they moved
+    10 px apart); scaled up to the profile's noise by second differences when that is larger (a zigzag along
+    the stem); flags: few_frames (2 frames ok), the frames' most frequent flag, unseen; flagged stations keep
+    the median and spread of whatever the frames read; the shared offset (0.05 px at the median m/px), scale
+    (depth, the contrast scales' standard error, the blur's and the lens's terms in quadrature) and taper."""
+    from bayesrod.dataset.engagement import robust_noise
+    from bayesrod.vision.width import OFFSET_SD_PX, blur_scale_sd, contrast_fit_scale_sd
+
+    k, steps = 12, np.array([-2.0, -1.0, 0.0, 1.0, 2.0])
+    s = np.linspace(0.0, 0.11, k)
+    base = np.full(k, 0.004) + (np.where(np.arange(k) % 2, 1e-4, -1e-4) if zigzag else 0.0)
+    delta = np.full(k, 1e-5)
+    delta[11] = 2e-4  # the frames' spread wins at the last station
+    own = 3e-5 * np.array([1.0, 2.0, 3.0, 4.0, 10.0])  # each frame's own sd: median 9e-5 (mean 1.2e-4)
+    px = np.array([1e-4, 1.1e-4, 0.9e-4, 1e-4, 1.2e-4])  # metres per pixel, per frame
+    scales, blur = [1.0, 1.02, 0.98, 1.01, 0.99], [np.nan, 0.5, 0.9, np.nan, 0.6]  # medians, not means
+    shares = [0.0, 0.2, 0.9, 0.1, 0.3]
+    profs = []
+    for j in range(5):
+        w = base + steps[j] * delta
+        flag = np.full(k, "ok", dtype=object)
+        if j >= 2:
+            flag[3] = "occluded"  # station 3: two frames ok
+        flag[4] = "occluded" if j < 3 else "edge"  # station 4: no frame ok, mostly occluded
+        uv = np.column_stack([np.where(np.arange(k) < 6, 0.0, 10.0 * j), np.arange(k, dtype=float)])
+        keep = np.arange(k) != 5  # station 5: no frame measured it
+        profs.append(
+            WidthProfile(
+                s[keep],
+                w[keep],
+                np.full(k, own[j])[keep],
+                (w / px[j])[keep],
+                flag[keep].astype(str),
+                uv[keep],
+                contrast_scale=scales[j],
+                blur_over_width=blur[j],
+                borrowed_share=shares[j],
+            )
+        )
+    dp = combine_profiles(profs, s, depth_scale_sd=0.01)
+    ok = np.ones(k, bool)
+    ok[[3, 4, 5]] = False
+    n_eff = np.where(np.arange(k) < 6, 1.0, 5.0)
+    want_sd = np.maximum(_median_sd_by_hand(1.4826 * delta, 5), _median_sd_by_hand(9e-5, n_eff))
+    rice, typical = robust_noise(base[ok]), float(np.median(want_sd[ok]))
+    assert (rice > typical) == zigzag  # the case is on the side of the rule it is meant to be
+    want_sd = want_sd * (rice / typical if zigzag else 1.0)
+    np.testing.assert_allclose(dp.d_m[ok], base[ok], rtol=1e-12)
+    np.testing.assert_allclose(dp.sd_m[ok], want_sd[ok], rtol=1e-9)
+    assert dp.flag.tolist() == ["ok"] * 3 + ["few_frames", "occluded", "unseen"] + ["ok"] * 6
+    assert dp.n_frames.tolist() == [5, 5, 5, 2, 0, 0] + [5] * 6
+    for i in (3, 4):  # flagged: the median and spread of every frame's number, for the record
+        raw = base[i] + steps * delta[i]
+        assert dp.d_m[i] == pytest.approx(np.median(raw), rel=1e-12)
+        assert dp.sd_m[i] == pytest.approx(1.4826 * np.median(np.abs(raw - np.median(raw))) + 1e-12, rel=1e-9)
+    assert np.isnan(dp.d_m[5]) and np.isnan(dp.sd_m[5])
+    ratios = np.concatenate([np.full(int(ok.sum()) + (j < 2), px[j]) for j in range(5)])  # station 3 ok in 0, 1
+    assert dp.shared_offset_sd_m == pytest.approx(OFFSET_SD_PX * np.median(ratios), rel=1e-9)
+    fit = contrast_fit_scale_sd(0.6, 0.2)  # the medians of the read blur ratios and of the shares
+    want_scale = np.sqrt(0.01**2 + (np.std(scales) / np.sqrt(5)) ** 2 + fit**2)
+    assert fit > 0 and dp.shared_scale_sd == pytest.approx(want_scale, rel=1e-12)
+    assert dp.shared_taper_sd == pytest.approx(blur_scale_sd(0.6), rel=1e-12) and dp.blur_over_width == 0.6
