@@ -444,6 +444,7 @@ def test_a_long_table_with_a_height_column_makes_one_dataset_of_several_heights(
     doc = json.loads((out / "stem9" / "specimen.json").read_text())
     got = [(p["id"], p["height_m"], p["source_test"]) for p in doc["pushes"]]
     assert got == [("h400", 0.4, "t1"), ("h500", 0.5, "t2"), ("h500-2", 0.5, "t3"), ("h600", 0.6, "t4")]
+    assert doc["provenance"]["source_files"] == ["heights.csv"]  # once, for its four recordings
     assert main(["import", "table", str(src), "--out", str(tmp_path / "o2"), *flags, *long, "--height-m", "0.5"]) == 2
     err = capsys.readouterr().err
     assert "--height-m: expected either one contact height or a height column ('Height (cm)'), got both" in err
