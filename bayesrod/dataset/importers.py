@@ -513,9 +513,11 @@ def read_recordings(path: Path, opt: TableOptions) -> list[dict]:
         )
     )
     order = list(dict.fromkeys(keys))  # the recordings in the order their first rows appear
+    index = {key: j for j, key in enumerate(order)}
+    which = np.array([index[k] for k in keys], int)
     out = []
-    for key in order:
-        rows = np.flatnonzero([k == key for k in keys])
+    for j, key in enumerate(order):
+        rows = np.flatnonzero(which == j)
         group = {k: (float(v) if k == "height_m" else str(v)) for k, v in zip(groups, key, strict=True)}
         sub = replace(
             tab,
