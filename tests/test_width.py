@@ -763,6 +763,7 @@ def test_combine_profiles_by_hand(zigzag):
     base = np.full(k, 0.004) + (np.where(np.arange(k) % 2, 1e-4, -1e-4) if zigzag else 0.0)
     delta = np.full(k, 1e-5)
     delta[11] = 2e-4  # the frames' spread wins at the last station
+    delta[4] = 3e-5  # a flagged station's spread of its own
     own = 3e-5 * np.array([1.0, 2.0, 3.0, 4.0, 10.0])  # each frame's own sd: median 9e-5 (mean 1.2e-4)
     px = np.array([1e-4, 1.1e-4, 0.9e-4, 1e-4, 1.2e-4])  # metres per pixel, per frame
     scales, blur = [1.0, 1.02, 0.98, 1.01, 0.99], [np.nan, 0.5, 0.9, np.nan, 0.6]  # medians, not means
@@ -812,3 +813,52 @@ def test_combine_profiles_by_hand(zigzag):
     want_scale = np.sqrt(0.01**2 + (np.std(scales) / np.sqrt(5)) ** 2 + fit**2)
     assert fit > 0 and dp.shared_scale_sd == pytest.approx(want_scale, rel=1e-12)
     assert dp.shared_taper_sd == pytest.approx(blur_scale_sd(0.6), rel=1e-12) and dp.blur_over_width == 0.6
+    # what the fit reads: the ok stations with the shared errors; what the file records: every station with a number
+    dm = dp.to_diameters()
+    np.testing.assert_array_equal(dm.s_m, s[ok])
+    np.testing.assert_array_equal(dm.d_m, dp.d_m[ok])
+    np.testing.assert_array_equal(dm.sd_m, dp.sd_m[ok])
+    assert dm.source == "frames" and dm.shared_offset_sd_m == dp.shared_offset_sd_m
+    assert (dm.shared_scale_sd, dm.shared_taper_sd) == (dp.shared_scale_sd, dp.shared_taper_sd)
+    cols = dp.columns()
+    rec = np.arange(k) != 5
+    np.testing.assert_array_equal(cols["s_m"], s[rec])
+    np.testing.assert_array_equal(cols["d_m"], dp.d_m[rec])
+    np.testing.assert_array_equal(cols["sd_m"], dp.sd_m[rec])
+    assert cols["n_frames"].tolist() == dp.n_frames[rec].tolist() and cols["flag"].tolist() == dp.flag[rec].tolist()
+    for key in ("shared_offset_sd_m", "shared_scale_sd", "shared_taper_sd"):
+        np.testing.assert_array_equal(cols[key], np.full(k - 1, getattr(dp, key)))
+
+
+def test_combine_profiles_edges_by_hand():
+    """Three frames and four stations: a station ok in exactly min_frames frames is ok; each station's own sd is
+    its own frames' median (not one for all); a station one frame saw, flagged, keeps that frame's number and a
+    zero spread; a station off the grid is ignored, however wild; two frames' contrast scales give their
+    standard error; a push with no ok station has no pixel scale and so no shared offset."""
+    import dataclasses
+
+    s = np.array([0.0, 0.01, 0.02, 0.03])
+    base = np.array([0.004, 0.0039, 0.0038, 0.0037])
+    own = np.array([[5e-5, 1e-5, 3e-5], [0.0, 0.0, 0.0], [1e-5, 2e-5, 9e-5], [4e-5, 4e-5, 4e-5]])  # (station, frame)
+    profs = []
+    for j in range(3):
+        w = base + (j - 1) * 1e-5
+        keep = [0, 2, 3] if j else [0, 1, 2, 3]  # station 1: frame 0 alone, flagged
+        flag = np.array(["ok", "edge", "ok", "ok"])[keep]
+        sj, wj = s[keep], w[keep]
+        if j == 0:  # a station between the grid's: ignored
+            sj, wj, flag = np.r_[sj, 0.0155], np.r_[wj, 1.0], np.append(flag, "ok")
+        uv = np.column_stack([np.full(sj.size, 10.0 * j), np.arange(sj.size, dtype=float)])
+        sd = np.r_[own[keep, j], 1e-5] if j == 0 else own[keep, j]
+        profs.append(WidthProfile(sj, wj, sd, wj / 1e-4, flag, uv, contrast_scale=1.0 + 0.04 * (j == 1)))
+    dp = combine_profiles(profs, s)
+    assert dp.flag.tolist() == ["ok", "edge", "ok", "ok"] and dp.n_frames.tolist() == [3, 0, 3, 3]
+    ok = np.array([True, False, True, True])
+    np.testing.assert_allclose(dp.d_m[ok], base[ok], rtol=1e-12)
+    want = np.maximum(_median_sd_by_hand(1.4826e-5, 3), _median_sd_by_hand(np.median(own[ok], axis=1), 3))
+    np.testing.assert_allclose(dp.sd_m[ok], want, rtol=1e-9)
+    assert dp.d_m[1] == base[1] - 1e-5 and dp.sd_m[1] == 1e-12
+    two = combine_profiles(profs[:2], s, min_frames=1)
+    assert two.shared_scale_sd == pytest.approx(np.std([1.0, 1.04]) / np.sqrt(2), rel=1e-12)
+    flagged = [dataclasses.replace(p, flag=np.full(p.flag.size, "occluded")) for p in profs]
+    assert combine_profiles(flagged, s).shared_offset_sd_m == 0.0
