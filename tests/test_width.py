@@ -862,26 +862,3 @@ def test_combine_profiles_edges_by_hand():
     assert two.shared_scale_sd == pytest.approx(np.std([1.0, 1.04]) / np.sqrt(2), rel=1e-12)
     flagged = [dataclasses.replace(p, flag=np.full(p.flag.size, "occluded")) for p in profs]
     assert combine_profiles(flagged, s).shared_offset_sd_m == 0.0
-
-
-def test_a_frames_station_sd_is_the_scatter_of_its_width_over_noise_draws():
-    """One synthetic frame (a 5-px stem, pixel noise 10 levels, the camera's 3 x 3 blur) under 16 noise draws:
-    each ok station's width over its reported sd scatters with sd about 1 (0.99 measured over 40 draws). The
-    formula alone (independent pixels, the noise read from 3-px strips centred on their own median) gave 1.50:
-    the null widths beside the stem scale it (``null_scale``), and without them this fails."""
-    z = []
-    for seed in range(16):
-        img, line, truth = _synthetic(5.0, 1.6, 10.0, seed=seed)
-        wp = width_profile(img, None, line, CAM)
-        ok = wp.flag == "ok"
-        z.append((wp.width_px[ok] - truth(wp.s_m[ok])) / (wp.sd_m[ok] * wp.width_px[ok] / wp.width_m[ok]))
-    z = np.concatenate(z)
-    assert z.size > 1000 and 0.85 < np.std(z) < 1.15, np.std(z)
-
-
-def test_null_scale_is_the_robust_sd_of_the_null_widths_and_needs_twenty():
-    from bayesrod.vision.width import NULL_MIN, null_scale
-
-    z = np.r_[np.linspace(-2.0, 2.0, 39), 50.0]  # one wild null (a stick beside the stem) barely moves it
-    assert null_scale(z) == pytest.approx(1.4826 * np.median(np.abs(z)), rel=1e-12)
-    assert null_scale(list(z[: NULL_MIN - 1]) + [np.nan]) == 1.0 and NULL_MIN == 20
