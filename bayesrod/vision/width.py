@@ -171,43 +171,6 @@ def _sample(img: NDArray, pts: NDArray) -> NDArray:
     return out.reshape(*pts.shape[:-1], img.shape[2])
 
 
-def _coverage(prof, tt, bg_l, bg_r, stem, colour_model: str) -> tuple[NDArray, list[float]]:
-    """Coverage (n,) of a profile's samples ``prof`` (n, 3) at offsets ``tt`` (n,) [px] between each side's
-    background colour (``bg_l`` for tt < 0, ``bg_r`` for tt >= 0) and the stem colour ``stem``, and the two
-    sides' contrasts |stem - bg| [levels]."""
-    a = np.empty(tt.size)
-    contrast = []
-    for side, bg in ((tt < 0, bg_l), (tt >= 0, bg_r)):
-        dcol = stem - bg
-        dd = float(dcol @ dcol)
-        contrast.append(np.sqrt(dd))
-        if colour_model == "unmixing":  # rgb - bg = a (-bg) + (a k) stem: a free of the shading k
-            X = np.column_stack([-bg, stem])
-            a[side] = np.linalg.lstsq(X, (prof[side] - bg).T, rcond=None)[0][0]
-        else:  # projection onto stem - bg: one stem colour across the stem
-            a[side] = (prof[side] - bg) @ dcol / max(dd, 1e-12)
-    return a, contrast
-
-
-#: fewest null windows :func:`null_scale` reads a frame's scale from
-NULL_MIN = 20
-
-
-def null_scale(z: list[float]) -> float:
-    """The factor a frame's station sds are scaled by: the robust sd (1.4826 MAD about 0) of its null widths
-    (the station's window and strips laid on the background beside the stem) over the formula's sd, or 1
-    with fewer than :data:`NULL_MIN` of them.
-
-    The formula takes each pixel of the window as an independent value and reads the per-pixel noise from
-    the strips' samples, centred on their own median. The camera's blur correlates neighbouring pixels, the
-    samples between pixel centres are interpolated, and a 3-px strip's median follows its correlated samples:
-    on the synthetic frames (a 3 x 3 blur) the widths scattered 1.6-2.0 times the formula's sd over noise
-    draws (docs/validation.md, "The station sd from null windows")."""
-    z = np.asarray(z, float)
-    z = z[np.isfinite(z)]
-    return float(1.4826 * np.median(np.abs(z))) if z.size >= NULL_MIN else 1.0
-
-
 def width_profile(
     rgb: NDArray,
     depth_mm: NDArray | None,
@@ -304,7 +267,6 @@ def width_profile(
     flag = np.full(k, "ok", dtype=object)
     own_core = half_mask >= OWN_CORE_HALF_PX
     profiles: dict[int, tuple] = {}
-    nulls: dict[tuple, float] = {}  # each station's null width beside the stem over its formula sd, per side
 
     def measure(i: int, stem_rgb: NDArray | None) -> None:
         """Station i's coverage profile, width, sd and flag against the stem colour ``stem_rgb`` (None:
@@ -320,7 +282,17 @@ def width_profile(
         bg_l = np.median(prof[tt < -T], axis=0)
         bg_r = np.median(prof[tt > T], axis=0)
         stem = np.median(prof[np.abs(tt) <= half_mask[i] - 1.5], axis=0) if stem_rgb is None else stem_rgb
-        a, contrast = _coverage(prof, tt, bg_l, bg_r, stem, colour_model)
+        a = np.empty(tt.size)
+        contrast = []
+        for side, bg in ((tt < 0, bg_l), (tt >= 0, bg_r)):
+            dcol = stem - bg
+            dd = float(dcol @ dcol)
+            contrast.append(np.sqrt(dd))
+            if colour_model == "unmixing":  # rgb - bg = a (-bg) + (a k) stem: a free of the shading k
+                X = np.column_stack([-bg, stem])
+                a[side] = np.linalg.lstsq(X, (prof[side] - bg).T, rcond=None)[0][0]
+            else:  # projection onto stem - bg: one stem colour across the stem
+                a[side] = (prof[side] - bg) @ dcol / max(dd, 1e-12)
         # noise of a: the scatter of the background samples (one value per pixel: 1/STEP_PX samples)
         bg_a = a[~inner]
         per_px = 1.4826 * float(np.median(np.abs(bg_a - np.median(bg_a)))) if bg_a.size >= 8 else 0.1
@@ -329,17 +301,6 @@ def width_profile(
         # carried over that side's T pixels
         width_px[i] = float(np.sum(a[inner]) * STEP_PX)
         sd_px[i] = per_px * np.sqrt(2 * T + 2 * (np.pi / 2) * T**2 / BG_PX)
-        # the same window and strips laid on the background beside the stem, on each side: their "width" is
-        # the estimator's noise alone, for the frame's check of the formula (:func:`null_scale`)
-        for sgn in (-1.0, 1.0):
-            off = sgn * (2 * (T + BG_PX) + 1.0)
-            qn = np.stack([u[i] + (tt + off) * nu[i], v[i] + (tt + off) * nv[i]], axis=-1)
-            if qn[:, 0].min() >= 0 and qn[:, 0].max() <= W - 1 and qn[:, 1].min() >= 0 and qn[:, 1].max() <= H - 1:
-                pn = _sample(img, qn)
-                an, _ = _coverage(
-                    pn, tt, np.median(pn[tt < -T], axis=0), np.median(pn[tt > T], axis=0), stem, colour_model
-                )
-                nulls[(i, sgn)] = float(np.sum(an[inner]) * STEP_PX) / sd_px[i]
         profiles[i] = (tt[inner], a[inner])
         flag[i] = "ok"
         if observed[i] < 0.999 or (occluder is not None and _touches(occluder, q)):
@@ -375,7 +336,6 @@ def width_profile(
         scale = fit.scale
     width_px[~own_core] /= scale
     sd_px[~own_core] /= scale
-    sd_px *= null_scale([z for (i, _), z in nulls.items() if flag[i] == "ok"])
     ok = flag == "ok"
     borrowed_share = float(np.mean(~own_core[ok])) if fit.width_px > 0 and ok.any() else 0.0
     return WidthProfile(
