@@ -160,23 +160,8 @@ def _slip_change_point(F: NDArray, first_low: int, sigma: float) -> int:
 
 
 def _slip_change_point_reference(F: NDArray, first_low: int, sigma: float) -> int:
-    """The slow, obvious version of :func:`_slip_change_point` (one least-squares line per split), kept to test
-    the fast one against.
-
-    The slip at or after ``first_low`` (the first sample the threshold rule calls unloaded): where the
-    samples from there on best split into a straight line (the stem still loaded, its force falling
-    along the branch) and a constant (the unloaded sensor).
-
-    At a low signal-to-noise ratio a force that falls along the branch before the slip dips below the
-    threshold while still in contact (SBC seeds 272 and 334 lost 8 and 16 engaged samples; docs/validation.md).
-    The split is taken only where it beats "all unloaded" by the BIC of its three extra parameters (line and
-    change point) with the noise sd ``sigma``; where the loaded part (at least three samples, with at least
-    four unloaded after it: with two, chance lows among them drew the slip 6 samples late) lies above the
-    constant by 1.5 sigma and by three standard errors of the difference of their means (the noise taken as
-    independent); and where the line starts at least 0.4 of the way from the constant up to the force just
-    before ``first_low`` (the stem does not jump). Otherwise the slip stays at ``first_low``. Never moves the
-    slip earlier.
-    """
+    """The slow, obvious version of :func:`_slip_change_point` (one least-squares line per split, the same rules:
+    the BIC, the two gaps, the join), kept to test the fast one against."""
     W = F[first_low:]
     m = W.size
     if m < 7 or sigma <= 0:  # three loaded and four unloaded samples at least
