@@ -495,3 +495,31 @@ def test_a_table_without_time_and_a_rig_counting_the_push_as_negative(tmp_path, 
     doc = json.loads((tmp_path / "out-neg.csv" / "neg" / "specimen.json").read_text())
     assert "sample index" in doc["provenance"]["assumptions"]["time_s"]
     assert doc["provenance"]["options"]["displacement_sign"] == -1
+
+
+def test_a_long_tables_stems_take_their_own_length_and_species_from_metadata_keyed_by_stem(tmp_path, capsys):
+    """Plants of different lengths in one long table: a metadata CSV keyed by stem_id gives each its own length
+    and species (every condition of the plant); a CSV naming none of file, stem_id, specimen is refused."""
+    recs = []
+    for plant, L in (("P1", 0.9), ("P2", 1.1)):
+        for treat in ("intact", "cut"):
+            x = np.linspace(0.0, 0.04, 30)
+            recs.append(((plant, treat), bayesrod.force_from_displacement(x, 0.5, 1.8, 0.5, L).force_N, 1000 * x))
+    src = tmp_path / "series.csv"
+    _long_table(src, recs, ["Plant", "Treatment", "Time (s)", "Load (N)", "Position (mm)"])
+    meta = tmp_path / "plants.csv"
+    meta.write_text("stem_id,length_m,species\nP1,0.9,Zea mays\nP2,1.1,Zea mays\n")
+    flags = ["--time", "Time (s)", "--force", "Load (N)", "--displacement", "Position (mm)", "--displacement-unit"]
+    flags += ["mm", "--height-m", "0.5", "--stem-id-column", "Plant", "--condition-column", "Treatment"]
+    out = tmp_path / "out"
+    assert main(["import", "table", str(src), "--out", str(out), *flags, "--metadata", str(meta)]) == 0
+    for plant, L in (("P1", 0.9), ("P2", 1.1)):
+        for treat in ("intact", "cut"):
+            ds = read_dataset(out / f"{plant}_{treat}")
+            assert ds.length_m == L and ds.species == "Zea mays" and ds.extra["stem_id"] == plant
+    meta.write_text("plant,length_m\nP1,0.9\n")
+    assert main(["import", "table", str(src), "--out", str(tmp_path / "o2"), *flags, "--metadata", str(meta)]) == 2
+    assert (
+        "expected a header with a column named file, stem_id or specimen, got plant, length_m"
+        in capsys.readouterr().err
+    )

@@ -207,8 +207,8 @@ def build_parser() -> argparse.ArgumentParser:
     im.add_argument(
         "--metadata",
         metavar="CSV",
-        help="table: a CSV with a column file and any of height_m, "
-        "length_m, specimen, species, arm_height_m, force_sign, displacement_sign, stem_id, condition, per file",
+        help="table: a CSV with a column file (or stem_id, or specimen: per stem or specimen) and any of height_m, "
+        "length_m, specimen, species, arm_height_m, force_sign, displacement_sign, stem_id, condition",
     )
     im.add_argument(
         "--stem-id-column",

@@ -482,7 +482,7 @@ def _positive(name: str, v) -> float:
     return float(v)
 
 
-def read_recordings(path: Path, opt: TableOptions) -> list[dict]:
+def read_recordings(path: Path, opt: TableOptions, meta: dict | None = None) -> list[dict]:
     """The recordings of one table file, each read, converted to SI and split into loading ramps; in memory.
 
     A file is one recording, unless ``opt`` names columns that split it (:attr:`TableOptions.group_columns`:
@@ -490,7 +490,8 @@ def read_recordings(path: Path, opt: TableOptions) -> list[dict]:
     their values, in file order, are one recording each (a long table of many pushes).
 
     Returns a list of dicts as :func:`import_recording` returns, each with ``group`` ({option: value} of
-    the splitting columns; empty for a whole file) and ``options`` (``opt`` with the group's values set).
+    the splitting columns; empty for a whole file) and ``options`` (``opt`` with the group's values set, then
+    the ``meta`` rows keyed by its stem or specimen: :func:`read_metadata`).
     """
     from dataclasses import replace
 
@@ -501,7 +502,9 @@ def read_recordings(path: Path, opt: TableOptions) -> list[dict]:
     numeric = cols + ([opt.height_column] if opt.height_column else [])
     texts = [c for k, c in groups.items() if k != "height_m"]
     tab = read_table(path, numeric, header_row=opt.header_row, name=str(path), text_columns=texts)
+    meta = meta or {}
     if not groups:
+        opt = _keyed_options(opt, meta)
         return [{**import_recording(path, opt, tab), "group": {}, "options": opt}]
     keys = list(
         zip(
@@ -527,6 +530,7 @@ def read_recordings(path: Path, opt: TableOptions) -> list[dict]:
             skipped=tab.skipped if key == order[0] else (),  # the file's skipped lines, reported once
         )
         gopt = replace(opt, height_column=None, **{k: v for k, v in group.items() if k != "test"})
+        gopt = _keyed_options(gopt, meta)
         unit = DISPLACEMENT_UNITS[opt.height_unit]  # the height named as the column holds it
         named = (f"{groups[k]} = {v / unit:g}" if k == "height_m" else f"{groups[k]} = {v}" for k, v in group.items())
         where = f"{path} ({', '.join(named)})"
@@ -668,26 +672,48 @@ def import_recording(path: Path, opt: TableOptions, tab=None, *, where: str | No
     return {"pushes": pushes, "report": report, "height_m": height, "length_m": length}
 
 
+#: the columns a metadata CSV may key its rows by, in this order of precedence: a file's name, or (for long tables,
+#: and files whose stem or specimen a flag names) a stem's id or a specimen's name
+METADATA_KEYS = ("file", "stem_id", "specimen")
+
+
 def read_metadata(path) -> dict[str, dict]:
-    """A small CSV mapping each file (column ``file``: its name) to options (columns as the options' names)."""
+    """A small CSV mapping files, stems or specimens to options (columns as the options' names).
+
+    Rows are keyed by the first of :data:`METADATA_KEYS` the header names: ``file`` (a file's name, the key
+    itself), else ``stem_id`` or ``specimen`` (the key ``"stem_id=<id>"`` or ``"specimen=<name>"``: each
+    recording of that stem or specimen takes the row's options, e.g. a length per plant of a long table).
+    """
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8-sig")
     except OSError as e:
         raise ValueError(f"metadata: expected a readable CSV file, got {type(e).__name__}: {e}") from None
     rows = list(csv.DictReader(text.splitlines()))
-    if not rows or "file" not in rows[0]:
+    key = next((k for k in METADATA_KEYS if rows and k in rows[0]), None)
+    if key is None:
         raise ValueError(
-            f"{path}: column file: expected a header with a column named file, got "
-            f"{', '.join(rows[0]) if rows else 'an empty file'}"
+            f"{path}: metadata: expected a header with a column named {', '.join(METADATA_KEYS[:-1])} or "
+            f"{METADATA_KEYS[-1]}, got {', '.join(rows[0]) if rows else 'an empty file'}"
         )
     out = {}
     for i, r in enumerate(rows, start=2):
-        name = (r.get("file") or "").strip()
+        name = (r.get(key) or "").strip()
         if not name:
-            raise ValueError(f"{path}, line {i}: column file: expected a file name, got an empty cell")
-        out[name] = {k.strip(): (v or "").strip() for k, v in r.items() if k and k != "file"}
+            raise ValueError(f"{path}, line {i}: column {key}: expected a {key.replace('_', ' ')}, got an empty cell")
+        out[name if key == "file" else f"{key}={name}"] = {
+            k.strip(): (v or "").strip() for k, v in r.items() if k and k != key
+        }
     return out
+
+
+def _keyed_options(opt: TableOptions, meta: dict) -> TableOptions:
+    """``opt`` with the metadata rows keyed by its stem's id and its specimen's name applied (in that order)."""
+    for key in ("stem_id", "specimen"):
+        value = getattr(opt, key)
+        if value and f"{key}={value}" in meta:
+            opt = _file_options(opt, meta[f"{key}={value}"])
+    return opt
 
 
 @dataclass(frozen=True, eq=False)
@@ -785,7 +811,8 @@ def import_tables(files, options: TableOptions, metadata=None) -> TableImport:
     """Turn raw rig tables into datasets (one per specimen; one push per loading ramp); nothing written.
 
     ``files``: table files or folders of them. ``metadata``: None, a CSV path or ``{file name: {field: value}}``
-    setting per-file options (:data:`METADATA_FIELDS`). Each dataset records its source files and the
+    setting per-file options (:data:`METADATA_FIELDS`); keys ``"stem_id=<id>"`` and ``"specimen=<name>"`` set
+    a stem's or a specimen's (:func:`read_metadata`). Each dataset records its source files and the
     options used under ``provenance``.
     """
     from dataclasses import asdict
@@ -796,7 +823,7 @@ def import_tables(files, options: TableOptions, metadata=None) -> TableImport:
     report = {"importer": "bayesrod import table", "options": asdict(options), "files": []}
     for p in paths:
         fmeta = meta.get(p.name, meta.get(str(p), {}))
-        for rec in read_recordings(p, _file_options(options, fmeta)):
+        for rec in read_recordings(p, _file_options(options, fmeta), meta):
             _add_recording(specimens, report, p, rec)
     docs = []
     for name, spec in specimens.items():
