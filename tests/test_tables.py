@@ -453,6 +453,9 @@ def test_a_long_table_with_a_height_column_makes_one_dataset_of_several_heights(
     err = capsys.readouterr().err
     assert "heights.csv (Test = t4, Height (cm) = 0): column 'Height (cm)': height_m: expected a number > 0" in err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+    src.write_text(src.read_text().replace("t4,0,", "t4,-60,"))  # named as the column holds it, in cm
+    assert main(["import", "table", str(src), "--out", str(tmp_path / "o4"), *flags, *long]) == 2
+    assert "(Test = t4, Height (cm) = -60)" in capsys.readouterr().err
 
 
 def test_two_tests_of_one_stem_without_a_test_column_are_refused_at_the_row_where_time_restarts(tmp_path, capsys):

@@ -274,16 +274,19 @@ def import_table(files, *, metadata=None, **options):
         Table files (CSV, TSV, semicolon with decimal comma; metadata lines above the header are fine) or
         folders of them.
     metadata : path, mapping or None
-        Per-file options: a CSV with a column ``file`` (or ``{file name: {option: value}}``).
+        Per-file options: a CSV with a column ``file`` (or ``stem_id`` or ``specimen``: per stem or specimen),
+        or ``{file name: {option: value}}`` (keys ``"stem_id=<id>"``, ``"specimen=<name>"`` likewise).
     **options
-        As :class:`bayesrod.dataset.importers.TableOptions`: ``time``, ``force`` (column names), either
-        ``displacement`` or ``angle`` with ``arm_height_m``; units ``time_unit`` (s, ms, min), ``force_unit``
-        (N, mN, kN, gf, kgf, lbf, ozf), ``displacement_unit`` (m, cm, mm, um, in), ``angle_unit`` (deg, rad);
-        ``height_m``, ``length_m``, ``length_unknown``, ``specimen``, ``species``, ``stem_id``, ``condition``,
-        ``header_row``, ``cycles`` (``all``: every loading ramp a push; ``first``), ``force_sign``, ``tare``
-        (auto, none). A long table of many pushes: ``specimen_column``, ``stem_id_column``,
-        ``condition_column``, ``test_column`` (text ids) and ``height_column`` (with ``height_unit``, in place
-        of ``height_m``) name the columns whose values split it; rows sharing them are one recording.
+        As :class:`bayesrod.dataset.importers.TableOptions`: ``force`` and ``time`` (column names; without
+        ``time`` the sample index is the time, for forces-only fits), either ``displacement`` or ``angle`` with
+        ``arm_height_m``; units ``time_unit`` (s, ms, min), ``force_unit`` (N, mN, kN, gf, kgf, lbf, ozf),
+        ``displacement_unit`` (m, cm, mm, um, in), ``angle_unit`` (deg, rad); ``height_m``, ``length_m``,
+        ``length_unknown``, ``specimen``, ``species``, ``stem_id``, ``condition``, ``header_row``, ``cycles``
+        (``all``: every loading ramp a push; ``first``), ``force_sign`` and ``displacement_sign`` (-1 where the
+        rig counts the push as negative), ``tare`` (auto, none). A long table of many pushes:
+        ``specimen_column``, ``stem_id_column``, ``condition_column``, ``test_column`` (text ids) and
+        ``height_column`` (with ``height_unit``, in place of ``height_m``) name the columns whose values split
+        it; rows sharing them are one recording.
 
     Returns
     -------

@@ -129,9 +129,10 @@ def _slip_change_point(F: NDArray, first_low: int, sigma: float) -> int:
     m = W.size
     if m < 7 or sigma <= 0:  # three loaded and four unloaded samples at least
         return first_low
-    W = W - W.mean()  # centred: the sums of squares below then cancel no large offset
+    level = float(W.mean())
+    W = W - level  # centred: the sums of squares below then cancel no large offset
     sse_flat = float(np.sum(W**2))
-    pre = float(np.median(F[max(0, first_low - 3) : first_low])) - float(np.mean(F[first_low:]))
+    pre = float(np.median(F[max(0, first_low - 3) : first_low])) - level
     s = np.arange(3, m - 3)  # splits: at least three loaded and four unloaded samples
     x = np.arange(m, dtype=float)
     # prefix sums over the loaded part W[:s] (x = 0 .. s-1) and suffix sums over the unloaded part W[s:]

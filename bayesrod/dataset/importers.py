@@ -498,6 +498,7 @@ def read_recordings(path: Path, opt: TableOptions, meta: dict | None = None) -> 
     from .tables import read_table
 
     groups = opt.group_columns
+    unit = DISPLACEMENT_UNITS[opt.height_unit]  # the height column's, to metres and back in messages
     cols = [c for c in (opt.time, opt.force) if c] + ([opt.displacement] if opt.displacement else [opt.angle])
     numeric = cols + ([opt.height_column] if opt.height_column else [])
     texts = [c for k, c in groups.items() if k != "height_m"]
@@ -508,10 +509,7 @@ def read_recordings(path: Path, opt: TableOptions, meta: dict | None = None) -> 
         return [{**import_recording(path, opt, tab), "group": {}, "options": opt}]
     keys = list(
         zip(
-            *(
-                tab.columns[c] * DISPLACEMENT_UNITS[opt.height_unit] if k == "height_m" else tab.text[c]
-                for k, c in groups.items()
-            ),
+            *(tab.columns[c] * unit if k == "height_m" else tab.text[c] for k, c in groups.items()),
             strict=True,
         )
     )
@@ -531,7 +529,6 @@ def read_recordings(path: Path, opt: TableOptions, meta: dict | None = None) -> 
         )
         gopt = replace(opt, height_column=None, **{k: v for k, v in group.items() if k != "test"})
         gopt = _keyed_options(gopt, meta)
-        unit = DISPLACEMENT_UNITS[opt.height_unit]  # the height named as the column holds it
         named = (f"{groups[k]} = {v / unit:g}" if k == "height_m" else f"{groups[k]} = {v}" for k, v in group.items())
         where = f"{path} ({', '.join(named)})"
         if "height_m" in group and not group["height_m"] > 0:
@@ -542,17 +539,17 @@ def read_recordings(path: Path, opt: TableOptions, meta: dict | None = None) -> 
     return out
 
 
-def import_recording(path: Path, opt: TableOptions, tab=None, *, where: str | None = None) -> dict:
-    """One recording read, converted to SI, split into loading ramps; in memory.
+def import_recording(path: Path, opt: TableOptions, tab, *, where: str | None = None) -> dict:
+    """One recording, converted to SI, split into loading ramps; in memory.
 
-    ``tab``: the recording's rows already read (:func:`read_recordings`), else the whole file is read;
-    ``where`` names the recording in messages (default: the file).
+    ``tab``: the recording's rows as :func:`read_recordings` read them (a :class:`~.tables.Table`); ``where``
+    names the recording in messages (default: the file).
 
     Returns a dict: ``pushes`` (list of dicts with ``cycle``, ``force`` columns, ``unloading`` columns or
     None, ``preload_N``, ``tared_N``, ``rows`` (first and last file line)), ``report`` (what was done).
     """
     from .plausibility import noise_sd, reversal_tolerance
-    from .tables import delimiter_name, read_table
+    from .tables import delimiter_name
 
     prefix = f"{where}: " if where else ""  # a recording of a long table is named in every message
     where = where or str(path)
@@ -568,9 +565,6 @@ def import_recording(path: Path, opt: TableOptions, tab=None, *, where: str | No
         raise ValueError(
             f"{prefix}height_m: expected a contact height below the stem length {length:g} m, got {height:g}"
         )
-    cols = [c for c in (opt.time, opt.force) if c] + ([opt.displacement] if opt.displacement else [opt.angle])
-    if tab is None:
-        tab = read_table(path, cols, header_row=opt.header_row, name=str(path))
     if opt.time is None:  # no time column: the sample index, which only shapes (matched by time) would read
         t = np.arange(tab.n_rows, dtype=float)
     else:
