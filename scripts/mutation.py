@@ -356,7 +356,13 @@ TARGETS["engagement"] = (
 
 # added in session 41: the diameter profile and Young's modulus's inputs (issue 22), and the corrected snooker move
 # every sampler uses (a wrong Hastings factor changes every posterior)
-TARGETS["width"] = ("bayesrod/vision/width.py", ["tests/test_width.py"], None)
+TARGETS["width"] = ("bayesrod/vision/width.py", ["tests/test_width.py", "tests/test_width_frame.py"], None)
+# one frame's measurement alone (session 42: its window, edges, flags and the fixed frames' numbers)
+TARGETS["width_frame"] = (
+    "bayesrod/vision/width.py",
+    ["tests/test_width.py", "tests/test_width_frame.py"],
+    ["bayesrod.vision.width.x_width_profile__mutmut_*"],
+)
 TARGETS["moves"] = ("bayesrod/inference/moves.py", ["tests/test_moves.py"], None)
 
 STATUSES = ("killed", "timeout", "survived", "no tests", "suspicious", "skipped", "segfault")
