@@ -68,6 +68,7 @@ STEP_PX = 0.25  # sample spacing along the normal [px]
 SPACING_PX = 3.0  # default station spacing along the centerline [px]
 BG_PX = 3.0  # width of each background strip [px]
 MARGIN_PX = 3.0  # the window reaches this far beyond the mask's half-width (blur, anti-aliasing)
+MASK_REACH_PX = 20.0  # the mask's half-width is looked for at least this far from the centerline [px]
 #: sd [px] of the width error all stations of a profile share (the method's bias at the stem's edges:
 #: blur, anti-aliasing, the colour model). scripts/width_error_study.py measured its rms over 12 replicates:
 #: 0.029 px on the twig, 0.088 px on the grass (heavy-tailed: -0.19 and -0.17 px) at first, hence 0.1 px;
@@ -237,8 +238,16 @@ def width_profile(
     img = rgb.astype(float)
     H, W = rgb.shape[:2]
     mask = np.asarray(line.mask, bool)
-    # the mask's half-width across the stem (nearest samples out to 20 px): the window's extent (at least 2 px)
-    t = np.arange(-20.0, 20.0 + 1e-9, STEP_PX)
+    # the mask's half-width across the stem (nearest samples out to 20 px, or further where the mask is wider:
+    # twice its largest inscribed radius at a station, plus 4 px): the window's extent (at least 2 px). A fixed
+    # 20 px left a stem over 40 px wide (a thick stalk close to the camera) without background strips: its
+    # strips lay on the stem and every station read low_contrast
+    reach = MASK_REACH_PX
+    if mask.any():
+        inside = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 3)
+        iu, iv = np.clip(np.rint(u).astype(int), 0, W - 1), np.clip(np.rint(v).astype(int), 0, H - 1)
+        reach = max(reach, 2.0 * float(inside[iv, iu].max()) + 4.0)
+    t = np.arange(-reach, reach + 1e-9, STEP_PX)
     left, right = band_around_centre(mask_across(mask, np.column_stack([u, v]), np.column_stack([nu, nv]), t, 0) <= 0.5)
     half_mask = 0.5 * np.maximum(right - left, 0) * STEP_PX
     half = np.maximum(half_mask, 2.0) + MARGIN_PX
@@ -293,10 +302,10 @@ def width_profile(
                 a[side] = np.linalg.lstsq(X, (prof[side] - bg).T, rcond=None)[0][0]
             else:  # projection onto stem - bg: one stem colour across the stem
                 a[side] = (prof[side] - bg) @ dcol / max(dd, 1e-12)
-        # noise of a: the scatter of the background samples (one value per pixel: 1/STEP_PX samples)
+        # noise of a: the scatter of the background samples (one value per pixel: 1/STEP_PX samples; the two
+        # strips hold 2 BG_PX / STEP_PX = 24 of them)
         bg_a = a[~inner]
-        per_px = 1.4826 * float(np.median(np.abs(bg_a - np.median(bg_a)))) if bg_a.size >= 8 else 0.1
-        per_px = max(per_px, 0.01)
+        per_px = max(1.4826 * float(np.median(np.abs(bg_a - np.median(bg_a)))), 0.01)
         # window sum over 2T independent pixels, plus each side's background median (BG_PX pixels)
         # carried over that side's T pixels
         width_px[i] = float(np.sum(a[inner]) * STEP_PX)
