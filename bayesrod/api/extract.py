@@ -168,11 +168,14 @@ def extract(dataset, *, progress: bool = True, width_colour_model: str = "auto")
     from ..vision.width import (
         BLUR_RATIO_OK,
         BLUR_WARN_SCALE_SD,
+        RESOLVED_PX,
         SPACING_PX,
+        THIN_PX,
         ColourChoice,
         blur_scale_sd,
         choose_colour_model,
         combine_profiles,
+        thin_scale_sd,
         width_profile,
     )
     from ._common import as_dataset, progress_enabled
@@ -267,7 +270,10 @@ def extract(dataset, *, progress: bool = True, width_colour_model: str = "auto")
             },
             "shared_scale_sd": diameters.shared_scale_sd,
             "shared_taper_sd": diameters.shared_taper_sd,
+            # the stem's widest stations [px]: under THIN_PX a resolution term joins the scale error
+            "base_width_px": None if not np.isfinite(diameters.base_width_px) else diameters.base_width_px,
         }
+        warnings = []
         if blur_scale_sd(diameters.blur_over_width) >= BLUR_WARN_SCALE_SD:
             blurred = (
                 f"the lens's blur is {diameters.blur_over_width:.2f} of the width of the narrow stations the stem's "
@@ -277,8 +283,25 @@ def extract(dataset, *, progress: bool = True, width_colour_model: str = "auto")
                 f"an error of sd {100 * diameters.shared_taper_sd:.1f}% (docs/validation.md, 'Blur against width', "
                 f"'Thin stems' and 'The taper under a wide blur'); a closer or sharper camera avoids it"
             )
-            report["diameters"]["warning"] = blurred
-            log.warning("warning: %s: %s", spec.specimen, blurred)
+            warnings.append(blurred)
+        if np.isfinite(diameters.base_width_px) and diameters.base_width_px < THIN_PX:
+            if diameters.base_width_px < RESOLVED_PX:
+                what = "no width is used (every station is flagged unresolved)"
+            else:
+                what = (
+                    f"every width shares a resolution scale error of sd "
+                    f"{100 * thin_scale_sd(diameters.base_width_px):.1f}% (Young's modulus: four times that)"
+                )
+            warnings.append(
+                f"the stem is only {diameters.base_width_px:.2f} px wide at its widest stations; widths under "
+                f"{THIN_PX:g} px carry errors the frames do not show (rendered stems this thin read their base "
+                f"mostly 1-5% wide, single pushes up to 34% off; docs/validation.md, 'Thinner than three "
+                f"pixels'): {what}; a closer camera, or a caliper's base diameter, avoids it"
+            )
+        if warnings:
+            report["diameters"]["warning"] = "; ".join(warnings)
+            for w in warnings:
+                log.warning("warning: %s: %s", spec.specimen, w)
         log.info("diameter profile: %d of %d stations measured", int(diameters.ok.sum()), diameters.s_m.size)
     report = plain_json(report)
     return Extraction(spec, MappingProxyType(columns), MappingProxyType(report), MappingProxyType(examples), diameters)

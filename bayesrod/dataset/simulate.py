@@ -95,6 +95,8 @@ class SimConfig:
     exact_width: bool = False
     # with exact_width: "flat" (one stem colour) or "shaded" (a round stem's limb darkening, a defocused lens)
     render_style: str = "flat"
+    # the frames' sensor noise: sd of each pixel's fresh noise per frame [grey levels]
+    sensor_noise: float = 3.0
 
     @property
     def rendered_diameter(self) -> tuple[float, float]:

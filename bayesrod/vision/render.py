@@ -181,6 +181,7 @@ def render_frame(
     arm="leading",
     exact_width=False,
     style="flat",
+    sensor_noise=3.0,
 ):
     """One RGB (uint8) and depth (uint16 mm) image of the stem centerline ``xz_m`` (2, n).
 
@@ -193,6 +194,9 @@ def render_frame(
     ``exact_width=True`` draws each pixel's exact coverage of the true width (:func:`stem_coverage`, the truth
     of the diameter study); the default draws whole-pixel line widths with a visible sub-pixel tip (what every
     centerline number of docs/vision.md was measured on).
+
+    ``sensor_noise``: sd of the fresh noise every pixel gets in each frame [grey levels] (over a background that
+    is the same in every frame of a push).
 
     ``style`` (with ``exact_width``): ``"flat"`` draws the stem in one colour, ``"shaded"`` as a round stem
     lit from the camera (its colour darkens towards the limbs to 55% of the core's, Lambert) seen through
@@ -245,7 +249,7 @@ def render_frame(
         rgb[max(arm_y0, 0) : max(arm_y1, 0), cols] = [70, 72, 78]
         depth[max(arm_y0, 0) : max(arm_y1, 0), cols] = Z0 - 0.06
     # Sensor noise.
-    rgb = np.clip(rgb + rng.normal(0, 3, rgb.shape), 0, 255).astype(np.uint8)
+    rgb = np.clip(rgb + rng.normal(0, sensor_noise, rgb.shape), 0, 255).astype(np.uint8)
     rgb = cv2.GaussianBlur(rgb, (3, 3), 0.6) if style == "flat" else cv2.GaussianBlur(rgb, (7, 7), 1.2)
     noisy = depth + rng.normal(0, 0.002, depth.shape) * (depth / 1.0) ** 2
     edges = cv2.Canny(np.clip(depth * 200, 0, 255).astype(np.uint8), 20, 60) > 0
@@ -288,6 +292,7 @@ def render_push_frames(cfg, sp, folder: Path, camera: dict, rng: np.random.Gener
             arm,
             cfg.exact_width,
             cfg.render_style,
+            cfg.sensor_noise,
         )
         cv2.imwrite(str(folder / f"rgb_{k:03d}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
         cv2.imwrite(str(folder / f"depth_{k:03d}.png"), dmm)

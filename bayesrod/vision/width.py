@@ -119,6 +119,26 @@ BLUR_WARN_SCALE_SD = 0.01
 LENS_SCALE_SD = 0.01
 
 
+#: a stem whose widest stations read narrower than THIN_PX [px] (the 95th percentile of the combined ok stations)
+#: is read with errors its frames do not show: rendered stems whose widest stations read 1.8-3.0 px (grass drawn
+#: 2.0-3.3 px wide at the base, twig 2.4-2.9 px) read their base -7% to +13% off, most +1% to +5% wide (the
+#: contrast is read from profiles all about as thin), where 1-2% was declared, and two pushes at 2.0 px -21% and
+#: +34%. Below THIN_PX every width shares a resolution scale error of sd THIN_SCALE_SD_SLOPE x (THIN_PX - width)
+#: (:func:`thin_scale_sd`; docs/validation.md, "Thinner than three pixels"), and extract warns
+THIN_PX = 3.2
+THIN_SCALE_SD_SLOPE = 0.06  # per px
+#: a stem narrower than this at its widest [px] is not resolved: its stations are flagged ``unresolved``
+RESOLVED_PX = 1.8
+
+
+def thin_scale_sd(base_px: float) -> float:
+    """Relative sd of the scale error every station shares when the stem's widest stations read ``base_px``
+    pixels (0 from :data:`THIN_PX` up, and where no width was read)."""
+    if not np.isfinite(base_px) or base_px >= THIN_PX:
+        return 0.0
+    return THIN_SCALE_SD_SLOPE * (THIN_PX - base_px)
+
+
 def blur_scale_sd(ratio: float) -> float:
     """Relative sd of the scale error every station shares when the contrast fit's blur is ``ratio`` of the
     width of the profiles it read (0 at or below :data:`BLUR_RATIO_OK`, and where no ratio was read)."""
@@ -675,7 +695,9 @@ class DiameterProfile:
     of stations averages down; ``shared_taper_sd``: the relative sd of an error in the taper the widths read
     (the blur's share again, :func:`blur_scale_sd`: a blur wide against the stem reads its thin stations
     differently from its thick ones). ``blur_over_width``: the frames' median of the contrast fit's blur over the
-    width of the profiles it read (NaN where no frame read one).
+    width of the profiles it read (NaN where no frame read one). ``base_width_px``: the stem's widest
+    stations' width [px] (the 95th percentile of the ok stations; NaN where none): below :data:`THIN_PX` the
+    scale error holds a resolution term (:func:`thin_scale_sd`), below :data:`RESOLVED_PX` no station is ok.
     """
 
     s_m: NDArray
@@ -687,6 +709,7 @@ class DiameterProfile:
     shared_scale_sd: float = 0.0
     shared_taper_sd: float = 0.0
     blur_over_width: float = float("nan")
+    base_width_px: float = float("nan")
 
     @property
     def ok(self) -> NDArray:
@@ -776,7 +799,9 @@ def combine_profiles(
     (:func:`_independent_frames`; 1 where the stem stood still), and the noise the combined profile
     shows along the stem, measured by second differences of neighbouring stations (robust, Rice 1984;
     the true profile is smooth on the scale of a few pixels), which scales every station's sd up when
-    it is the larger.
+    it is the larger. A stem whose widest stations read under :data:`THIN_PX` pixels adds a resolution
+    term to the shared scale error (:func:`thin_scale_sd`); under :data:`RESOLVED_PX` every station is
+    ``unresolved``.
     """
     s_m = np.asarray(s_m, float)
     k = s_m.size
@@ -841,6 +866,11 @@ def combine_profiles(
     px = np.concatenate(px) if px else np.array([])
     px = px[np.isfinite(px) & (px > 0)]
     offset_sd = OFFSET_SD_PX * float(np.median(px)) if px.size else 0.0
+    # the stem's widest stations in pixels: too thin a stem is read with a resolution error, or not at all
+    measured = flag == "ok"
+    base_px = float(np.percentile(d[measured], 95)) / float(np.median(px)) if measured.any() and px.size else np.nan
+    if base_px < RESOLVED_PX:
+        flag[measured] = "unresolved"
     # each frame divides its narrow stations by its own contrast scale, so a frame's scale error is shared by all
     # its stations; the median over frames averages it down over frames only, not over stations as the stations'
     # own sd (from the frames' spread at each station, taken as independent along the stem) would have it. The
@@ -864,10 +894,11 @@ def combine_profiles(
         n_frames=n.astype(int),
         flag=flag.astype(str),
         shared_offset_sd_m=offset_sd,
-        shared_scale_sd=float(np.linalg.norm([depth_scale_sd, contrast_sd, fit_sd])),
+        shared_scale_sd=float(np.linalg.norm([depth_scale_sd, contrast_sd, fit_sd, thin_scale_sd(base_px)])),
         # the blur reads thin stations differently from thick ones, so it errs in the taper too (the 3.3- and 5-px
         # synthetic stems under one blur read 2-4% apart: a slope of 0.06-0.1 in relative error per unit of log
         # width, against the blur term's 2-7%; docs/validation.md, "The taper under a wide blur")
         shared_taper_sd=blur_scale_sd(ratio),
         blur_over_width=ratio,
+        base_width_px=base_px,
     )
