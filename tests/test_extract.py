@@ -177,3 +177,30 @@ def test_extract_warns_when_the_blur_leaves_the_widths_a_shared_scale_error(twig
     assert "lens's blur" in warning and f"{100 * loud.diameters.shared_scale_sd:.1f}%" in warning
     assert loud.diameters.shared_scale_sd > quiet.diameters.shared_scale_sd + 0.02
     assert any("lens's blur" in r.getMessage() for r in records)
+
+
+def test_extract_warns_about_a_stem_thinner_than_three_pixels(twig_frames, monkeypatch, caplog):
+    """A push whose combined profile reads its widest stations 2.4 px wide (the combination monkeypatched to
+    return such a profile): the report gives ``base_width_px`` and a warning with the width and the resolution
+    term, and the console prints it. The twig itself (4.8 px) gets neither."""
+    import logging
+
+    import bayesrod
+    import bayesrod.vision.width as W
+    from bayesrod.vision.width import WidthProfile
+
+    quiet = bayesrod.extract(twig_frames, progress=False)
+    assert "warning" not in quiet.doc["diameters"] and quiet.doc["diameters"]["base_width_px"] > 4.0
+    k = 30
+    s = np.linspace(0.0, 0.1, k)
+    w_px = 2.5 * (1 - 0.5 * s / 0.1)
+    frames = [WidthProfile(s, w_px * 1e-4, np.full(k, 2e-6), w_px, np.full(k, "ok"), np.zeros((k, 2)))] * 5
+    thin = W.combine_profiles(frames, s)
+    monkeypatch.setattr(W, "combine_profiles", lambda *a, **kw: thin)
+    with caplog.at_level(logging.WARNING, logger="bayesrod"):
+        ex = bayesrod.extract(twig_frames, progress=False)
+    warning = ex.doc["diameters"]["warning"]
+    assert f"only {thin.base_width_px:.2f} px wide" in warning
+    assert f"resolution scale error of sd {100 * W.thin_scale_sd(thin.base_width_px):.1f}%" in warning
+    assert ex.doc["diameters"]["base_width_px"] == pytest.approx(thin.base_width_px)
+    assert any("px wide at its widest" in r.getMessage() for r in caplog.records)

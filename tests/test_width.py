@@ -271,7 +271,7 @@ def test_combined_profile_flags_unresolved_tips_and_carries_the_shared_errors():
     from bayesrod.vision.width import OFFSET_SD_PX
 
     s = np.linspace(0.0, 0.4, 20)
-    px = 2e-3  # metres per pixel
+    px = 2e-4  # metres per pixel: a stem 20 px wide (no resolution term)
     true = np.where(s < 0.35, 0.004, 2e-5)
     profs = [
         WidthProfile(
@@ -298,7 +298,7 @@ def test_the_frames_spread_of_contrast_scales_is_a_scale_error_all_stations_shar
 
     s = np.linspace(0.0, 0.4, 20)
     base = WidthProfile(
-        s, np.full(20, 0.004), np.full(20, 2e-5), np.full(20, 2.0), np.full(20, "ok"), np.column_stack([s, s])
+        s, np.full(20, 0.004), np.full(20, 2e-5), np.full(20, 20.0), np.full(20, "ok"), np.column_stack([s, s])
     )
     scales = [1.0, 1.03, 1.06, 1.03, 1.0, 1.06]  # population sd 0.02449
     profs = [dataclasses.replace(base, contrast_scale=k) for k in scales]
@@ -676,9 +676,10 @@ def test_a_blur_wide_against_a_thin_stem_is_declared_as_a_shared_scale_error():
     shapes and its widths come out about 3% narrow (-3.4, -2.2, -3.1% on seeds 0-2 at noise 3; -3.9, -6.2,
     -5.0% before the thin profiles pinned the blur): the contrast fit's blur is then about half the profiles'
     width, and every station shares a scale error whose sd covers that (6.7%); at the renderer's blur of 0.6 px the
-    widths are unbiased and only the lens's share (LENS_SCALE_SD on a stem whose every station was fitted)
-    is added (docs/validation.md, "Blur against width")."""
-    from bayesrod.vision.width import BLUR_RATIO_OK, LENS_SCALE_SD, blur_scale_sd, combine_profiles
+    widths are unbiased and only the lens's share (LENS_SCALE_SD on a stem whose every station was fitted) and
+    the resolution term of a stem about 3 px wide at its widest are added (docs/validation.md, "Blur against
+    width", "Thinner than three pixels")."""
+    from bayesrod.vision.width import BLUR_RATIO_OK, LENS_SCALE_SD, blur_scale_sd, combine_profiles, thin_scale_sd
 
     for blur, seeds in ((0.6, (0, 1)), (1.2, (0, 1, 2))):
         frames, errors = [], []
@@ -693,7 +694,10 @@ def test_a_blur_wide_against_a_thin_stem_is_declared_as_a_shared_scale_error():
         if blur == 0.6:
             assert abs(error) < 0.005 and combined.blur_over_width <= BLUR_RATIO_OK + 0.02
             assert blur_scale_sd(combined.blur_over_width) < 0.001 and combined.shared_taper_sd < 0.001
-            assert combined.shared_scale_sd == pytest.approx(LENS_SCALE_SD, rel=0.05)  # every station fitted
+            # every station fitted; the stem's widest stations read about 3 px: the resolution term joins in
+            assert 2.8 < combined.base_width_px < 3.2
+            want = np.hypot(LENS_SCALE_SD, thin_scale_sd(combined.base_width_px))
+            assert combined.shared_scale_sd == pytest.approx(want, rel=0.05)
         else:
             assert -0.05 < error < -0.015 and combined.blur_over_width > 0.45
             assert 0.5 * abs(error) < combined.shared_scale_sd < 2.5 * abs(error), (error, combined.shared_scale_sd)

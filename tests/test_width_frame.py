@@ -378,3 +378,39 @@ def test_a_stem_bent_through_sixty_degrees_is_measured_across_its_normal():
     assert ok.sum() > 70
     err = wp.width_px[ok] - 6.0
     assert np.abs(err).max() < 0.2 and abs(np.median(err)) < 0.01, (np.abs(err).max(), np.median(err))
+
+
+def _frames_of_a_taper(base_px: float, m_per_px: float = 1e-4, n_frames: int = 5, k: int = 30):
+    """``n_frames`` noiseless frames of one tapering stem, ``base_px`` wide at s = 0 and half that at the top."""
+    from bayesrod.vision.width import WidthProfile
+
+    s = np.linspace(0.0, 0.1, k)
+    w_px = base_px * (1 - 0.5 * s / 0.1)
+    frames = [
+        WidthProfile(
+            s, w_px * m_per_px, np.full(k, 0.02 * m_per_px), w_px, np.full(k, "ok"), np.column_stack([s * 0, s * 1e4])
+        )
+        for _ in range(n_frames)
+    ]
+    return frames, s, w_px
+
+
+@pytest.mark.parametrize("base_px", [4.0, 3.1, 2.9, 2.4, 1.9, 1.7])
+def test_a_stem_thinner_than_three_pixels_shares_a_resolution_scale_error_or_is_unresolved(base_px):
+    """The stem's widest stations (the 95th percentile of the ok stations) in pixels: from 3 px up no resolution
+    term; below it every width shares a scale error of sd 0.06 per px below 3 (0.6% at 2.9 px, 6.6% at 1.9 px), in
+    quadrature with the other shared terms; below 1.8 px every station is unresolved."""
+    from bayesrod.vision.width import combine_profiles, thin_scale_sd
+
+    frames, s, w_px = _frames_of_a_taper(base_px)
+    dp = combine_profiles(frames, s, depth_scale_sd=0.01)
+    widest = float(np.percentile(w_px, 95))
+    assert dp.base_width_px == pytest.approx(widest, rel=1e-9)
+    term = 0.06 * max(3.0 - widest, 0.0)
+    assert thin_scale_sd(widest) == pytest.approx(term, abs=1e-15)
+    if widest < 1.8:
+        assert set(dp.flag) == {"unresolved"} and not dp.ok.any()
+    else:
+        assert set(dp.flag) == {"ok"}
+        assert dp.shared_scale_sd == pytest.approx(np.hypot(0.01, term), rel=1e-12)
+    assert thin_scale_sd(float("nan")) == 0.0 and thin_scale_sd(3.0) == 0.0

@@ -124,8 +124,10 @@ LENS_SCALE_SD = 0.01
 #: 2.0-3.3 px wide at the base, twig 2.4-2.9 px) read their base -7% to +13% off, most +1% to +5% wide (the
 #: contrast is read from profiles all about as thin), where 1-2% was declared, and two pushes at 2.0 px -21% and
 #: +34%. Below THIN_PX every width shares a resolution scale error of sd THIN_SCALE_SD_SLOPE x (THIN_PX - width)
-#: (:func:`thin_scale_sd`; docs/validation.md, "Thinner than three pixels"), and extract warns
-THIN_PX = 3.2
+#: (:func:`thin_scale_sd`; docs/validation.md, "Thinner than three pixels"), and extract warns. From 3.2 px the
+#: term made the rendered grass (3.3 px at its base, its widest stations 2.8-3.0 px) cover d0 in 10 of 10 with
+#: z rms 0.6: too wide
+THIN_PX = 3.0
 THIN_SCALE_SD_SLOPE = 0.06  # per px
 #: a stem narrower than this at its widest [px] is not resolved: its stations are flagged ``unresolved``
 RESOLVED_PX = 1.8
