@@ -210,3 +210,50 @@ def test_extract_warns_about_a_stem_thinner_than_three_pixels(twig_frames, monke
     assert f"resolution scale error of sd {100 * W.thin_scale_sd(thin.base_width_px):.1f}%" in warning
     assert ex.doc["diameters"]["base_width_px"] == pytest.approx(thin.base_width_px)
     assert any("px wide at its widest" in r.getMessage() for r in records)
+
+
+def test_a_thick_stems_path_does_not_start_up_a_spur_of_its_skeleton():
+    """Near a blunt end the skeleton of a stem 38 px wide splits towards the corners, and the rendered twig's
+    path started 8 px aside and ran diagonally to the trunk: 6 px of arc length too many at the base, which every
+    station's width reads through the taper (+0.4 px at mid-stem). Pixels within 1.5 half-widths of the base
+    pixel are dropped on stems at least 4 px in half-width, so the base joins the trunk directly; a thin stem's
+    path is kept whole."""
+    from bayesrod.vision.extract import _off_the_base_spur
+
+    base = np.array([128.0, 441.6])
+
+    def arc(path):
+        return float(np.sum(np.hypot(*np.diff(np.vstack([base, path]), axis=0).T)))
+
+    spur = np.column_stack([np.arange(136, 128, -1), np.arange(433, 425, -1)]).astype(float)
+    trunk = np.column_stack([np.full(326, 128.0), np.arange(425, 99, -1)]).astype(float)
+    uv = np.vstack([spur, trunk])
+    thin = np.column_stack([np.full(341, 128.0), np.arange(440, 99, -1)]).astype(float)  # from 1.6 px above
+    for half, dropped in ((19, True), (2, False)):
+        mask = np.zeros((480, 640), bool)
+        mask[100:442, 128 - half : 128 + half + 1] = True
+        path = uv if dropped else thin
+        out = _off_the_base_spur(path, mask, base)
+        if dropped:
+            assert arc(uv) - (base[1] - 100) > 5.0  # the spur's extra length, before
+            d = np.hypot(*(out - base).T)
+            assert d[0] >= 1.5 * 19 and np.all(out[:, 0] == 128.0)  # on the trunk, beyond 1.5 half-widths
+            assert abs(arc(out) - (base[1] - 100)) < 0.5
+        else:
+            np.testing.assert_array_equal(out, thin)
+
+
+def test_a_thick_stems_diameters_read_true_below_mid_stem(tmp_path):
+    """The twig drawn 8 cm (38 px) at its base, three frames: its ok stations below mid-stem read +0.25% (median);
+    with the base spur left in the path they read +1.2%."""
+    import bayesrod
+    from bayesrod.physics import stem_diameter
+
+    over = {"exact_width": True, "base_diameter_m": 0.08, "n_frames_engaged": 3}
+    bayesrod.simulate("twig", seed=400, heights_m=[0.4], config_overrides=over).save(tmp_path / "raw", frames=True)
+    ex = bayesrod.extract(tmp_path / "raw", progress=False)
+    dp, truth, ds = ex.diameters, ex.source.extra["truth"], ex.dataset
+    drawn = stem_diameter(dp.s_m, truth["base_diameter_m"], truth["diameter_taper"], ds.length_m)
+    low = dp.ok & (dp.s_m < 0.5 * ds.length_m)
+    assert low.sum() > 15
+    assert abs(np.median(dp.d_m[low] / drawn[low] - 1)) < 0.006

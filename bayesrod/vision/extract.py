@@ -196,6 +196,40 @@ def centerline_pixels(mask: NDArray, base_px, max_gap_px: float = 60.0):
     return skel, np.column_stack([uu[path], vv[path]]).astype(float)
 
 
+#: the skeleton's path is dropped this many of the stem's half-widths from the base pixel (:func:`_off_the_base_spur`)
+BASE_SPUR_HALF_WIDTHS = 1.5
+#: ... on stems at least this wide [px of half-width]: thinner ones (the presets: 1.5-2.5 px) keep their path
+BASE_SPUR_MIN_HALF_PX = 4.0
+
+
+def _off_the_base_spur(uv: NDArray, mask: NDArray, base_px) -> NDArray:
+    """The path (k, 2) without its pixels within :data:`BASE_SPUR_HALF_WIDTHS` of the stem's half-width from
+    the base pixel (at least 6 pixels kept), on a stem whose half-width is at least :data:`BASE_SPUR_MIN_HALF_PX`.
+
+    Near a blunt end a skeleton splits into spurs towards the corners, and the path from the base pixel can
+    start up one of them diagonally. On a stem 38 px wide that added about 8 px of arc length below the trunk,
+    and every station then read its width where the stem is that much wider (+0.4 px at mid-stem, +2 px near
+    the tip: docs/validation.md, "Thick stems"). The base pixel is known and joins the path directly; the
+    half-width is the mask's largest inscribed radius on the path's first 40 px. A thin stem keeps its path: on
+    the presets (1.5-2.5 px) the drop moved the grass's base stations by up to -4% for nothing gained."""
+    import cv2
+
+    d = np.hypot(uv[:, 0] - base_px[0], uv[:, 1] - base_px[1])
+    inside = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 3)
+    H, W = mask.shape
+    iu, iv = np.clip(np.rint(uv[:, 0]).astype(int), 0, W - 1), np.clip(np.rint(uv[:, 1]).astype(int), 0, H - 1)
+    near = d <= 40.0
+    if not near.any():
+        return uv
+    half = float(inside[iv[near], iu[near]].max())
+    if half < BASE_SPUR_MIN_HALF_PX:
+        return uv
+    keep = d >= BASE_SPUR_HALF_WIDTHS * half
+    first = int(np.argmax(keep)) if keep.any() else uv.shape[0]
+    first = min(first, max(uv.shape[0] - 6, 0))
+    return uv[first:]
+
+
 def _smoothing_spline(x: NDArray, z: NDArray, t: NDArray, s: float, w: NDArray | None = None):
     """Cubic smoothing spline of the path; where FITPACK cannot meet ``s`` (it warns), twice the slack."""
     import warnings
@@ -596,6 +630,7 @@ def extract_frame(
     if mask.sum() < 10:
         raise ExtractionError("no pixels in the stem's depth band")
     skel, uv = centerline_pixels(mask, base)
+    uv = _off_the_base_spur(uv, mask, base)
     uv = recentre(uv, mask)
     uv = np.vstack([np.asarray(base, float)[None, :], uv])  # the clamped base is known
     unseen = np.zeros(uv.shape[0], bool)
