@@ -153,11 +153,27 @@ def test_arc_length_is_not_lengthened_by_pixel_scale_wiggles():
     assert np.sum(np.hypot(np.diff(xf), np.diff(zf))) / true - 1 > 0.005  # what the fine sampling read
 
 
+def _extract_logged(folder):
+    """``bayesrod.extract(folder)`` and the log records it emitted, read through a handler on the package's logger
+    (the CLI's tests may leave that logger not propagating to pytest's caplog)."""
+    import logging
+
+    import bayesrod
+
+    records = []
+    handler = logging.Handler()
+    handler.emit = records.append
+    logging.getLogger("bayesrod").addHandler(handler)
+    try:
+        return bayesrod.extract(folder, progress=False), records
+    finally:
+        logging.getLogger("bayesrod").removeHandler(handler)
+
+
 def test_extract_warns_when_the_blur_leaves_the_widths_a_shared_scale_error(twig_frames, tmp_path, monkeypatch):
     """The twig's lens blur is about 0.2 of its narrow stations' width: no warning. Declared as acceptable
     only up to 0 instead of 0.3, the same frames carry a blur scale error of about 5%: the report says so in
     ``diameters.warning`` (with the scale error written to the diameters) and the console prints it."""
-    import logging
 
     import bayesrod
     from bayesrod.vision import width as W
@@ -165,14 +181,7 @@ def test_extract_warns_when_the_blur_leaves_the_widths_a_shared_scale_error(twig
     quiet = bayesrod.extract(twig_frames, progress=False)
     assert "warning" not in quiet.doc["diameters"]
     monkeypatch.setattr(W, "BLUR_RATIO_OK", 0.0)
-    records = []
-    handler = logging.Handler()
-    handler.emit = records.append
-    logging.getLogger("bayesrod").addHandler(handler)
-    try:
-        loud = bayesrod.extract(twig_frames, progress=False)
-    finally:
-        logging.getLogger("bayesrod").removeHandler(handler)
+    loud, records = _extract_logged(twig_frames)
     warning = loud.doc["diameters"]["warning"]
     assert "lens's blur" in warning and f"{100 * loud.diameters.shared_scale_sd:.1f}%" in warning
     assert loud.diameters.shared_scale_sd > quiet.diameters.shared_scale_sd + 0.02
@@ -183,7 +192,6 @@ def test_extract_warns_about_a_stem_thinner_than_three_pixels(twig_frames, monke
     """A push whose combined profile reads its widest stations 2.4 px wide (the combination monkeypatched to
     return such a profile): the report gives ``base_width_px`` and a warning with the width and the resolution
     term, and the console prints it. The twig itself (4.8 px) gets neither."""
-    import logging
 
     import bayesrod
     import bayesrod.vision.width as W
@@ -197,14 +205,7 @@ def test_extract_warns_about_a_stem_thinner_than_three_pixels(twig_frames, monke
     frames = [WidthProfile(s, w_px * 1e-4, np.full(k, 2e-6), w_px, np.full(k, "ok"), np.zeros((k, 2)))] * 5
     thin = W.combine_profiles(frames, s)
     monkeypatch.setattr(W, "combine_profiles", lambda *a, **kw: thin)
-    records = []  # a handler on the package's logger: the CLI's tests may leave it not propagating to caplog
-    handler = logging.Handler()
-    handler.emit = records.append
-    logging.getLogger("bayesrod").addHandler(handler)
-    try:
-        ex = bayesrod.extract(twig_frames, progress=False)
-    finally:
-        logging.getLogger("bayesrod").removeHandler(handler)
+    ex, records = _extract_logged(twig_frames)
     warning = ex.doc["diameters"]["warning"]
     assert f"only {thin.base_width_px:.2f} px wide" in warning
     assert f"resolution scale error of sd {100 * W.thin_scale_sd(thin.base_width_px):.1f}%" in warning
