@@ -202,6 +202,18 @@ BASE_SPUR_HALF_WIDTHS = 1.5
 BASE_SPUR_MIN_HALF_PX = 4.0
 
 
+def widest_half_px(uv: NDArray, mask: NDArray) -> float:
+    """The mask's largest inscribed radius [px] at the path's pixels (k, 2) (0 for an empty path)."""
+    import cv2
+
+    if uv.shape[0] == 0:
+        return 0.0
+    inside = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 3)
+    H, W = mask.shape
+    iu, iv = np.clip(np.rint(uv[:, 0]).astype(int), 0, W - 1), np.clip(np.rint(uv[:, 1]).astype(int), 0, H - 1)
+    return float(inside[iv, iu].max())
+
+
 def _off_the_base_spur(uv: NDArray, mask: NDArray, base_px) -> NDArray:
     """The path (k, 2) without its pixels within :data:`BASE_SPUR_HALF_WIDTHS` of the stem's half-width from
     the base pixel (at least 6 pixels kept), on a stem whose half-width is at least :data:`BASE_SPUR_MIN_HALF_PX`.
@@ -212,16 +224,8 @@ def _off_the_base_spur(uv: NDArray, mask: NDArray, base_px) -> NDArray:
     the tip: docs/validation.md, "Thick stems"). The base pixel is known and joins the path directly; the
     half-width is the mask's largest inscribed radius on the path's first 40 px. A thin stem keeps its path: on
     the presets (1.5-2.5 px) the drop moved the grass's base stations by up to -4% for nothing gained."""
-    import cv2
-
     d = np.hypot(uv[:, 0] - base_px[0], uv[:, 1] - base_px[1])
-    inside = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 3)
-    H, W = mask.shape
-    iu, iv = np.clip(np.rint(uv[:, 0]).astype(int), 0, W - 1), np.clip(np.rint(uv[:, 1]).astype(int), 0, H - 1)
-    near = d <= 40.0
-    if not near.any():
-        return uv
-    half = float(inside[iv[near], iu[near]].max())
+    half = widest_half_px(uv[d <= 40.0], mask)
     if half < BASE_SPUR_MIN_HALF_PX:
         return uv
     keep = d >= BASE_SPUR_HALF_WIDTHS * half
@@ -631,7 +635,8 @@ def extract_frame(
         raise ExtractionError("no pixels in the stem's depth band")
     skel, uv = centerline_pixels(mask, base)
     uv = _off_the_base_spur(uv, mask, base)
-    uv = recentre(uv, mask)
+    # the mask's edges are looked for 12 px either side of the path, or further on a stem wider than 24 px
+    uv = recentre(uv, mask, max_half_width=max(12.0, widest_half_px(uv, mask) + 4.0))
     uv = np.vstack([np.asarray(base, float)[None, :], uv])  # the clamped base is known
     unseen = np.zeros(uv.shape[0], bool)
     if track:

@@ -234,7 +234,7 @@ def width_profile(
     import cv2
     from scipy.interpolate import CubicSpline
 
-    from .extract import band_around_centre, behind_plane, in_front_of_plane, mask_across
+    from .extract import band_around_centre, behind_plane, in_front_of_plane, mask_across, widest_half_px
 
     if colour_model not in COLOUR_MODELS:
         raise ValueError(f"colour_model: expected one of {', '.join(COLOUR_MODELS)}, got {colour_model!r}")
@@ -264,11 +264,7 @@ def width_profile(
     # twice its largest inscribed radius at a station, plus 4 px): the window's extent (at least 2 px). A fixed
     # 20 px left a stem over 40 px wide (a thick stalk close to the camera) without background strips: its
     # strips lay on the stem and every station read low_contrast
-    reach = MASK_REACH_PX
-    if mask.any():
-        inside = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 3)
-        iu, iv = np.clip(np.rint(u).astype(int), 0, W - 1), np.clip(np.rint(v).astype(int), 0, H - 1)
-        reach = max(reach, 2.0 * float(inside[iv, iu].max()) + 4.0)
+    reach = max(MASK_REACH_PX, 2.0 * widest_half_px(np.column_stack([u, v]), mask) + 4.0)
     t = np.arange(-reach, reach + 1e-9, STEP_PX)
     left, right = band_around_centre(mask_across(mask, np.column_stack([u, v]), np.column_stack([nu, nv]), t, 0) <= 0.5)
     half_mask = 0.5 * np.maximum(right - left, 0) * STEP_PX
