@@ -210,6 +210,9 @@ def test_shaded_render_darkens_the_limbs_and_keeps_the_coverage():
         render_frame(*args, exact_width=True, style="glossy")
     with pytest.raises(ValueError, match="unless exact_width"):
         render_frame(*args, style="shaded")
+    for bad in (-1.0, float("nan")):
+        with pytest.raises(ValueError, match="sensor_noise: expected a noise sd of 0 or more grey levels, got"):
+            render_frame(*args, sensor_noise=bad)
 
 
 def test_combined_profile_sd_is_calibrated_when_frames_share_their_errors():

@@ -207,6 +207,8 @@ def render_frame(
         raise ValueError(f"style: expected one of {STYLES}, got {style!r}")
     if style != "flat" and not exact_width:
         raise ValueError(f"style: expected 'flat' unless exact_width is set, got {style!r}")
+    if not (np.isfinite(sensor_noise) and sensor_noise >= 0):
+        raise ValueError(f"sensor_noise: expected a noise sd of 0 or more grey levels, got {sensor_noise!r}")
     rgb = bg_rgb.copy()
     depth = bg_depth.copy()
     u, v = project(xz_m[0], xz_m[1], camera, Z0)
