@@ -363,6 +363,12 @@ TARGETS["width_frame"] = (
     ["tests/test_width.py", "tests/test_width_frame.py"],
     ["bayesrod.vision.width.x_width_profile__mutmut_*"],
 )
+# the frames combined, with the resolution term of a thin stem (session 42)
+TARGETS["width_combine"] = (
+    "bayesrod/vision/width.py",
+    ["tests/test_width.py", "tests/test_width_frame.py"],
+    ["bayesrod.vision.width.x_combine_profiles__mutmut_*", "bayesrod.vision.width.x_thin_scale_sd__mutmut_*"],
+)
 TARGETS["moves"] = ("bayesrod/inference/moves.py", ["tests/test_moves.py"], None)
 
 STATUSES = ("killed", "timeout", "survived", "no tests", "suspicious", "skipped", "segfault")
