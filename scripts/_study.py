@@ -40,10 +40,11 @@ def seeds(text: str) -> list[int]:
     return [int(x) for x in text.split(",") if x]
 
 
-def extracted_push(stem: str, seed: int, graded: bool, folder: Path, style: str = "flat"):
+def extracted_push(stem: str, seed: int, graded: bool, folder: Path, style: str = "flat", overrides=None):
     """``bayesrod simulate`` one push of preset ``stem`` (its middle contact height; rendered frames with
     exact widths; ``graded``: a diameter taper ``GRADIENT`` below the bending taper; ``style``: the
-    renderer's ``render_style``, ``"shaded"`` a limb-darkened stem through a 1.2-px blur) into
+    renderer's ``render_style``, ``"shaded"`` a limb-darkened stem through a 1.2-px blur; ``overrides``: more
+    ``SimConfig`` fields, e.g. ``n_frames_engaged``, ``sensor_noise``, ``base_diameter_m``) into
     ``folder``/raw, then ``bayesrod.extract``. Returns (extraction, the drawn diameter at its stations [m]
     (k,), metres per pixel at the push's plane)."""
     import bayesrod
@@ -53,6 +54,7 @@ def extracted_push(stem: str, seed: int, graded: bool, folder: Path, style: str 
     cfg = SimConfig.from_preset(stem, seed=seed)
     h = cfg.heights_m[len(cfg.heights_m) // 2]
     over = {"exact_width": True, "render_style": style, **({"diameter_taper": cfg.p - GRADIENT} if graded else {})}
+    over.update(overrides or {})
     bayesrod.simulate(stem, seed=seed, heights_m=[h], config_overrides=over).save(Path(folder) / "raw", frames=True)
     ex = bayesrod.extract(Path(folder) / "raw", progress=False)
     ds, truth = ex.dataset, ex.source.extra["truth"]

@@ -27,37 +27,17 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-import bayesrod
-from bayesrod.dataset.simulate import SimConfig
-from bayesrod.physics import stem_diameter
-
-
-def _seeds(text: str) -> list[int]:
-    out: list[int] = []
-    for part in text.split(","):
-        lo, _, hi = part.partition("-")
-        out.extend(range(int(lo), int(hi) + 1) if hi else [int(lo)])
-    return out
+from _study import extracted_push, seeds
 
 
 def one(stem: str, seed: int, frames: int | None, sensor_noise: float | None, d0: float | None) -> dict:
     t0 = time.perf_counter()
-    cfg = SimConfig.from_preset(stem, seed=seed)
-    h = cfg.heights_m[len(cfg.heights_m) // 2]
-    over: dict = {"exact_width": True, "render_style": "flat"}
-    if frames is not None:
-        over["n_frames_engaged"] = frames
-    if sensor_noise is not None:
-        over["sensor_noise"] = sensor_noise
-    if d0 is not None:
-        over["base_diameter_m"] = d0
+    given = {"n_frames_engaged": frames, "sensor_noise": sensor_noise, "base_diameter_m": d0}
     with tempfile.TemporaryDirectory() as tmp:
-        bayesrod.simulate(stem, seed=seed, heights_m=[h], config_overrides=over).save(Path(tmp) / "raw", frames=True)
-        ex = bayesrod.extract(Path(tmp) / "raw", progress=False)
-    ds, truth, dp = ex.dataset, ex.source.extra["truth"], ex.diameters
-    drawn = np.asarray(stem_diameter(dp.s_m, truth["base_diameter_m"], truth["diameter_taper"], ds.length_m), float)
-    px = ex.doc["pushes"][ds.pushes[0].id]["plane_depth_m"] / ds.camera.fx
+        ex, drawn, px = extracted_push(
+            stem, seed, False, Path(tmp), overrides={k: v for k, v in given.items() if v is not None}
+        )
+    ds, dp = ex.dataset, ex.diameters
     ok = dp.ok
     z = (dp.d_m[ok] - drawn[ok]) / dp.sd_m[ok]
     lo = dp.s_m[ok] / ds.length_m < 0.3
@@ -69,7 +49,7 @@ def one(stem: str, seed: int, frames: int | None, sensor_noise: float | None, d0
     return {
         "stem": stem,
         "seed": seed,
-        "d0_px": round(truth["base_diameter_m"] / px, 3),
+        "d0_px": round(ex.source.extra["truth"]["base_diameter_m"] / px, 3),
         "stations_ok": int(ok.sum()),
         "zsd": sd(z),
         "cover": float(np.mean(np.abs(z) < 1.645)) if z.size else float("nan"),
@@ -88,14 +68,14 @@ def one(stem: str, seed: int, frames: int | None, sensor_noise: float | None, d0
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--stems", default="twig,grass")
-    ap.add_argument("--seeds", default="200-209", help="e.g. 200-209 or 1,5,7")
+    ap.add_argument("--seeds", default="200-209", help="200-209 or 1,5,7")
     ap.add_argument("--frames", type=int, help="frames before the slip (default: the simulator's 20)")
     ap.add_argument("--sensor-noise", type=float, help="fresh pixel noise per frame [grey levels] (default 3)")
     ap.add_argument("--base-diameter-m", type=float, help="the drawn base diameter [m]")
     ap.add_argument("--out", type=Path, help="append the rows to this JSON-lines file")
     args = ap.parse_args(argv)
     for stem in args.stems.split(","):
-        for seed in _seeds(args.seeds):
+        for seed in seeds(args.seeds):
             row = one(stem, seed, args.frames, args.sensor_noise, args.base_diameter_m)
             line = json.dumps(row)
             print(line, flush=True)

@@ -40,6 +40,14 @@ def twig_frames(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
+def twig_extracted(twig_frames):
+    """The twig's frames extracted as they are (no monkeypatch): the warning tests' quiet case."""
+    import bayesrod
+
+    return bayesrod.extract(twig_frames, progress=False)
+
+
+@pytest.fixture(scope="module")
 def grass_frames(tmp_path_factory):
     return make_dataset(tmp_path_factory.mktemp("frames") / "grass", "grass", seed=4, frames=True, n_frames_engaged=6)
 
@@ -170,15 +178,13 @@ def _extract_logged(folder):
         logging.getLogger("bayesrod").removeHandler(handler)
 
 
-def test_extract_warns_when_the_blur_leaves_the_widths_a_shared_scale_error(twig_frames, tmp_path, monkeypatch):
+def test_extract_warns_when_the_blur_leaves_the_widths_a_shared_scale_error(twig_frames, twig_extracted, monkeypatch):
     """The twig's lens blur is about 0.2 of its narrow stations' width: no warning. Declared as acceptable
     only up to 0 instead of 0.3, the same frames carry a blur scale error of about 5%: the report says so in
     ``diameters.warning`` (with the scale error written to the diameters) and the console prints it."""
-
-    import bayesrod
     from bayesrod.vision import width as W
 
-    quiet = bayesrod.extract(twig_frames, progress=False)
+    quiet = twig_extracted
     assert "warning" not in quiet.doc["diameters"]
     monkeypatch.setattr(W, "BLUR_RATIO_OK", 0.0)
     loud, records = _extract_logged(twig_frames)
@@ -188,16 +194,14 @@ def test_extract_warns_when_the_blur_leaves_the_widths_a_shared_scale_error(twig
     assert any("lens's blur" in r.getMessage() for r in records)
 
 
-def test_extract_warns_about_a_stem_thinner_than_three_pixels(twig_frames, monkeypatch):
+def test_extract_warns_about_a_stem_thinner_than_three_pixels(twig_frames, twig_extracted, monkeypatch):
     """A push whose combined profile reads its widest stations 2.4 px wide (the combination monkeypatched to
     return such a profile): the report gives ``base_width_px`` and a warning with the width and the resolution
     term, and the console prints it. The twig itself (4.8 px) gets neither."""
-
-    import bayesrod
     import bayesrod.vision.width as W
     from bayesrod.vision.width import WidthProfile
 
-    quiet = bayesrod.extract(twig_frames, progress=False)
+    quiet = twig_extracted
     assert "warning" not in quiet.doc["diameters"] and quiet.doc["diameters"]["base_width_px"] > 4.0
     k = 30
     s = np.linspace(0.0, 0.1, k)
@@ -246,7 +250,7 @@ def test_a_thick_stems_path_does_not_start_up_a_spur_of_its_skeleton():
 
 def test_a_thick_stems_diameters_read_true_below_mid_stem(tmp_path):
     """The twig drawn 8 cm (38 px) at its base, eight frames: its ok stations below mid-stem read +0.06% (median;
-    +1.2% with the base's skeleton spur left in the path), and all its ok stations within 0.14 px (median; 0.21
+    +1.1% with the base's skeleton spur left in the path), and all its ok stations within 0.14 px (median; 0.21
     px with the path recentred only 12 px either side, which on a stem this wide finds no edge)."""
     import bayesrod
     from bayesrod.physics import stem_diameter
