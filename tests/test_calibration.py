@@ -45,8 +45,11 @@ def test_force_tables_stay_smooth_past_a_branch_that_ends_rising():
     """With contact friction the stem slides off while the force still rises (the plain rod ends in a
     fold), so a node whose branch ended before d must not hold its end force: the 2-D table (4-point
     Lagrange in p and in mu, the likelihood's spacing) against an exact curve at an off-node (p, mu),
-    over the last half of the push. Measured 1.1e-5 of the peak; holding the end value gives 9.5e-3
-    (a 2-5 sd bias of mu, docs/validation.md "Likelihood tables against exact solves")."""
+    over the last half of the push. Measured 2.4e-4 of the peak; holding the end value gives 2.2e-3.
+    (Before session 43 the solver ended these branches early, at d 0.25 instead of 0.49, where f eta bent
+    the stem over: then 1.1e-5 and 9.5e-3. The true branch ends where the contact leaves the tip, whose end
+    slopes the 48 fixed steps resolve less well; docs/validation.md "Likelihood tables against exact
+    solves".)"""
     from bayesrod.inference.likelihood import ForceCurves, _lagrange4
 
     eta, p0, mu0 = 0.65 / 0.8, 0.43, 0.3
@@ -60,7 +63,7 @@ def test_force_tables_stay_smooth_past_a_branch_that_ends_rising():
     f_exact = exact.force(d)[0]
     table = np.stack([c.force(d)[ip[0]] for c in curves])  # (4 mu, 4 p, n)
     f = np.einsum("e,p,epn->n", we[0], wp[0], table)
-    assert np.abs(f - f_exact).max() < 1e-4 * f_exact.max()
+    assert np.abs(f - f_exact).max() < 5e-4 * f_exact.max()
 
 
 def test_frames_before_the_second_engaged_sample_are_not_used():

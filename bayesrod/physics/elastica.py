@@ -363,8 +363,8 @@ def _march(f, m0, phi0, P, n_steps, keep=False):
     Returns a dict of flat arrays: ``found`` (contact reached on the rod, below
     a horizontal tangent), ``sig_c``, ``xi_c``, ``phi_c``, ``resid`` (moment
     at the contact without weight, at the tip with weight: zero at
-    equilibrium) and, with ``keep``, the grid states ``grid`` of shape
-    (n_steps + 1, 3, B) holding xi, zeta, phi at sigma_k = k / n_steps.
+    equilibrium) and, with ``keep``, the grid states ``grid`` of
+    shape (n_steps + 1, 3, B) holding xi, zeta, phi at sigma_k = k / n_steps.
     """
     P = _prepare(P)
     B = f.shape[0]
@@ -638,21 +638,135 @@ def _equilibrium(f, phi_p, P, n_steps, keep=False):
     if not need:
         sol["m0"] = m0
         return sol
-    # Secant on the base moment; the residual has unit slope to leading order.
-    r0 = sol["resid"]
-    m_a, r_a = m0, r0
-    m_b = m0 - np.nan_to_num(r0)
-    for _ in range(30):
-        sol = _march(f, m_b, P["tilt"] + phi_p + P["c_base"] * m_b, P, n_steps, keep)
-        r_b = sol["resid"]
-        conv = ~(np.abs(r_b) > 1e-12 * (1.0 + np.abs(m_b)))
-        if conv.all():
+    return _balance_base_moment(f, P["tilt"] + phi_p, P, n_steps, keep, m0, sol)
+
+
+#: most rounds of :func:`_balance_base_moment` (secant steps, or sections of the bracket where they fail)
+BALANCE_ITERATIONS = 60
+#: points per round where :func:`_balance_base_moment` sections its bracket (it shrinks 16x per round)
+BALANCE_SECTIONS = 15
+#: points of :func:`_balance_base_moment`'s first scan for a moment that reaches the sensor (4x in the second)
+BALANCE_SCAN = 15
+
+
+def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
+    """The base moment m0 at which the residual of :func:`_march` vanishes (friction, self-weight).
+
+    The residual rises with m0 (unit slope to leading order). The moments at which the stem reaches the sensor
+    form one interval: above it the stem bends over toward the push, below it bends back, and a march without
+    a contact there says nothing reliable about which (near a tapered tip its angle spins). So a march without
+    contact is too far above the largest moment that found one, too little below the least, and where none
+    has, the element first scans its range (``BALANCE_SCAN`` points from 0 to twice the first guess, then
+    ``4 BALANCE_SCAN`` over a wider range) in one march. With a contact found, each round takes a secant step
+    from the last two where it falls inside the bracket; otherwise (or where the last secant step did not halve
+    the bracket: near the bend the residual turns like a square root) ``BALANCE_SECTIONS`` evenly spaced points
+    of the bracket in one march (it costs about as much as one point), and with one end known a point beyond
+    it. Without the bracket a first guess f eta past the bend (friction mu > 0 at large deflection) read the
+    stem as slipped where it holds, and a secant stopped short of its tolerance was returned as an equilibrium
+    (mu < 0; docs/model.md, "Friction and weight: the base moment"). Elements whose bracket closes without a
+    root, that find no contact in their scans, or that do not converge, are returned not ``found``. Only the
+    elements still open are marched again.
+    """
+    B = f.shape[0]
+    m = np.array(m, float)
+    r = np.array(sol["resid"], float)
+    lo, hi, r_lo = np.full(B, -np.inf), np.full(B, np.inf), np.full(B, np.nan)
+    least, most = np.full(B, np.inf), np.full(B, -np.inf)  # the least and largest moments that found a contact
+    m_prev, r_prev = np.full(B, np.nan), np.full(B, np.nan)
+    last_width = np.full(B, np.inf)
+    scans = np.zeros(B, int)
+    guess = m.copy()
+    frac = np.arange(1, BALANCE_SECTIONS + 1) / (BALANCE_SECTIONS + 1.0)
+
+    def narrow(e, mv, rv):
+        """Move the brackets of elements ``e`` with the marches at ``mv`` (residuals ``rv``, NaN: no contact)."""
+        fin = np.isfinite(rv)
+        np.minimum.at(least, e[fin], mv[fin])
+        np.maximum.at(most, e[fin], mv[fin])
+        seen = np.isfinite(most[e])
+        below = np.where(fin, rv < 0, seen & (mv < least[e]))
+        above = np.where(fin, rv >= 0, seen & (mv > most[e]))
+        np.maximum.at(lo, e[below], mv[below])
+        np.minimum.at(hi, e[above], mv[above])
+        at_lo = below & fin & (mv == lo[e])
+        r_lo[e[at_lo]] = rv[at_lo]
+
+    narrow(np.arange(B), m, r)
+    for _ in range(BALANCE_ITERATIONS):
+        finite = np.isfinite(r)
+        conv = finite & (np.abs(r) <= 1e-12 * (1.0 + np.abs(m)))
+        width = hi - lo
+        # closed without a root: to round-off, or to 1e-6 where the residual below stays under -0.05 (near the
+        # bend it rises like a sqrt(distance), a ~ 1 here: by about 1e-3 over the last 1e-6)
+        tight = width <= 1e-14 * (1.0 + np.abs(hi))
+        far_below = (width <= 1e-6 * (1.0 + np.abs(hi))) & (r_lo <= -0.05 * (1.0 + np.abs(lo)))
+        closed = np.isfinite(lo) & np.isfinite(hi) & (tight | far_below)
+        lost = ~np.isfinite(most) & (scans >= 2)  # no moment reaches the sensor
+        open_ = ~(conv | closed | lost)
+        if not open_.any():
             break
-        slope = np.where(np.abs(m_b - m_a) > 0, (r_b - r_a) / np.where(m_b != m_a, m_b - m_a, 1.0), 1.0)
+        pair = finite & np.isfinite(r_prev) & (m != m_prev)
+        slope = np.where(pair, (r - r_prev) / np.where(pair, m - m_prev, 1.0), 1.0)
         slope = np.where(np.isfinite(slope) & (slope > 0.05), slope, 1.0)
-        m_a, r_a = m_b, r_b
-        m_b = np.where(conv, m_b, m_b - np.nan_to_num(r_b) / slope)
-    sol["m0"] = m_b
+        step = m - r / slope
+        inside = np.isfinite(step) & (step > lo) & (step < hi)
+        with np.errstate(invalid="ignore"):  # inf - inf where an end is still open: not taken
+            towards_zero = np.where(hi > 0, 0.5 * hi, hi - 1.0 - np.abs(hi))
+            beyond = np.where(np.isfinite(lo), lo + 1.0 + np.abs(lo), towards_zero)
+        # a secant step that did not halve the bracket is followed by sections
+        slow = ~(width <= 0.5 * last_width)
+        last_width = width
+        m_prev, r_prev = np.where(finite, m, m_prev), np.where(finite, r, r_prev)
+        i = np.flatnonzero(open_)
+        blind = ~np.isfinite(most[i])
+        scan = i[blind]
+        seen = i[~blind]
+        sections = np.isfinite(lo[seen]) & np.isfinite(hi[seen]) & (~inside[seen] | slow[seen])
+        one, many = seen[~sections], seen[sections]
+        g = np.abs(guess[scan])[:, None]
+        first = scans[scan] == 0
+        u = [np.arange(1, n + 1) / (n + 1.0) for n in (BALANCE_SCAN, 4 * BALANCE_SCAN)]
+        pts_first = 2.0 * g[first] * u[0]  # (0, 2 |guess|): friction and weight move the root from f eta
+        pts_wide = -(g[~first] + 1.0) + (4.0 * g[~first] + 2.0) * u[1]  # (-|g| - 1, 3 |g| + 1)
+        scan_first, scan_wide = scan[first], scan[~first]
+        scans[scan] += 1
+        e = np.concatenate(
+            [
+                one,
+                np.repeat(many, BALANCE_SECTIONS),
+                np.repeat(scan_first, BALANCE_SCAN),
+                np.repeat(scan_wide, 4 * BALANCE_SCAN),
+            ]
+        )
+        mv = np.concatenate(
+            [
+                np.where(inside, step, beyond)[one],
+                (lo[many, None] + (hi - lo)[many, None] * frac).ravel(),
+                pts_first.ravel(),
+                pts_wide.ravel(),
+            ]
+        )
+        s = _march(f[e], mv, phi_fixed[e] + P["c_base"][e] * mv, _subset(P, e), n_steps, keep)
+        narrow(e, mv, s["resid"])
+        # each element's new point: its march of smallest |residual| (one without contact if none found one)
+        score = np.where(np.isfinite(s["resid"]), np.abs(s["resid"]), np.inf)
+        order = np.lexsort((score, e))
+        pick = order[np.concatenate([[True], e[order][1:] != e[order][:-1]])]
+        j = e[pick]
+        m[j] = mv[pick]
+        for k in ("found", "sig_c", "xi_c", "phi_c", "m_c", "resid"):
+            sol[k][j] = s[k][pick]
+        if keep:
+            sol["grid"][..., j] = s["grid"][..., pick]
+        r[j] = s["resid"][pick]
+    else:
+        finite = np.isfinite(r)
+        conv = finite & (np.abs(r) <= 1e-12 * (1.0 + np.abs(m)))
+    found = sol["found"] & conv
+    for k in ("sig_c", "xi_c", "phi_c", "m_c", "resid"):
+        sol[k] = np.where(found, sol[k], np.nan)
+    sol["found"] = found
+    sol["m0"] = m
     return sol
 
 

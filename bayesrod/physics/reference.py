@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 from scipy.integrate import quad, solve_ivp
-from scipy.optimize import brentq, root_scalar
+from scipy.optimize import brentq
 
 from .elastica import TIP_TOLERANCE
 
@@ -52,12 +52,26 @@ def solve_force(
             return y[2] - math.pi / 2
 
         over.terminal, over.direction = True, 1
+
+        def back(sig, y, on):  # bent back past horizontal (a base moment far too small): no contact ahead
+            return y[2] + math.pi / 2
+
+        back.terminal, back.direction = True, -1
         y0 = [0.0, 0.0, tilt + phi_p + c_base * m0, m0]
         s1 = solve_ivp(
-            rhs, (0.0, 1.0 + TIP_TOLERANCE), y0, args=(1.0,), events=(hit, over), method="DOP853", rtol=rtol, atol=ATOL
+            rhs,
+            (0.0, 1.0 + TIP_TOLERANCE),
+            y0,
+            args=(1.0,),
+            events=(hit, over, back),
+            method="DOP853",
+            rtol=rtol,
+            atol=ATOL,
         )
         if s1.status != 1 or s1.t_events[0].size == 0:
-            return {"found": False}
+            # bent over: the tangent passed horizontal below the sensor, or the stem ends leaning toward the
+            # push below it (else it bent back: a base moment too small)
+            return {"found": False, "bent_over": bool(s1.t_events[1].size) or bool(s1.y[2, -1] > 0)}
         sig_c = float(s1.t_events[0][0])
         yc = s1.y_events[0][0]
         out = {"found": True, "sig_c": sig_c, "xi_c": float(yc[0]), "phi_c": float(yc[2]), "m0": m0}
@@ -75,23 +89,30 @@ def solve_force(
         return shoot(m_guess)
 
     def resid(m0):
+        """The residual; without a contact, too far (+1) where the stem bent over, else too little (-1)."""
         r = shoot(m0)
-        return r["resid"] if r["found"] else float("nan")
+        if r["found"]:
+            return r["resid"]
+        return 1.0 if r["bent_over"] else -1.0
 
-    if w0 == 0.0:
-        # Friction only: m0 = f eta - mu f x_c(m0) (moment balance about the base); fixed point.
-        m0 = m_guess
-        for _ in range(500):
-            r = shoot(m0)
-            if not r["found"]:
-                return r
-            m_new = f * eta - mu * f * r["xi_c"]
-            if abs(m_new - m0) <= 1e-15 * (1.0 + abs(m0)):
-                break
-            m0 = m_new
-        return shoot(m_new)
-    sol = root_scalar(resid, method="secant", x0=m_guess, x1=m_guess * (1 + 1e-3) + 1e-6, xtol=1e-15, rtol=1e-14)
-    return shoot(sol.root)
+    # The residual rises with the base moment. Bracket its root from below (0 for a push and a stem leaning
+    # toward it) and above (the frictionless f eta, grown until the residual is positive or the stem bends
+    # over), then brentq. Starting from f eta without a bracket found no contact where friction bends the
+    # stem far (docs/physics.md, "Friction and weight: the base moment").
+    lo, hi = 0.0, max(m_guess, 1e-6)
+    while resid(lo) >= 0:
+        lo = -2.0 * abs(lo) - 1.0
+        if lo < -1e6:
+            return {"found": False}
+    while resid(hi) < 0:
+        lo, hi = hi, 2.0 * hi
+        if hi > 1e6:
+            return {"found": False}
+    m0 = brentq(resid, lo, hi, xtol=1e-15, rtol=1e-14)
+    out = shoot(m0)
+    if not out["found"] or abs(out["resid"]) > 1e-9 * (1.0 + abs(m0)):
+        return {"found": False}  # the bracket closed on the branch's end: no equilibrium holds
+    return out
 
 
 def solve_displacement(d: float, eta: float, p: float, eff: dict | None = None, rtol: float = RTOL) -> dict:
