@@ -202,6 +202,37 @@ TARGETS["elastica_solver"] = (
     ],
 )
 
+# added in session 43: the solver's core against exact solutions (tests/test_elastica_core.py, about 3 s): the
+# elastica target's tests take 60-80 s per surviving core mutant, too slow for its 1500 core mutants
+TARGETS["elastica_core"] = (
+    "bayesrod/physics/elastica.py",
+    ["tests/test_elastica_core.py", "tests/test_root_search.py"],
+    [
+        f"*.x_{f}__mutmut_*"
+        for f in (
+            "_problem",
+            "_subset",
+            "_weighted",
+            "_prepare",
+            "_rhs",
+            "_inverse_taper",
+            "_plain_slopes",
+            "_step_plain",
+            "_step_plain_each",
+            "_step",
+            "_step_general",
+            "_march",
+            "_at",
+            "_locate",
+            "_too_far",
+            "_illinois",
+            "_bracket_and_solve",
+            "_equilibrium",
+            "_balance_base_moment",
+        )
+    ],
+)
+
 # added in session 35: the joint posterior of one stem under several conditions (issue 23) and its summary
 TARGETS["group"] = ("bayesrod/inference/group.py", ["tests/test_group.py"], None)
 TARGETS["group_summary"] = (
