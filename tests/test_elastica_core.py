@@ -188,20 +188,26 @@ def test_one_step_of_either_path_is_an_exact_circular_arc(path):
         np.testing.assert_allclose(got, want, atol=1e-13)
 
 
-def test_one_step_of_a_loaded_tapered_rod_with_every_effect_matches_an_adaptive_solve():
+@pytest.mark.parametrize("eff", [None, {"kappa0": 0.3, "w0": 0.8}, {"mu": 0.2, "w0": 0.8, "kappa0": 0.3}],
+                         ids=["plain", "curved-weighted", "every-effect"])  # fmt: skip
+def test_one_step_of_a_loaded_tapered_rod_matches_an_adaptive_solve(eff):
+    """The plain path, the general one without friction and with it; one step size and one per element (the
+    partial steps that locate a contact): the stages sit at sigma + c_i h, where the taper is evaluated."""
     eta, p, f = 0.7, 0.43, np.array([2.0, 3.5])
-    eff = {"mu": 0.2, "w0": 0.8, "kappa0": 0.3}
     P = E._prepare(E._problem(np.full(2, eta), p, eff)[0])
+    assert P["_plain"] == (eff is None)
     Y = np.array([[0.02, 0.05], [0.2, 0.3], [0.3, 0.6], [1.1, 0.4]])
-    sig, h = 0.25, 1.0 / 48
-    got = E._step(Y, sig, h, f, P, 1.0)
-    for b in range(2):
+    sig = 0.55
+    for h in (1.0 / 48, np.array([1.0 / 48, 0.04])):
+        got = E._step(Y, sig, h, f, P, 1.0)
+        for b in range(2):
 
-        def rhs(s, y, b=b):
-            return E._rhs(s, y[:, None], np.array([f[b]]), E._subset(P, np.array([b])))[:, 0]
+            def rhs(s, y, b=b):
+                return E._rhs(s, y[:, None], np.array([f[b]]), E._subset(P, np.array([b])))[:, 0]
 
-        ref = solve_ivp(rhs, (sig, sig + h), Y[:, b], method="DOP853", rtol=1e-13, atol=1e-15)
-        np.testing.assert_allclose(got[:, b], ref.y[:, -1], atol=1e-13)
+            hb = float(np.broadcast_to(h, 2)[b])
+            ref = solve_ivp(rhs, (sig, sig + hb), Y[:, b], method="DOP853", rtol=1e-13, atol=1e-15)
+            np.testing.assert_allclose(got[:, b], ref.y[:, -1], atol=1e-12)
 
 
 def test_the_right_hand_side_is_the_rod_equations_with_every_effect():
@@ -211,8 +217,9 @@ def test_the_right_hand_side_is_the_rod_equations_with_every_effect():
     B = 5
     Y = rng.uniform(-1, 1, (4, B))
     af = rng.uniform(0, 3, B)
-    mu, w0, k0 = rng.uniform(-0.3, 0.3, B), rng.uniform(0, 2, B), rng.uniform(-1, 1, B)
-    for p in (0.43, rng.uniform(0.1, 1.0, B)):
+    friction, w0, k0 = rng.uniform(-0.3, 0.3, B), rng.uniform(0, 2, B), rng.uniform(-1, 1, B)
+    # the last without friction (its own branch of the moment's slope)
+    for p, mu in ((0.43, friction), (rng.uniform(0.1, 1.0, B), friction), (0.43, np.zeros(B))):
         P = E._prepare(E._problem(np.full(B, 0.5), p, {"mu": mu, "w0": w0, "kappa0": k0})[0])
         for sig in (0.3, rng.uniform(0, 0.9, B)):
             e = (1 - sig) ** (4 * P["p"])
