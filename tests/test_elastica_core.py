@@ -191,12 +191,17 @@ def test_one_step_of_either_path_is_an_exact_circular_arc(path):
         np.testing.assert_allclose(got, want, atol=1e-13)
 
 
-@pytest.mark.parametrize("eff", [None, {"kappa0": 0.3, "w0": 0.8}, {"mu": 0.2, "w0": 0.8, "kappa0": 0.3}],
-                         ids=["plain", "curved-weighted", "every-effect"])  # fmt: skip
-def test_one_step_of_a_loaded_tapered_rod_matches_an_adaptive_solve(eff):
-    """The plain path, the general one without friction and with it; one step size and one per element (the
-    partial steps that locate a contact): the stages sit at sigma + c_i h, where the taper is evaluated."""
-    eta, p, f = 0.7, 0.43, np.array([2.0, 3.5])
+@pytest.mark.parametrize(
+    ("eff", "p"),
+    [(None, 0.43), (None, np.array([0.43, 0.6])), ({"kappa0": 0.3, "w0": 0.8}, 0.43),
+     ({"mu": 0.2, "w0": 0.8, "kappa0": 0.3}, 0.43)],
+    ids=["plain", "plain-two-tapers", "curved-weighted", "every-effect"],
+)  # fmt: skip
+def test_one_step_of_a_loaded_tapered_rod_matches_an_adaptive_solve(eff, p):
+    """The plain path (one taper exponent for the batch, and one per element), the general one without friction
+    and with it; one step size and one per element (the partial steps that locate a contact): the stages sit at
+    sigma + c_i h, where the taper is evaluated."""
+    eta, f = 0.7, np.array([2.0, 3.5])
     P = E._prepare(E._problem(np.full(2, eta), p, eff)[0])
     assert P["_plain"] == (eff is None)
     Y = np.array([[0.02, 0.05], [0.2, 0.3], [0.3, 0.6], [1.1, 0.4]])
