@@ -299,7 +299,7 @@ class ForceCurves:
                     # edge of the forces that have an equilibrium can flip within round-off between batches (the
                     # base moment's root meets the bend there); the curve ends at its last equilibrium
                     c.d_end[k] = dk[keep][-1]
-                    c.d_early[k] = min(c.d_early[k], c.d_end[k]) if np.isfinite(c.d_early[k]) else c.d_end[k]
+                    c.d_early[k] = np.fmin(c.d_early[k], c.d_end[k])
                 spline = PchipInterpolator(dk[keep], fk[keep], extrapolate=True)
                 c.end_slope[k] = max(float(spline.derivative()(c.d_end[k])), 0.0)
                 c._interp.append(spline)

@@ -363,8 +363,8 @@ def _march(f, m0, phi0, P, n_steps, keep=False):
     Returns a dict of flat arrays: ``found`` (contact reached on the rod, below
     a horizontal tangent), ``sig_c``, ``xi_c``, ``phi_c``, ``resid`` (moment
     at the contact without weight, at the tip with weight: zero at
-    equilibrium) and, with ``keep``, the grid states ``grid`` of
-    shape (n_steps + 1, 3, B) holding xi, zeta, phi at sigma_k = k / n_steps.
+    equilibrium) and, with ``keep``, the grid states ``grid`` of shape
+    (n_steps + 1, 3, B) holding xi, zeta, phi at sigma_k = k / n_steps.
     """
     P = _prepare(P)
     B = f.shape[0]
@@ -677,6 +677,10 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
     scans = np.zeros(B, int)
     guess = m.copy()
     frac = np.arange(1, BALANCE_SECTIONS + 1) / (BALANCE_SECTIONS + 1.0)
+    u_first, u_wide = (np.arange(1, n + 1) / (n + 1.0) for n in (BALANCE_SCAN, 4 * BALANCE_SCAN))
+
+    def balanced():
+        return np.isfinite(r) & (np.abs(r) <= 1e-12 * (1.0 + np.abs(m)))
 
     def narrow(e, mv, rv):
         """Move the brackets of elements ``e`` with the marches at ``mv`` (residuals ``rv``, NaN: no contact)."""
@@ -694,7 +698,7 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
     narrow(np.arange(B), m, r)
     for _ in range(BALANCE_ITERATIONS):
         finite = np.isfinite(r)
-        conv = finite & (np.abs(r) <= 1e-12 * (1.0 + np.abs(m)))
+        conv = balanced()
         width = hi - lo
         # closed without a root: to round-off, or to 1e-6 where the residual below stays under -0.05 (near the
         # bend it rises like a sqrt(distance), a ~ 1 here: by about 1e-3 over the last 1e-6)
@@ -725,9 +729,8 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
         one, many = seen[~sections], seen[sections]
         g = np.abs(guess[scan])[:, None]
         first = scans[scan] == 0
-        u = [np.arange(1, n + 1) / (n + 1.0) for n in (BALANCE_SCAN, 4 * BALANCE_SCAN)]
-        pts_first = 2.0 * g[first] * u[0]  # (0, 2 |guess|): friction and weight move the root from f eta
-        pts_wide = -(g[~first] + 1.0) + (4.0 * g[~first] + 2.0) * u[1]  # (-|g| - 1, 3 |g| + 1)
+        pts_first = 2.0 * g[first] * u_first  # (0, 2 |guess|): friction and weight move the root from f eta
+        pts_wide = -(g[~first] + 1.0) + (4.0 * g[~first] + 2.0) * u_wide  # (-|g| - 1, 3 |g| + 1)
         scan_first, scan_wide = scan[first], scan[~first]
         scans[scan] += 1
         e = np.concatenate(
@@ -759,10 +762,7 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
         if keep:
             sol["grid"][..., j] = s["grid"][..., pick]
         r[j] = s["resid"][pick]
-    else:
-        finite = np.isfinite(r)
-        conv = finite & (np.abs(r) <= 1e-12 * (1.0 + np.abs(m)))
-    found = sol["found"] & conv
+    found = sol["found"] & balanced()
     for k in ("sig_c", "xi_c", "phi_c", "m_c", "resid"):
         sol[k] = np.where(found, sol[k], np.nan)
     sol["found"] = found

@@ -98,7 +98,7 @@ def solve_force(
     # The residual rises with the base moment. Bracket its root from below (0 for a push and a stem leaning
     # toward it) and above (the frictionless f eta, grown until the residual is positive or the stem bends
     # over), then brentq. Starting from f eta without a bracket found no contact where friction bends the
-    # stem far (docs/physics.md, "Friction and weight: the base moment").
+    # stem far (docs/model.md, "Friction and weight: the base moment").
     lo, hi = 0.0, max(m_guess, 1e-6)
     while resid(lo) >= 0:
         lo = -2.0 * abs(lo) - 1.0
