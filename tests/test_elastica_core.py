@@ -149,6 +149,20 @@ def test_above_the_contact_the_loaded_rod_is_straight_along_its_contact_tangent(
     np.testing.assert_allclose(grid[above, 2], case[1], atol=TOL)
 
 
+@pytest.mark.parametrize("p", [0.45, np.array([0.3, 0.45])], ids=["one-taper", "per-element"])
+def test_a_tapered_rod_under_its_own_weight_ends_in_a_finite_tip_angle(p):
+    """The grid's last node is the tip, where the tapered stiffness vanishes with the moment (curvature ~
+    (1 - s)^(2 - 2p) -> 0). The last step's final stage sits at sigma = 1: a stiffness clipped to _TINY there
+    turned the stage's round-off moment into a tip angle of 1e287 (the one-taper path; the per-element path
+    the same). At the tip the angle changes no faster than one node below."""
+    sol = contact_from_force_nd(np.array([2.0, 2.0]), 0.5, p, {"w0": 0.8}, keep_shape=True)
+    assert sol["found"].all()
+    phi = sol["grid"][:, 2]
+    assert np.isfinite(sol["grid"]).all()
+    step = np.abs(np.diff(phi[-3:], axis=0))
+    assert (step[1] <= step[0] + 1e-12).all()
+
+
 @pytest.mark.parametrize("p", [0.0, 0.43])
 def test_an_unloaded_tilted_rod_is_straight_and_a_curved_one_a_circle(p):
     eta = 0.6

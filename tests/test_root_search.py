@@ -126,6 +126,18 @@ def test_bracket_and_solve_expands_from_guesses_above_and_below_the_root():
     assert_roots(x[ok], r[ok])
 
 
+def test_bracket_and_solve_finds_a_root_at_any_point_of_the_first_expansion_round():
+    """One round tries the guess times 1, 1.6, 2.56 and 4.1 (``EXPAND_POINTS`` growths): the root between any
+    two of them, and past the last, is the root. (Taking the point before the last as the bracket's top when the
+    last one stopped returned that point, 2.56 x the guess, as the root: the guesses 100x off never land there.)"""
+    g = FAMILIES["cubic"]
+    r = np.full(6, 2.0)
+    guess = r / np.array([1.3, 2.0, 3.3, 4.0, 5.0, 8.0])
+    x, ok = el._bracket_and_solve(_counted(g, r, []), guess)
+    assert ok.all()
+    assert_roots(x, r)
+
+
 def test_bracket_and_solve_takes_the_first_root_along_a_folding_branch():
     """g rises to a peak at x = 1 and falls back (the force-displacement curve folding): a target below
     the peak has two roots; the search keeps the loading branch's, the smaller."""

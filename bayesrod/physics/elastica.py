@@ -226,12 +226,15 @@ def _rhs(sig, Y, af, P, out=None):
     if out is None:
         out = np.empty_like(Y)
     p4 = P["_p4_scalar"]
+    # At and past the tip (sigma >= 1: the last step's final stage, the short step of TIP_TOLERANCE) the stem
+    # ends: no moment, no bending (e = inf). A tapered stiffness of _TINY there divided the stage's round-off
+    # moment into a tip angle of 1e287 under self-weight.
     if p4 is not None and isinstance(sig, float):  # one taper exponent, one sigma (numpy floats are floats)
-        e = max((1.0 - sig) ** p4 if sig < 1.0 else 0.0, _TINY) if p4 else 1.0
+        e = (max((1.0 - sig) ** p4, _TINY) if p4 else 1.0) if sig < 1.0 else np.inf
         log1m = None
     else:
         log1m = np.log(np.maximum(1.0 - sig, _TINY))
-        e = np.maximum(np.exp(P["_p4"] * log1m), _TINY)
+        e = np.where(sig < 1.0, np.maximum(np.exp(P["_p4"] * log1m), _TINY), np.inf)
     np.sin(Y[2], out=out[0])
     np.cos(Y[2], out=out[1])
     np.divide(Y[3], e, out=out[2])
@@ -953,8 +956,8 @@ class ContactSolution:
     contact_s_m : arc length of the contact s_c [m]
     contact_x_m : horizontal position of the contact x_c [m]
     contact_angle_rad : tangent angle from vertical at the contact [rad]
-    base_moment_Nm : moment at the base [N m]
-    found : contact exists (stem reaches the sensor height)
+    base_moment_Nm : moment at the base [N m]; NaN where not ``found``
+    found : contact exists (stem reaches the sensor height) and the base holds it (below yield)
     shape_xz_m : optional centerline grid, shape (n_steps + 1, 2, ...), in m
     """
 
@@ -1034,13 +1037,15 @@ def contact_from_force(
     eff = (effects or Effects()).nondim(L, EI0)
     res = contact_from_force_nd(F * L**2 / EI0, h / L, p, eff, n_steps=n_steps, keep_shape=keep_shape)
     scale = np.broadcast_to(EI0 / L, res["m0"].shape)
+    found = res["found"] & ~res["yielded"]
     return ContactSolution(
         force_N=np.broadcast_to(F, res["m0"].shape).astype(float),
         contact_s_m=res["sig_c"] * L,
         contact_x_m=res["xi_c"] * L,
         contact_angle_rad=res["phi_c"],
-        base_moment_Nm=res["m0"] * scale,
-        found=res["found"] & ~res["yielded"],
+        # NaN without an equilibrium, like the contact: with friction or weight m0 is then the search's last try
+        base_moment_Nm=np.where(found, res["m0"] * scale, np.nan),
+        found=found,
         shape_xz_m=res["grid"][:, :2] * L if keep_shape else None,
     )
 
