@@ -134,6 +134,22 @@ def test_every_friction_contact_returned_is_an_equilibrium(mu, f):
     assert np.isnan(sol["xi_c"][~found]).all() and np.isnan(sol["sig_c"][~found]).all()
 
 
+def test_a_friction_contact_next_to_the_bend_holds_as_the_reference_solver_finds():
+    """Large forces on a short lever (eta 0.35, mu 0.3): the contact angle nears atan(1 / mu) = 1.279, where the
+    residual below the root turns like a square root and the bracket narrows with a residual there of -0.05
+    or less. Closing that bracket as "no root" is right only with the residual *at* its lower end: taken from
+    another point below (a survivor of the core's mutation run), these stems were returned as slipped."""
+    f = np.array([62.75, 80.0])
+    sol = contact_from_force_nd(f, 0.35, 0.0, {"mu": 0.3})
+    assert sol["found"].all()
+    for i, fi in enumerate(f):
+        r = R.solve_force(fi, 0.35, 0.0, {"mu": 0.3})
+        assert r["found"]
+        np.testing.assert_allclose([sol["sig_c"][i], sol["phi_c"][i], sol["m0"][i]], [r["sig_c"], r["phi_c"], r["m0"]],
+                                   rtol=0, atol=1e-9)  # fmt: skip
+    assert sol["phi_c"][1] > 1.27
+
+
 @pytest.mark.parametrize("case", [CASES[0], CASES[3]], ids=["plain", "friction"])
 def test_above_the_contact_the_loaded_rod_is_straight_along_its_contact_tangent(case):
     """The grid past the contact (no load, M = 0 there): xi = xi_c + (s - s_c) sin(alpha), zeta likewise; with
