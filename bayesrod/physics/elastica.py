@@ -646,8 +646,10 @@ def _equilibrium(f, phi_p, P, n_steps, keep=False):
 
 #: most rounds of :func:`_balance_base_moment` (secant steps, or sections of the bracket where they fail)
 BALANCE_ITERATIONS = 60
-#: points per round where :func:`_balance_base_moment` sections its bracket (it shrinks 16x per round)
+#: points per round where :func:`_balance_base_moment` sections its bracket (it shrinks 16x per round) ...
 BALANCE_SECTIONS = 15
+#: ... while at most this many elements are open (more: one point, bisection: a march's cost grows with its batch)
+BALANCE_FEW = 256
 #: points of :func:`_balance_base_moment`'s first scan for a moment that reaches the sensor (4x in the second)
 BALANCE_SCAN = 15
 
@@ -655,35 +657,45 @@ BALANCE_SCAN = 15
 def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
     """The base moment m0 at which the residual of :func:`_march` vanishes (friction, self-weight).
 
-    The residual rises with m0 (unit slope to leading order). The moments at which the stem reaches the sensor
-    form one interval: above it the stem bends over toward the push, below it bends back, and a march without
-    a contact there says nothing reliable about which (near a tapered tip its angle spins). So a march without
-    contact is too far above the largest moment that found one, too little below the least, and where none
-    has, the element first scans its range (``BALANCE_SCAN`` points from 0 to twice the first guess, then
-    ``4 BALANCE_SCAN`` over a wider range) in one march. With a contact found, each round takes a secant step
-    from the last two where it falls inside the bracket; otherwise (or where the last secant step did not halve
-    the bracket: near the bend the residual turns like a square root) ``BALANCE_SECTIONS`` evenly spaced points
-    of the bracket in one march (it costs about as much as one point), and with one end known a point beyond
-    it. Without the bracket a first guess f eta past the bend (friction mu > 0 at large deflection) read the
-    stem as slipped where it holds, and a secant stopped short of its tolerance was returned as an equilibrium
-    (mu < 0; docs/model.md, "Friction and weight: the base moment"). Elements whose bracket closes without a
-    root, that find no contact in their scans, or that do not converge, are returned not ``found``. Only the
-    elements still open are marched again.
+    The residual rises with m0 (unit slope to leading order). The moments at which the stem reaches the sensor form
+    one interval: above it the stem bends over toward the push, below it bends back, and a march without a contact
+    there says nothing reliable about which (near a tapered tip its angle spins). So a march without contact is too
+    far above the largest moment that found one, too little below the least, and where none has, the element first
+    scans its range (``BALANCE_SCAN`` points from 0 to twice the first guess, then ``4 BALANCE_SCAN`` over a wider
+    range) in one march. With a contact found, each round takes a secant step from the last two where it falls
+    inside the bracket, else the regula falsi point of the bracket where both its ends reach the sensor; otherwise
+    (or where the last step halved neither the bracket nor the residual: near the bend the residual turns like a
+    square root) ``BALANCE_SECTIONS`` evenly spaced points of the bracket in one march (it costs about as much as
+    one point while at most ``BALANCE_FEW`` elements are open; with more, one point: bisection), and with one end
+    known a point beyond it. A root is a residual under 1e-12, or under 1e-9 in a bracket closed to round-off
+    between two contacts (next to the bend the residual rises by up to 1e5 per unit moment: these friction stems
+    were returned as slipped before session 44). A bracket in which two rounds in a row found no contact is closed:
+    the residual jumps there (the contact leaving the tip). Without the bracket a first guess f eta past the bend
+    (friction mu > 0 at large deflection) read the stem as slipped where it holds, and a secant stopped short of its
+    tolerance was returned as an equilibrium (mu < 0; docs/model.md, "Friction and weight: the base moment").
+    Elements whose bracket closes without a root, that find no contact in their scans, or that do not converge, are
+    returned not ``found``. Only the elements still open are marched again.
     """
     B = f.shape[0]
     m = np.array(m, float)
     r = np.array(sol["resid"], float)
-    lo, hi, r_lo = np.full(B, -np.inf), np.full(B, np.inf), np.full(B, np.nan)
+    lo, hi = np.full(B, -np.inf), np.full(B, np.inf)
+    r_lo, r_hi = np.full(B, np.nan), np.full(B, np.nan)  # the residuals at the bracket's ends (NaN: no contact)
     least, most = np.full(B, np.inf), np.full(B, -np.inf)  # the least and largest moments that found a contact
     m_prev, r_prev = np.full(B, np.nan), np.full(B, np.nan)
     last_width = np.full(B, np.inf)
+    still = np.zeros(B, int)  # rounds in a row that did not move the bracket
     scans = np.zeros(B, int)
     guess = m.copy()
-    frac = np.arange(1, BALANCE_SECTIONS + 1) / (BALANCE_SECTIONS + 1.0)
     u_first, u_wide = (np.arange(1, n + 1) / (n + 1.0) for n in (BALANCE_SCAN, 4 * BALANCE_SCAN))
 
     def balanced():
-        return np.isfinite(r) & (np.abs(r) <= 1e-12 * (1.0 + np.abs(m)))
+        """The residual vanishes to 1e-12; or to 1e-9 where the bracket has closed to round-off between two
+        moments that reach the sensor (next to the bend the residual rises by up to 1e5 per unit moment, and 1e-12
+        is below its round-off; a jump of the residual, where the contact moves along the rod, leaves |r| large)."""
+        tight = (hi - lo <= 1e-14 * (1.0 + np.abs(hi))) & np.isfinite(r_lo) & np.isfinite(r_hi)
+        tol = np.where(tight, 1e-9, 1e-12) * (1.0 + np.abs(m))
+        return np.isfinite(r) & (np.abs(r) <= tol)
 
     def narrow(e, mv, rv):
         """Move the brackets of elements ``e`` with the marches at ``mv`` (residuals ``rv``, NaN: no contact)."""
@@ -695,19 +707,24 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
         above = np.where(fin, rv >= 0, seen & (mv > most[e]))
         np.maximum.at(lo, e[below], mv[below])
         np.minimum.at(hi, e[above], mv[above])
-        at_lo = below & fin & (mv == lo[e])
+        at_lo = below & (mv == lo[e])
         r_lo[e[at_lo]] = rv[at_lo]
+        at_hi = above & (mv == hi[e])
+        r_hi[e[at_hi]] = rv[at_hi]
 
     narrow(np.arange(B), m, r)
     for _ in range(BALANCE_ITERATIONS):
         finite = np.isfinite(r)
         conv = balanced()
         width = hi - lo
-        # closed without a root: to round-off, or to 1e-6 where the residual below stays under -0.05 (near the
-        # bend it rises like a sqrt(distance), a ~ 1 here: by about 1e-3 over the last 1e-6)
+        # closed without a root: to round-off, or to 1e-8 where the residual below stays under -0.05 (near the
+        # bend it rises like a sqrt(distance), a ~ 10 at eta 0.5, p 0.5, mu 0.2: by about 1e-3 over the last 1e-8)
         tight = width <= 1e-14 * (1.0 + np.abs(hi))
-        far_below = (width <= 1e-6 * (1.0 + np.abs(hi))) & (r_lo <= -0.05 * (1.0 + np.abs(lo)))
-        closed = np.isfinite(lo) & np.isfinite(hi) & (tight | far_below)
+        far_below = (width <= 1e-8 * (1.0 + np.abs(hi))) & (r_lo <= -0.05 * (1.0 + np.abs(lo)))
+        # or where two rounds in a row found no contact inside a bracket between two contacts: there the
+        # residual jumps over moments that miss the sensor (the contact leaving the tip), with no root in the gap
+        still = np.where(width == last_width, still + 1, 0)
+        closed = np.isfinite(lo) & np.isfinite(hi) & (tight | far_below | (still >= 2))
         lost = ~np.isfinite(most) & (scans >= 2)  # no moment reaches the sensor
         open_ = ~(conv | closed | lost)
         if not open_.any():
@@ -717,11 +734,16 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
         slope = np.where(np.isfinite(slope) & (slope > 0.05), slope, 1.0)
         step = m - r / slope
         inside = np.isfinite(step) & (step > lo) & (step < hi)
+        # no secant step inside: the regula falsi point of a bracket whose ends both reach the sensor
+        with np.errstate(invalid="ignore", divide="ignore"):
+            falsi = lo - r_lo * (hi - lo) / (r_hi - r_lo)
+        use_falsi = ~inside & np.isfinite(falsi) & (falsi > lo) & (falsi < hi)
+        step, inside = np.where(use_falsi, falsi, step), inside | use_falsi
         with np.errstate(invalid="ignore"):  # inf - inf where an end is still open: not taken
             towards_zero = np.where(hi > 0, 0.5 * hi, hi - 1.0 - np.abs(hi))
             beyond = np.where(np.isfinite(lo), lo + 1.0 + np.abs(lo), towards_zero)
-        # a secant step that did not halve the bracket is followed by sections
-        slow = ~(width <= 0.5 * last_width)
+        # a step that halved neither the bracket nor the residual is followed by sections
+        slow = ~(width <= 0.5 * last_width) & ~(np.abs(r) <= 0.5 * np.abs(r_prev))
         last_width = width
         m_prev, r_prev = np.where(finite, m, m_prev), np.where(finite, r, r_prev)
         i = np.flatnonzero(open_)
@@ -730,6 +752,9 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
         seen = i[~blind]
         sections = np.isfinite(lo[seen]) & np.isfinite(hi[seen]) & (~inside[seen] | slow[seen])
         one, many = seen[~sections], seen[sections]
+        # a march costs about the same for 1 or 100 elements but grows with more: many open, plain bisection
+        n_sec = BALANCE_SECTIONS if i.size <= BALANCE_FEW else 1
+        frac = np.arange(1, n_sec + 1) / (n_sec + 1.0)
         g = np.abs(guess[scan])[:, None]
         first = scans[scan] == 0
         pts_first = 2.0 * g[first] * u_first  # (0, 2 |guess|): friction and weight move the root from f eta
@@ -739,7 +764,7 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
         e = np.concatenate(
             [
                 one,
-                np.repeat(many, BALANCE_SECTIONS),
+                np.repeat(many, n_sec),
                 np.repeat(scan_first, BALANCE_SCAN),
                 np.repeat(scan_wide, 4 * BALANCE_SCAN),
             ]
