@@ -162,13 +162,14 @@ def test_friction_contacts_near_the_branch_end_where_the_residual_is_too_steep_f
     78 degrees): the residual rises by about 1e5 per unit moment at the root, so the best moment in round-off
     leaves a residual of 5e-12, over the 1e-12 a root needed; the bracket closed around it and these stems were
     returned as slipped (the friction tables' branch ends 3-10% early). The reference solver finds them."""
-    f = np.array([9.2, 9.3, 9.44])
-    sol = contact_from_force_nd(f, 0.5, 0.5, {"mu": 0.2})
-    assert sol["found"].all()
-    for i, fi in enumerate(f):
-        r = R.solve_force(fi, 0.5, 0.5, {"mu": 0.2})
-        assert r["found"]
-        np.testing.assert_allclose([sol["xi_c"][i], sol["m0"][i]], [r["xi_c"], r["m0"]], rtol=0, atol=1e-7)
+    for eta, f in ((0.5, [9.2, 9.3, 9.44]), (0.4, [22.28125, 22.5625, 22.9375])):
+        # the second set: sections after the root to round-off ended on a worse point of the same bracket
+        sol = contact_from_force_nd(np.array(f), eta, 0.5, {"mu": 0.2})
+        assert sol["found"].all()
+        for i, fi in enumerate(f):
+            r = R.solve_force(fi, eta, 0.5, {"mu": 0.2})
+            assert r["found"]
+            np.testing.assert_allclose([sol["xi_c"][i], sol["m0"][i]], [r["xi_c"], r["m0"]], rtol=0, atol=1e-7)
 
 
 @pytest.mark.parametrize("case", [CASES[0], CASES[3]], ids=["plain", "friction"])

@@ -689,7 +689,7 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
     guess = m.copy()
     u_first, u_wide = (np.arange(1, n + 1) / (n + 1.0) for n in (BALANCE_SCAN, 4 * BALANCE_SCAN))
 
-    def balanced():
+    def balanced(m, r):
         """The residual vanishes to 1e-12; or to 1e-9 where the bracket has closed to round-off between two
         moments that reach the sensor (next to the bend the residual rises by up to 1e5 per unit moment, and 1e-12
         is below its round-off; a jump of the residual, where the contact moves along the rod, leaves |r| large)."""
@@ -713,9 +713,10 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
         r_hi[e[at_hi]] = rv[at_hi]
 
     narrow(np.arange(B), m, r)
+    best_m, best_r = m.copy(), r.copy()  # each element's moment of least |residual| so far
     for _ in range(BALANCE_ITERATIONS):
         finite = np.isfinite(r)
-        conv = balanced()
+        conv = balanced(m, r)
         width = hi - lo
         # closed without a root: to round-off, or to 1e-8 where the residual below stays under -0.05 (near the
         # bend it rises like a sqrt(distance), a ~ 10 at eta 0.5, p 0.5, mu 0.2: by about 1e-3 over the last 1e-8)
@@ -790,7 +791,19 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
         if keep:
             sol["grid"][..., j] = s["grid"][..., pick]
         r[j] = s["resid"][pick]
-    found = sol["found"] & balanced()
+        better = np.isfinite(r[j]) & ~(np.abs(best_r[j]) <= np.abs(r[j]))
+        best_m[j[better]], best_r[j[better]] = m[j[better]], r[j[better]]
+    # the sections after a root to round-off may end on a worse point of the same bracket: take the best one
+    back = ~balanced(m, r) & balanced(best_m, best_r)
+    if back.any():
+        e = np.flatnonzero(back)
+        s = _march(f[e], best_m[e], phi_fixed[e] + P["c_base"][e] * best_m[e], _subset(P, e), n_steps, keep)
+        m[e], r[e] = best_m[e], s["resid"]
+        for k in ("found", "sig_c", "xi_c", "phi_c", "m_c", "resid"):
+            sol[k][e] = s[k]
+        if keep:
+            sol["grid"][..., e] = s["grid"]
+    found = sol["found"] & balanced(m, r)
     for k in ("sig_c", "xi_c", "phi_c", "m_c", "resid"):
         sol[k] = np.where(found, sol[k], np.nan)
     sol["found"] = found
