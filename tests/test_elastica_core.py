@@ -56,6 +56,7 @@ CASES = [
     (3.0, 0.9, 0.0, -0.2),
     (5.0, 0.9, 0.1, 0.2),
     (4.0, 0.7, 0.05, -0.3),
+    (6.0, 0.5, 0.0, 1.0),
 ]
 
 
@@ -201,6 +202,21 @@ def test_a_tapered_rod_under_its_own_weight_ends_in_a_finite_tip_angle(p):
     assert (step[1] <= step[0] + 1e-12).all()
 
 
+def test_the_shape_grid_starts_at_the_clamp_along_the_base_angle():
+    """Node 0 of the grid is the base: (0, 0, tilt + c m0), written before the first step."""
+    sol = contact_from_force_nd(np.array([1.0, 2.0]), 0.6, 0.3, {"tilt": 0.2, "c_base": 0.1}, keep_shape=True)
+    np.testing.assert_allclose(sol["grid"][0, :2], 0.0, atol=0)
+    np.testing.assert_allclose(sol["grid"][0, 2], 0.2 + 0.1 * sol["m0"], atol=1e-15)
+
+
+def test_a_weight_of_exactly_one_is_weight():
+    """w0 = 1 (nondimensional self-weight) against the reference solver: the base moment balanced at the tip."""
+    sol = contact_from_force_nd(2.0, 0.5, 0.45, {"w0": 1.0})
+    r = R.solve_force(2.0, 0.5, 0.45, {"w0": 1.0})
+    assert bool(sol["found"]) and r["found"]
+    np.testing.assert_allclose([sol["xi_c"], sol["m0"]], [r["xi_c"], r["m0"]], rtol=0, atol=1e-8)
+
+
 @pytest.mark.parametrize("p", [0.0, 0.43])
 def test_an_unloaded_tilted_rod_is_straight_and_a_curved_one_a_circle(p):
     eta = 0.6
@@ -246,8 +262,8 @@ def test_one_step_of_either_path_is_an_exact_circular_arc(path):
 @pytest.mark.parametrize(
     ("eff", "p"),
     [(None, 0.43), (None, np.array([0.43, 0.6])), ({"kappa0": 0.3, "w0": 0.8}, 0.43),
-     ({"mu": 0.2, "w0": 0.8, "kappa0": 0.3}, 0.43)],
-    ids=["plain", "plain-two-tapers", "curved-weighted", "every-effect"],
+     ({"mu": 0.2, "w0": 0.8, "kappa0": 0.3}, 0.43), ({"kappa0": 0.3}, np.array([0.43, 0.6]))],
+    ids=["plain", "plain-two-tapers", "curved-weighted", "every-effect", "curved-two-tapers"],
 )  # fmt: skip
 def test_one_step_of_a_loaded_tapered_rod_matches_an_adaptive_solve(eff, p):
     """The plain path (one taper exponent for the batch, and one per element), the general one without friction
