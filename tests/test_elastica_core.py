@@ -173,6 +173,19 @@ def test_friction_contacts_near_the_branch_end_where_the_residual_is_too_steep_f
             np.testing.assert_allclose([sol["xi_c"][i], sol["m0"][i]], [r["xi_c"], r["m0"]], rtol=0, atol=1e-7)
 
 
+def test_a_push_near_the_tip_with_friction_against_it_holds_as_the_reference_finds():
+    """eta 0.8, p 0.45, mu -0.25, d 0.403 L: the contact at 0.94 L. The moment search converges here only with its
+    secant slope: unit-slope steps and sections (a survivor of the whole core's mutation run) used up the 60 rounds
+    and returned the push slipped. The reference solver, given the force found, puts the contact at d."""
+    d = 0.03 + 3 * (0.9 - 0.03) / 7
+    r = force_from_displacement_nd(np.array([d]), 0.8, 0.45, {"mu": -0.25})
+    assert not r["slipped"].any()
+    ref = R.solve_force(float(r["f"][0]), 0.8, 0.45, {"mu": -0.25})
+    assert ref["found"]
+    assert ref["xi_c"] == pytest.approx(d, abs=1e-8)
+    assert ref["sig_c"] == pytest.approx(float(r["sig_c"][0]), abs=1e-8)
+
+
 @pytest.mark.parametrize("case", [CASES[0], CASES[3]], ids=["plain", "friction"])
 def test_above_the_contact_the_loaded_rod_is_straight_along_its_contact_tangent(case):
     """The grid past the contact (no load, M = 0 there): xi = xi_c + (s - s_c) sin(alpha), zeta likewise; with
