@@ -68,20 +68,32 @@ MIXED = [
 ]
 
 
+def _readable(a: dict) -> dict:
+    """What :func:`~bayesrod.physics.elastica.contact_from_force` lets a user read of a force-direction solve:
+    without an equilibrium (not found, or past yield) no contact, moment or shape (NaN), only the flags."""
+    hold = np.asarray(a["found"]) & ~np.asarray(a["yielded"])
+    out = dict(a)
+    for k in ("sig_c", "xi_c", "phi_c", "m0"):
+        out[k] = np.where(hold, a[k], np.nan)
+    if "grid" in a:
+        out["grid"] = np.where(hold, a["grid"], np.nan)
+    return out
+
+
 def compute() -> dict[str, np.ndarray]:
     """The sweep with whatever bayesrod is importable: arrays keyed ``<case>/<direction>/<field>``."""
     from bayesrod.physics.elastica import contact_from_force_nd, force_from_displacement_nd
 
     out = {}
     for name, eta, p, eff in CASES:
-        a = contact_from_force_nd(FORCES * eta**-2, eta, p, eff, keep_shape=True)
+        a = _readable(contact_from_force_nd(FORCES * eta**-2, eta, p, eff, keep_shape=True))
         for k, v in a.items():
             out[f"{name}/force/{k}"] = np.asarray(v)
         b = force_from_displacement_nd(DISPLACEMENTS * eta, eta, p, eff)
         for k, v in b.items():
             out[f"{name}/displacement/{k}"] = np.asarray(v)
     for name, eta, p, eff in MIXED:
-        a = contact_from_force_nd(FORCES[:, None] * eta**-2, eta, p, eff, keep_shape=True)
+        a = _readable(contact_from_force_nd(FORCES[:, None] * eta**-2, eta, p, eff, keep_shape=True))
         b = force_from_displacement_nd(DISPLACEMENTS[:, None] * eta, eta, p, eff)
         out.update({f"{name}/force/{k}": np.asarray(v) for k, v in a.items()})
         out.update({f"{name}/displacement/{k}": np.asarray(v) for k, v in b.items()})

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from bayesrod.physics import (
+    Effects,
     contact_from_force,
     contact_from_force_nd,
     force_from_displacement,
@@ -505,3 +506,20 @@ def test_without_effects_the_measured_force_is_the_true_force():
     np.testing.assert_array_equal(tilted["f_measured"], tilted["f"])
     offset = E.force_from_displacement_nd(d, 0.6, 0.43, {"f_offset": 0.3})
     np.testing.assert_allclose(offset["f_measured"], plain["f"] + 0.3, rtol=1e-14)
+
+
+@pytest.mark.parametrize(
+    "effects",
+    [Effects(contact_friction=0.3), Effects(self_weight=0.5), Effects(yield_moment=1.0)],
+    ids=["friction", "weight", "yield"],
+)
+def test_forces_without_an_equilibrium_return_no_moment_and_no_shape(effects):
+    """Past the branch end (or past yield) there is no stem to read: its base moment and shape are NaN, not the
+    search's last try (a march balancing nothing, which with friction or weight changed from one search path to
+    another: mutants of the moment search changed only those)."""
+    F = np.geomspace(0.5, 60.0, 12)
+    sol = contact_from_force(F, 0.45, 2.6, 0.43, 0.8, effects, keep_shape=True)
+    assert sol.found.any() and not sol.found.all()
+    assert np.all(np.isfinite(sol.base_moment_Nm[sol.found])) and np.all(np.isnan(sol.base_moment_Nm[~sol.found]))
+    assert np.all(np.isfinite(sol.shape_xz_m[..., sol.found]))
+    assert np.all(np.isnan(sol.shape_xz_m[..., ~sol.found]))

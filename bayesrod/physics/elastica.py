@@ -996,7 +996,7 @@ class ContactSolution:
     contact_angle_rad : tangent angle from vertical at the contact [rad]
     base_moment_Nm : moment at the base [N m]; NaN where not ``found``
     found : contact exists (stem reaches the sensor height) and the base holds it (below yield)
-    shape_xz_m : optional centerline grid, shape (n_steps + 1, 2, ...), in m
+    shape_xz_m : optional centerline grid, shape (n_steps + 1, 2, ...), in m; NaN where not ``found``
     """
 
     force_N: NDArray
@@ -1084,7 +1084,9 @@ def contact_from_force(
         # NaN without an equilibrium, like the contact: with friction or weight m0 is then the search's last try
         base_moment_Nm=np.where(found, res["m0"] * scale, np.nan),
         found=found,
-        shape_xz_m=res["grid"][:, :2] * L if keep_shape else None,
+        # NaN without an equilibrium too: the grid is then the search's last march (with friction or weight a
+        # shape that balances nothing; past yield the elastic one the base cannot hold)
+        shape_xz_m=np.where(found, res["grid"][:, :2] * L, np.nan) if keep_shape else None,
     )
 
 
