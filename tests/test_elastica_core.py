@@ -342,3 +342,28 @@ def test_a_friction_contact_near_the_tip_whose_moment_lies_past_a_gap_without_co
     sol = contact_from_force_nd(f, eta, p, eff)
     assert bool(sol["found"])
     np.testing.assert_allclose([sol["sig_c"], sol["m0"]], [ref["sig_c"], ref["m0"]], rtol=0, atol=1e-8)
+
+
+def test_a_friction_contact_near_the_tip_found_only_by_the_wide_scan_holds():
+    """eta 0.45, p 0.3, mu 0.3, f 26.74: the contact at 0.936 L, which the reference holds. The first scan of the base
+    moment finds no contact; the wider second scan does. Survivors of session 45's mutation run that end the search
+    after the first scan, or move the second scan's points (its sign, offset or scale), returned this stem slipped."""
+    f, eta, p, eff = 26.737282729809095, 0.45, 0.3, {"mu": 0.3}
+    ref = R.solve_force(f, eta, p, eff)
+    assert ref["found"]
+    sol = contact_from_force_nd(f, eta, p, eff)
+    assert bool(sol["found"])
+    np.testing.assert_allclose([sol["sig_c"], sol["m0"]], [ref["sig_c"], ref["m0"]], rtol=0, atol=1e-9)
+
+
+def test_forces_from_displacements_with_friction_against_the_push_match_the_reference():
+    """eta 0.5, p 0.3, mu -0.25 along a push to past its slip: the unloaded rod is straight (contact at x = 0), the
+    force at 0.3 L is the reference's and the last two displacements slip. Survivors of the moment search (its
+    loop ending on a wrong mask, a secant step taken uphill) changed these numbers and passed every other test."""
+    d = np.linspace(0.0, 0.5, 11)
+    sol = force_from_displacement_nd(d, 0.5, 0.3, {"mu": -0.25})
+    np.testing.assert_array_equal(sol["xi_c0"], 0.0)
+    np.testing.assert_array_equal(sol["slipped"], [False] * 9 + [True] * 2)
+    ref = R.solve_displacement(0.3, 0.5, 0.3, {"mu": -0.25})
+    assert float(sol["f"][6]) == pytest.approx(ref["f"], abs=1e-8)
+    assert float(sol["sig_c"][6]) == pytest.approx(ref["sig_c"], abs=1e-8)
