@@ -218,7 +218,10 @@ def main(argv=None) -> None:
                     target.write_text("".join(way))
                     status = _run(tmp, tmp / "new.npz", args.timeout)
                     if status != "ok":
-                        verdicts.append(("timeout" if status == "timeout" else "error", status))
+                        cls = "timeout" if status == "timeout" else "error"
+                        if args.tests and _tests_fail(tmp, args.tests, 4 * args.timeout):
+                            cls = "killed by the suite"
+                        verdicts.append((cls, status))
                     else:
                         same, why = compare(ref, dict(np.load(tmp / "new.npz")), args.rtol)
                         if not same and args.tests and _tests_fail(tmp, args.tests, 4 * args.timeout):

@@ -345,9 +345,9 @@ def test_a_friction_contact_near_the_tip_whose_moment_lies_past_a_gap_without_co
 
 
 def test_a_friction_contact_near_the_tip_found_only_by_the_wide_scan_holds():
-    """eta 0.45, p 0.3, mu 0.3, f 26.74: the contact at 0.936 L, which the reference holds. The first scan of the base
-    moment finds no contact; the wider second scan does. Survivors of session 45's mutation run that end the search
-    after the first scan, or move the second scan's points (its sign, offset or scale), returned this stem slipped."""
+    """eta 0.45, p 0.3, mu 0.3, f 26.74: the contact at 0.936 L, which the reference holds. Survivors of session 45's
+    mutation run that move the moment search's wide scan (its sign, offset or scale) or stop elements that have
+    found a contact after two scans returned this stem slipped."""
     f, eta, p, eff = 26.737282729809095, 0.45, 0.3, {"mu": 0.3}
     ref = R.solve_force(f, eta, p, eff)
     assert ref["found"]
