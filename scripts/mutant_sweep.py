@@ -20,7 +20,7 @@ Usage::
 The result (``--out``): per survivor ``same`` (every number within rtol), ``changed`` (with the largest
 relative change and where), ``timeout``/``error`` (the mutant hangs or raises on the sweep: a user would see
 that) or ``unapplied`` (its diff's lines were not found); with ``--tests``, a changed mutant that one of them
-fails on is ``killed by the suite``.
+fails on is ``killed by the suite``; likewise one that raises or hangs.
 """
 
 from __future__ import annotations
@@ -28,15 +28,17 @@ from __future__ import annotations
 import argparse
 import json
 import re
-import shutil
 import subprocess
 import sys
 import tempfile
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from mutation import _copy_tree  # noqa: E402  (the same copy of the tracked tree mutmut's runs use)
+
 MODULE = "bayesrod/physics/elastica.py"
 
 #: (name, eta, p, nondimensional effects): each catalog effect the solver's core carries, alone or paired
@@ -153,25 +155,25 @@ def candidates(source: list[str], mutant: str, diff: list[str]) -> list[list[str
     return out
 
 
+def _env(root: Path) -> dict:
+    """A process that imports the bayesrod of the copy at ``root``, on one thread."""
+    return {"PYTHONPATH": str(root), "OMP_NUM_THREADS": "1", "PATH": "/usr/bin:/bin", "MPLBACKEND": "Agg"}
+
+
 def _tests_fail(root: Path, tests: list[str], timeout: float) -> bool:
     """Do ``tests`` fail (or hang) on the tree at ``root``?"""
     cmd = [sys.executable, "-m", "pytest", "-q", "-x", "-n0", "-p", "no:cacheprovider", "-m", "not slow", *tests]
-    env = {"PYTHONPATH": str(root), "OMP_NUM_THREADS": "1", "PATH": "/usr/bin:/bin", "MPLBACKEND": "Agg"}
     try:
-        return subprocess.run(cmd, cwd=root, env=env, capture_output=True, timeout=timeout).returncode != 0
+        return subprocess.run(cmd, cwd=root, env=_env(root), capture_output=True, timeout=timeout).returncode != 0
     except subprocess.TimeoutExpired:
         return True
 
 
-def _run(pkg_root: Path, out: Path, timeout: float) -> str:
+def _run(root: Path, out: Path, timeout: float) -> str:
+    """The sweep with the copy at ``root``, saved to ``out``: "ok", "timeout" or "error: <last line>"."""
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--compute", str(out)]
     try:
-        r = subprocess.run(
-            [sys.executable, str(Path(__file__).resolve()), "--compute", str(out)],
-            env={"PYTHONPATH": str(pkg_root), "OMP_NUM_THREADS": "1", "PATH": "/usr/bin:/bin"},
-            capture_output=True,
-            text=True,
-            timeout=timeout,
-        )
+        r = subprocess.run(cmd, env=_env(root), capture_output=True, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
         return "timeout"
     return "ok" if r.returncode == 0 else "error: " + (r.stderr.strip().splitlines() or ["?"])[-1][:200]
@@ -197,11 +199,7 @@ def main(argv=None) -> None:
     done = json.loads(out_path.read_text()) if out_path.exists() else {}  # resumable
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        tracked = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True)
-        for f in tracked.stdout.splitlines():
-            if (ROOT / f).is_file():
-                (tmp / f).parent.mkdir(parents=True, exist_ok=True)
-                shutil.copy2(ROOT / f, tmp / f)
+        _copy_tree(tmp)
         target = tmp / MODULE
         original = target.read_text().splitlines(keepends=True)
         if _run(tmp, tmp / "ref.npz", args.timeout) != "ok":
@@ -217,17 +215,14 @@ def main(argv=None) -> None:
                 for way in ways:
                     target.write_text("".join(way))
                     status = _run(tmp, tmp / "new.npz", args.timeout)
-                    if status != "ok":
-                        cls = "timeout" if status == "timeout" else "error"
-                        if args.tests and _tests_fail(tmp, args.tests, 4 * args.timeout):
-                            cls = "killed by the suite"
-                        verdicts.append((cls, status))
-                    else:
+                    if status == "ok":
                         same, why = compare(ref, dict(np.load(tmp / "new.npz")), args.rtol)
-                        if not same and args.tests and _tests_fail(tmp, args.tests, 4 * args.timeout):
-                            verdicts.append(("killed by the suite", why))
-                        else:
-                            verdicts.append(("same" if same else "changed", why))
+                        cls = "same" if same else "changed"
+                    else:
+                        cls, why = ("timeout" if status == "timeout" else "error"), status
+                    if cls != "same" and args.tests and _tests_fail(tmp, args.tests, 4 * args.timeout):
+                        cls = "killed by the suite"
+                    verdicts.append((cls, why))
                 target.write_text("".join(original))
                 # ambiguous diffs (the same line twice in the function): same only if every placement is
                 cls = next((c for c, _ in verdicts if c != "same"), "same")
@@ -237,10 +232,7 @@ def main(argv=None) -> None:
             tmp_out.replace(out_path)
             if sys.stderr.isatty():
                 print(f"\r{n}/{len(todo)} {m}: {done[m]['class']}   ", end="", file=sys.stderr)
-    counts: dict[str, int] = {}
-    for v in done.values():
-        counts[v["class"]] = counts.get(v["class"], 0) + 1
-    print(json.dumps(counts))
+    print(json.dumps(Counter(v["class"] for v in done.values())))
 
 
 if __name__ == "__main__":

@@ -658,7 +658,7 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
     """The base moment m0 at which the residual of :func:`_march` vanishes (friction, self-weight).
 
     The residual rises with m0 (unit slope to leading order). The moments at which the stem reaches the sensor form
-    one interval (near the tip not always: a root in a narrow window past a gap is missed, docs/model.md): above
+    one interval (near the tip not always: a root past a gap without contact can be missed, docs/model.md): above
     it the stem bends over toward the push, below it bends back, and a march without a contact
     there says nothing reliable about which (near a tapered tip its angle spins). So a march without contact is too
     far above the largest moment that found one, too little below the least, and where none has, the element first
