@@ -324,19 +324,13 @@ def test_the_right_hand_side_is_the_rod_equations_with_every_effect():
             np.testing.assert_allclose(E._rhs(sig, Y, af, P), want, rtol=1e-13, atol=1e-15)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="open (issue 21, session 45): near the tip the moments that reach the sensor are several intervals; the "
-    "first scan finds only the wrong one and the bracket closes at its edge",
-)
 def test_a_friction_contact_near_the_tip_whose_moment_lies_past_a_gap_without_contact_holds():
     """eta 0.5625, p 0.4, mu 0.424 (a node of the friction table): at f 13.748 the reference holds the stem (contact
-    at 0.927 L, m0 3.798), and so does the fast path at 13.6 and 13.8. Its moment search scans (0, 2 f eta) in 15
-    points 0.97 apart; only m0 1.93 reaches the sensor (contacts at 1.9-2.18 and 3.0-3.2 with residual -3 to -5;
-    the root ends a family 3.3-3.798 whose contact moves from 0.62 to 0.93 L), so the bracket closes on the jump
-    at 2.1828 and the force is read as slipped. 115 of 4000 forces from 1 to 19.6 (all in 13.7-19.55, the branch
-    end) are such holes; the force tables' branch-end search stopping at them moved a friction fit's MLE by -18.5
-    sd in mu (docs/validation.md, session 45)."""
+    at 0.927 L, m0 3.798). Before session 46 the fast path counted contacts its tip found after the stem had bent back
+    past horizontal (m0 1.9-2.18 and 2.9-3.27, residual -3 to -7; the reference stops there), took the first for the
+    bracket's lower end and closed it on the jump at 2.1828: 115 of 4000 forces in 13.7-19.55 were read as slipped,
+    and the force tables' branch-end search stopping at them moved a friction fit's MLE by -18.5 sd in mu
+    (docs/validation.md, session 45)."""
     eta, p, eff, f = 0.5625, 0.40, {"mu": 0.42409332}, 13.74791319
     ref = R.solve_force(f, eta, p, eff)
     assert ref["found"] and ref["sig_c"] == pytest.approx(0.9268, abs=1e-3)

@@ -390,6 +390,7 @@ def _march(f, m0, phi0, P, n_steps, keep=False):
     pend_sig = np.zeros(B)
     pend_h = np.zeros(B)
     pend = np.zeros(B, bool)
+    bent_back = np.zeros(B, bool)
 
     def resolve(idx, Y0, sig0, h0):
         """Exact contact (or none) for elements whose step [sig0, sig0 + h0] closed them."""
@@ -398,7 +399,7 @@ def _march(f, m0, phi0, P, n_steps, keep=False):
         y1 = _step(Y0, sig0, h0, fi, Pi, 1.0)
         dmax = np.array(h0, dtype=float, copy=True) * np.ones(idx.size)
         crossed = y1[1] >= Pi["eta"]
-        over = ~crossed
+        over = ~crossed & ~bent_back[idx]
         if over.any():
             # zeta may peak above eta inside the step (phi passes pi/2): check the peak.
             io = np.flatnonzero(over)
@@ -422,7 +423,11 @@ def _march(f, m0, phi0, P, n_steps, keep=False):
 
     def advance(Y, sig, step):
         new = _step(Y, sig, step, f, P, active)
-        closing = open_ & ((new[1] >= eta) | (new[2] >= _HALF_PI))
+        # bent back past horizontal (away from the push) below the sensor: no contact ahead (the tip of a tapered
+        # stem then spins, and a contact it finds is not an equilibrium the reference holds)
+        back = open_ & (new[2] <= -_HALF_PI) & (new[1] < eta)
+        bent_back[back] = True
+        closing = open_ & ((new[1] >= eta) | (new[2] >= _HALF_PI) | back)
         if closing.any():
             idx = np.flatnonzero(closing)
             if run_to_tip:
@@ -458,7 +463,10 @@ def _march(f, m0, phi0, P, n_steps, keep=False):
             resolve(idx, pend_Y[:, idx], pend_sig[idx], pend_h[idx])
     found = np.isfinite(out["sig_c"])
     resid = Y[3] if P["_weighted"] else out["m_c"]
-    out.update(found=found, resid=np.where(found, resid, np.nan), grid=grid)
+    # without a contact: bent over (the tangent passed horizontal toward the push below the sensor, or the stem
+    # ends leaning toward it; the base moment is too large) or back (too small), as the reference classifies
+    bent_over = ~found & ~bent_back & (~open_ | (Y[2] > 0))
+    out.update(found=found, resid=np.where(found, resid, np.nan), grid=grid, bent_over=bent_over)
     return out
 
 
@@ -657,25 +665,25 @@ BALANCE_SCAN = 15
 def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
     """The base moment m0 at which the residual of :func:`_march` vanishes (friction, self-weight).
 
-    The residual rises with m0 (unit slope to leading order). The moments at which the stem reaches the sensor form
-    one interval (near the tip not always: a root past a gap without contact can be missed, docs/model.md): above
-    it the stem bends over toward the push, below it bends back, and a march without a contact
-    there says nothing reliable about which (near a tapered tip its angle spins). So a march without contact is too
-    far above the largest moment that found one, too little below the least, and where none has, the element first
-    scans its range (``BALANCE_SCAN`` points from 0 to twice the first guess, then ``4 BALANCE_SCAN`` over a wider
-    range) in one march. With a contact found, each round takes a secant step from the last two where it falls
-    inside the bracket, else the regula falsi point of the bracket where both its ends reach the sensor; otherwise
-    (or where the last step halved neither the bracket nor the residual: near the bend the residual turns like a
-    square root) ``BALANCE_SECTIONS`` evenly spaced points of the bracket in one march (it costs about as much as
-    one point while at most ``BALANCE_FEW`` elements are open; with more, one point: bisection), and with one end
-    known a point beyond it. A root is a residual under 1e-12, or under 1e-9 in a bracket closed to round-off
-    between two contacts (next to the bend the residual rises by up to 1e5 per unit moment: these friction stems
-    were returned as slipped before session 44). A bracket in which two rounds in a row found no contact is closed:
-    the residual jumps there (the contact leaving the tip). Without the bracket a first guess f eta past the bend
-    (friction mu > 0 at large deflection) read the stem as slipped where it holds, and a secant stopped short of its
-    tolerance was returned as an equilibrium (mu < 0; docs/model.md, "Friction and weight: the base moment").
-    Elements whose bracket closes without a root, that find no contact in their scans, or that do not converge, are
-    returned not ``found``. Only the elements still open are marched again.
+    The residual rises with m0 (unit slope to leading order). A march that does not reach the sensor is classed as
+    the reference solver classes it: bent over (its tangent passed horizontal toward the push below the sensor, or
+    the stem ends leaning toward it: too much moment) or bent back (it passed horizontal away from the push first:
+    too little; a contact its spinning tip finds after that is none, session 46). Such a march moves the bracket by
+    its class only outside the moments that found a contact (the class can flip in islands next to a root near
+    the tip). Where no march has bracketed the root yet, the element first scans its range (``BALANCE_SCAN``
+    points from 0 to twice the first guess, then ``4 BALANCE_SCAN`` over a wider range) in one march. With a
+    bracket, each round takes a secant step from the last two contacts where it falls inside, else the regula
+    falsi point of the bracket where both its ends reach the sensor; otherwise (or where the last step halved
+    neither the bracket nor the residual: near the bend the residual turns like a square root; or where the last
+    round left the bracket as it was) ``BALANCE_SECTIONS`` evenly spaced points of the bracket in one march (it
+    costs about as much as one point while at most ``BALANCE_FEW`` elements are open; with more, one point:
+    bisection), and with one end known a point beyond it. A root is a residual under 1e-12, or under 1e-9 in a
+    bracket closed to round-off between two contacts (next to the bend the residual rises by up to 1e5 per unit
+    moment). A bracket closes without a root at round-off, at 1e-8 where the residual below stays under -0.05, at
+    1e-10 between a stem bent back and one bent over, or where two rounds in a row left it as it was (the residual
+    jumps there: the contact leaving the tip). Elements whose bracket closes without a root, that find no bracket
+    in their scans, or that do not converge, are returned not ``found``. Only the elements still open are marched
+    again (docs/model.md, "Friction and weight: the base moment").
     """
     B = f.shape[0]
     m = np.array(m, float)
@@ -698,22 +706,25 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
         tol = np.where(tight, 1e-9, 1e-12) * (1.0 + np.abs(m))
         return np.isfinite(r) & (np.abs(r) <= tol)
 
-    def narrow(e, mv, rv):
-        """Move the brackets of elements ``e`` with the marches at ``mv`` (residuals ``rv``, NaN: no contact)."""
+    def narrow(e, mv, rv, over):
+        """Move the brackets of elements ``e`` with the marches at ``mv`` (residuals ``rv``, NaN: no contact;
+        ``over``: a march without contact bent over toward the push, else back). A march without contact counts
+        by its class only outside the moments that found one (near the tip the class flips in islands: a stem bent
+        back 1e-6 above a root at eta 0.5625, p 0.4, mu 0.42, f 18.39); the upper end moves first and the lower
+        only below it, so the bracket never inverts."""
         fin = np.isfinite(rv)
         np.minimum.at(least, e[fin], mv[fin])
         np.maximum.at(most, e[fin], mv[fin])
-        seen = np.isfinite(most[e])
-        below = np.where(fin, rv < 0, seen & (mv < least[e]))
-        above = np.where(fin, rv >= 0, seen & (mv > most[e]))
-        np.maximum.at(lo, e[below], mv[below])
+        above = np.where(fin, rv >= 0, over & ~(mv <= most[e])) & (mv > lo[e])
         np.minimum.at(hi, e[above], mv[above])
+        below = np.where(fin, rv < 0, ~over & ~(mv >= least[e])) & (mv < hi[e])
+        np.maximum.at(lo, e[below], mv[below])
         at_lo = below & (mv == lo[e])
         r_lo[e[at_lo]] = rv[at_lo]
         at_hi = above & (mv == hi[e])
         r_hi[e[at_hi]] = rv[at_hi]
 
-    narrow(np.arange(B), m, r)
+    narrow(np.arange(B), m, r, sol["bent_over"])
     best_m, best_r = m.copy(), r.copy()  # each element's moment of least |residual| so far
     for _ in range(BALANCE_ITERATIONS):
         finite = np.isfinite(r)
@@ -723,11 +734,14 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
         # bend it rises like a sqrt(distance), a ~ 10 at eta 0.5, p 0.5, mu 0.2: by about 1e-3 over the last 1e-8)
         tight = width <= 1e-14 * (1.0 + np.abs(hi))
         far_below = (width <= 1e-8 * (1.0 + np.abs(hi))) & (r_lo <= -0.05 * (1.0 + np.abs(lo)))
+        # or to 1e-10 between a stem bent back and one bent over, neither reaching the sensor: no contact between
+        far_below |= (width <= 1e-10 * (1.0 + np.abs(hi))) & np.isnan(r_lo) & np.isnan(r_hi)
         # or where two rounds in a row found no contact inside a bracket between two contacts: there the
         # residual jumps over moments that miss the sensor (the contact leaving the tip), with no root in the gap
         still = np.where(width == last_width, still + 1, 0)
         closed = np.isfinite(lo) & np.isfinite(hi) & (tight | far_below | (still >= 2))
-        lost = ~np.isfinite(most) & (scans >= 2)  # no moment reaches the sensor
+        bracketed = np.isfinite(lo) & np.isfinite(hi)
+        lost = ~np.isfinite(most) & (scans >= 2) & ~bracketed  # no moment reaches the sensor
         open_ = ~(conv | closed | lost)
         if not open_.any():
             break
@@ -749,13 +763,21 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
         last_width = width
         m_prev, r_prev = np.where(finite, m, m_prev), np.where(finite, r, r_prev)
         i = np.flatnonzero(open_)
-        blind = ~np.isfinite(most[i])
+        blind = ~np.isfinite(most[i]) & ~bracketed[i]  # one side only, and no contact: scan
         scan = i[blind]
         seen = i[~blind]
-        sections = np.isfinite(lo[seen]) & np.isfinite(hi[seen]) & (~inside[seen] | slow[seen])
+        # sections where no step falls inside or the last was slow, or where the last round left the bracket as it
+        # was (its point a march without contact inside the moments that found one: a bisection would repeat it)
+        sections = bracketed[seen] & (~inside[seen] | slow[seen] | (still[seen] >= 1))
         one, many = seen[~sections], seen[sections]
         # a march costs about the same for 1 or 100 elements but grows with more: many open, plain bisection
+        # (but sections where the bracket stood still)
         n_sec = BALANCE_SECTIONS if i.size <= BALANCE_FEW else 1
+        few = (still[many] >= 1) | (n_sec == BALANCE_SECTIONS)
+        many, many_one = many[few], many[~few]
+        one = np.concatenate([one, many_one])
+        inside[many_one], step[many_one] = True, 0.5 * (lo[many_one] + hi[many_one])
+        n_sec = BALANCE_SECTIONS
         frac = np.arange(1, n_sec + 1) / (n_sec + 1.0)
         g = np.abs(guess[scan])[:, None]
         first = scans[scan] == 0
@@ -780,7 +802,7 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
             ]
         )
         s = _march(f[e], mv, phi_fixed[e] + P["c_base"][e] * mv, _subset(P, e), n_steps, keep)
-        narrow(e, mv, s["resid"])
+        narrow(e, mv, s["resid"], s["bent_over"])
         # each element's new point: its march of smallest |residual| (one without contact if none found one)
         score = np.where(np.isfinite(s["resid"]), np.abs(s["resid"]), np.inf)
         order = np.lexsort((score, e))
