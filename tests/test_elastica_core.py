@@ -339,6 +339,24 @@ def test_a_friction_contact_near_the_tip_whose_moment_lies_past_a_gap_without_co
     np.testing.assert_allclose([sol["sig_c"], sol["m0"]], [ref["sig_c"], ref["m0"]], rtol=0, atol=1e-8)
 
 
+def test_friction_contacts_near_the_tip_hold_past_islands_of_bent_back_stems_in_small_and_large_batches():
+    """eta 0.5625, p 0.4, mu 0.424, f 18.2-18.5 (contact at 0.986-0.989 L, the reference holds each): just above the
+    root the class of a march without contact flips (bent over, then bent back 1e-6 higher, then over). Counting
+    such a bent-back march as below the root moved the bracket past it (f 18.39 in a batch of 100); in a batch of
+    more than ``BALANCE_FEW`` the bisection point repeated on it and the bracket closed as if stuck (f 18.21)."""
+    eta, p, eff = 0.5625, 0.40, {"mu": 0.42409332}
+    checks = [18.39090909090909, 18.21111111111111]
+    refs = [R.solve_force(f, eta, p, eff) for f in checks]
+    assert all(r["found"] for r in refs)
+    for n in (100, 300):
+        fs = np.sort(np.concatenate([np.linspace(18.2, 18.5, n - 2), checks]))
+        sol = contact_from_force_nd(fs, eta, p, eff)
+        assert sol["found"].all(), fs[~sol["found"]]
+        for f, ref in zip(checks, refs, strict=True):
+            k = int(np.flatnonzero(fs == f)[0])
+            np.testing.assert_allclose([sol["sig_c"][k], sol["m0"][k]], [ref["sig_c"], ref["m0"]], rtol=0, atol=1e-8)
+
+
 def test_a_friction_contact_near_the_tip_found_only_by_the_wide_scan_holds():
     """eta 0.45, p 0.3, mu 0.3, f 26.74: the contact at 0.936 L, which the reference holds. Survivors of session 45's
     mutation run that move the moment search's wide scan (its sign, offset or scale) or stop elements that have

@@ -428,6 +428,19 @@ def test_force_curves_find_a_branch_end_above_their_first_guess(monkeypatch):
     np.testing.assert_array_equal(c.force(np.array([0.0, 1.0, 5.0]))[1], 0.0)  # no contact: no force
 
 
+def test_friction_force_curves_end_where_the_contact_leaves_the_tip_at_every_taper(monkeypatch):
+    """eta 0.5625, mu 0.424 (a node of the friction table), p 0.35-0.5: each branch ends where the contact leaves
+    the tip, 0.75-0.77 L, smoothly over p. Before session 46 the moment search read stems held near the tip as
+    slipped in isolated holes, the branch-end search stopped at one and p 0.4 ended at 0.328 L; past an end the
+    table goes on along the end tangent, and that node moved a friction fit's MLE by -18.5 sd in mu."""
+    monkeypatch.setattr(likelihood, "_CURVE_CACHE", {})
+    (c,) = ForceCurves.batch(
+        np.array([0.5625]), np.array([0.35, 0.40, 0.45, 0.50]), n_f=25, effects_nd={"mu": 0.42409332}
+    )
+    assert np.all((c.d_end > 0.74) & (c.d_end < 0.78)), c.d_end
+    assert np.max(np.abs(np.diff(c.d_end))) < 0.02, c.d_end
+
+
 def test_force_curves_count_displacement_from_the_unloaded_stem():
     """With a rest curvature the unloaded stem already leans: the curve's displacement is the contact's travel from
     where the unloaded stem meets the probe's height, f(xi(f) - xi(0)) = f, and the same curves serve the shapes."""

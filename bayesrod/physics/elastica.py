@@ -766,12 +766,11 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
         blind = ~np.isfinite(most[i]) & ~bracketed[i]  # one side only, and no contact: scan
         scan = i[blind]
         seen = i[~blind]
-        # sections where no step falls inside or the last was slow, or where the last round left the bracket as it
-        # was (its point a march without contact inside the moments that found one: a bisection would repeat it)
-        sections = bracketed[seen] & (~inside[seen] | slow[seen] | (still[seen] >= 1))
+        sections = bracketed[seen] & (~inside[seen] | slow[seen])
         one, many = seen[~sections], seen[sections]
-        # a march costs about the same for 1 or 100 elements but grows with more: many open, plain bisection
-        # (but sections where the bracket stood still)
+        # a march costs about the same for 1 or 100 elements but grows with more: many open, plain bisection; but
+        # sections where the last round left the bracket as it was (its point a march without contact inside the
+        # moments that found one, which a bisection would repeat)
         n_sec = BALANCE_SECTIONS if i.size <= BALANCE_FEW else 1
         few = (still[many] >= 1) | (n_sec == BALANCE_SECTIONS)
         many, many_one = many[few], many[~few]
