@@ -357,6 +357,22 @@ def test_friction_contacts_near_the_tip_hold_past_islands_of_bent_back_stems_in_
             np.testing.assert_allclose([sol["sig_c"][k], sol["m0"][k]], [ref["sig_c"], ref["m0"]], rtol=0, atol=1e-8)
 
 
+def test_friction_contacts_near_the_tip_hold_where_marches_without_contact_lie_between_contacts():
+    """eta 0.577, p 0.493, mu 0.421: 300 forces from 3 / eta^2 to 7 / eta^2, the contacts at 0.982-0.983 L (the
+    reference holds both checked here). Marches without contact that bent over lie below contacts that reach the
+    sensor, and ones that bent back lie above: counting either by its class, or letting the lower end pass the
+    upper, moved the bracket off the root and read these stems as slipped (single-line changes, session 46)."""
+    eta, p, eff = 0.5766368798548233, 0.49348719049873535, {"mu": 0.4207662055774063}
+    fs = np.linspace(3.0 / eta**2, 7.0 / eta**2, 300)
+    sol = contact_from_force_nd(fs, eta, p, eff)
+    for f in (13.850259863776378, 13.890493007897733):
+        k = int(np.argmin(np.abs(fs - f)))
+        assert fs[k] == pytest.approx(f, abs=1e-12)
+        ref = R.solve_force(float(fs[k]), eta, p, eff)
+        assert ref["found"] and bool(sol["found"][k]), (f, ref)
+        np.testing.assert_allclose([sol["sig_c"][k], sol["m0"][k]], [ref["sig_c"], ref["m0"]], rtol=0, atol=1e-8)
+
+
 def test_a_friction_contact_near_the_tip_found_only_by_the_wide_scan_holds():
     """eta 0.45, p 0.3, mu 0.3, f 26.74: the contact at 0.936 L, which the reference holds. Survivors of session 45's
     mutation run that move the moment search's wide scan (its sign, offset or scale) or stop elements that have
