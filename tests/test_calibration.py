@@ -66,6 +66,28 @@ def test_force_tables_stay_smooth_past_a_branch_that_ends_rising():
     assert np.abs(f - f_exact).max() < 5e-4 * f_exact.max()
 
 
+def test_the_likelihood_reads_friction_forces_in_log_space_to_the_branch_end():
+    """The twig's lowest push (eta 0.5625) with friction 0.3 runs to its branch end (0.745 L), where the force grows
+    nearly exponentially along mu (f at 0.738 L: 6.7, 8.7, 11.8, 17.1 on the fit's nodes 0.21-0.42). The
+    likelihood's table (4-point Lagrange in p and mu at the fit's spacing) against an exact curve at p 0.43, mu 0.3
+    over the last half of the push: read in log space 1.4e-4 of the peak force; linearly 1.5e-3, which moved a noise-free
+    friction fit's MLE of mu by +1.7 sd (docs/validation.md, session 46)."""
+    from bayesrod.inference.likelihood import EffectAxis, ForceCurves, RodLikelihood
+
+    eta, p0, mu0 = 0.45 / 0.8, 0.43, 0.3
+    p_grid = np.arange(0.35, 0.51, 0.05)  # the fit's 0.05 in p: the stencil around 0.43
+    mu_nodes = np.linspace(-0.8482, 0.8482, 25)[15:19]  # the fit's friction nodes around 0.3 (0.212-0.424)
+    curves = ForceCurves.batch(np.full(4, eta), p_grid, n_f=160, effects_nd={"mu": mu_nodes})
+    (exact,) = ForceCurves.batch(np.array([eta]), np.array([p0]), n_f=160, effects_nd={"mu": np.array([mu0])})
+    d = np.linspace(0.5, 1.0, 40) * exact.d_end[0]
+    f_exact = exact.force(d)[0]
+    lik = RodLikelihood.__new__(RodLikelihood)
+    lik.p_grid, lik.axis = p_grid, EffectAxis("contact_friction", mu_nodes)
+    lik.f_table = np.stack([c.force(d) for c in curves])  # (4 mu, 4 p, n)
+    f = lik.interp_force(np.array([p0]), np.array([mu0]))[0]
+    assert np.abs(f - f_exact).max() < 4e-4 * f_exact.max()
+
+
 def test_frames_before_the_second_engaged_sample_are_not_used():
     """A frame's contact displacement is interpolated in time from the force record; before the second
     engaged sample D(t) bends too hard (the simulated twig's first frame was 12% off, which a tilt or a

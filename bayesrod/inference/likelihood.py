@@ -347,6 +347,14 @@ SHAPE_END_STEP = 0.01
 #: force curves kept per process (each ~0.3 MB at 61 p nodes x 160 solves): enough for one stem's
 #: heights x effect nodes, so that the conditions of a stem (issue 23) share their solves
 CURVE_CACHE_SIZE = 128
+#: the force table is interpolated in log(f + FORCE_LOG_FLOOR) (nondimensional f): near a branch's end the force
+#: grows nearly exponentially along the friction axis (f 6.7, 8.7, 11.8, 17.1 at d 0.738 L, mu 0.21-0.42, eta 0.56),
+#: and linear 4-point interpolation over mu missed by 0.013 there, log-space by 0.0012 (docs/inference.md, session 46).
+#: Only on the axes of LOG_FORCE_EFFECTS: on a 5-node rest-curvature axis log space moved a noise-free fit's MLE by
+#: 10-26 sd (linear: 0.15-1.6), where small forces differ by factors between nodes; a table with a negative force
+#: is read linearly too.
+FORCE_LOG_FLOOR = 1e-9
+LOG_FORCE_EFFECTS = ("contact_friction",)
 _CURVE_CACHE: dict = {}
 
 
@@ -898,6 +906,24 @@ class RodLikelihood:
             out[:, t["points"]] = np.matmul(w.reshape(W, 1, 8), t["normal"][rows].reshape(W, 8, -1))[:, 0, :]
         return out
 
+    def _force_log_table(self) -> NDArray | None:
+        """log(f_table + FORCE_LOG_FLOOR), cached for the current ``f_table``; None (read linearly) without an
+        axis of ``LOG_FORCE_EFFECTS`` or where a force is negative."""
+        if getattr(self, "_f_log_of", None) is not self.f_table:
+            on_axis = self.axis is not None and self.axis.name in LOG_FORCE_EFFECTS
+            ok = on_axis and self.f_table.size and np.min(self.f_table) >= 0.0
+            self._f_log = np.log(self.f_table + FORCE_LOG_FLOOR) if ok else None
+            self._f_log_of = self.f_table
+        return self._f_log
+
+    def interp_force(self, p: NDArray, u: NDArray | None = None, weights=None) -> NDArray:
+        """The force table at p (W,) and effect coordinate u, (W, N) nondimensional: in log space on a friction axis
+        (``LOG_FORCE_EFFECTS``), else linearly."""
+        table = self._force_log_table()
+        if table is None:
+            return self._interp(self.f_table, p, u, weights)
+        return np.exp(self._interp(table, p, u, weights)) - FORCE_LOG_FLOOR
+
     def predict_nd_force(self, p: NDArray, u: NDArray | None = None) -> NDArray:
         """Nondimensional force at every engaged sample, (W, N).
 
@@ -906,7 +932,7 @@ class RodLikelihood:
         term of the likelihood (:meth:`slip_loglik`): a rule "slipped means zero" alone would say only
         "not yet slipped" for engaged samples and bias p toward late slips when a push stops at its slip.
         """
-        return self._interp(self.f_table, p, u)
+        return self.interp_force(p, u)
 
     def shape_offsets(self, p: NDArray, u: NDArray | None = None, weights=None) -> NDArray:
         """Signed normal offset [m] of every observed point from the centerline, (W, M): the shape
@@ -932,7 +958,7 @@ class RodLikelihood:
                 heights = heights + dh[:, self.F_push]
             else:
                 weights = self._gather_weights(p, u)
-                F = EI0[:, None] / self.L**2 * self._interp(self.f_table, p, u, weights)
+                F = EI0[:, None] / self.L**2 * self.interp_force(p, u, weights)
             if "yield" in params:
                 F = np.minimum(F, np.atleast_1d(params["yield"])[:, None] / heights)
             if "force_offset" in params:
@@ -1411,22 +1437,22 @@ def table_check(lik: RodLikelihood, point: dict) -> dict | None:
     names += (["force_offset"] if "force_offset" in lik.effects else []) + list(lik.offset_names)
     blocks, out = [], {"max_error_over_sigma": None, "n_samples": 0}
 
-    def steps(table: NDArray) -> list[NDArray]:  # central differences of a table in p (and u), per unit step
+    def steps(interp) -> list[NDArray]:  # central differences of an interpolated table in p (and u), per unit step
         cols = []
         for dp, du in ((1e-4, 0.0),) + (((0.0, 1e-4),) if lik.axis is not None else ()):
-            up = lik._interp(table, one["p"] + dp, None if u is None else u + du)[0]
-            dn = lik._interp(table, one["p"] - dp, None if u is None else u - du)[0]
+            up = interp(one["p"] + dp, None if u is None else u + du)[0]
+            dn = interp(one["p"] - dp, None if u is None else u - du)[0]
             cols.append((up - dn) / (2 * max(dp, du)))
         return cols
 
     if lik.n_force:
         sigma = float(one["sigma_force_N"][0])
-        f_tab = lik._interp(lik.f_table, one["p"], u)[0]  # (N,) nondimensional
+        f_tab = lik.interp_force(one["p"], u)[0]  # (N,) nondimensional, as the likelihood reads it
         d_nd = np.concatenate([d.D_m for d in lik.force_data]) / lik.L
         exact = force_from_displacement_nd(d_nd, lik.F_height / lik.L, p, eff or None)["f"]
         ok = np.isfinite(exact)
         scale = EI0 / lik.L**2
-        cols = [scale * f_tab] + [scale * c for c in steps(lik.f_table)]  # dF / d(log EI0, p, u) [N]
+        cols = [scale * f_tab] + [scale * c for c in steps(lik.interp_force)]  # dF / d(log EI0, p, u) [N]
         if "force_offset" in lik.effects:
             cols.append(np.ones_like(f_tab))
         cols += [(lik.F_push == j).astype(float) for j in range(len(lik.offset_names))]
@@ -1460,7 +1486,7 @@ def table_check(lik: RodLikelihood, point: dict) -> dict | None:
             first += d.x_m.size
         ok = np.isfinite(o_exact)
         w = np.sqrt(lik.shape_weight) / sd[ok]
-        cols = [np.zeros(lik.n_points)] + steps(lik.normal_table)  # a centerline does not depend on EI0
+        cols = [np.zeros(lik.n_points)] + steps(lik.shape_offsets)  # a centerline does not depend on EI0
         cols += [np.zeros(lik.n_points)] * (len(names) - len(cols))  # nor on force offsets
         blocks.append((np.column_stack(cols)[ok] * w[:, None], (o_tab - o_exact)[ok] * w))
         out["max_shape_error_over_sd"] = float(np.max(np.abs(o_tab - o_exact)[ok] / sd[ok])) if ok.any() else None
