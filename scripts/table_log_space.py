@@ -16,21 +16,14 @@ import argparse
 import time
 
 import numpy as np
+from table_accuracy import CASES  # the same cases (scripts/ is on the path of a script run from it)
 
 from bayesrod.api._common import as_dataset
-from bayesrod.api.calibration import TABLE_STUDY_NOISE
+from bayesrod.api.calibration import mle_shift
 from bayesrod.api.data import simulate
 from bayesrod.dataset.simulate import NoiseModel
 from bayesrod.inference import likelihood as LK
 from bayesrod.inference.priors import load_prior
-
-CASES = [
-    ("plain", None, 0.0),
-    ("base_compliance", "base_compliance", 20.0),
-    ("rest_curvature", "rest_curvature", 0.3),
-    ("base_tilt", "base_tilt", 0.05),
-    ("contact_friction", "contact_friction", 0.3),
-]
 
 
 def main(argv=None) -> None:
@@ -50,11 +43,11 @@ def main(argv=None) -> None:
         lik._force_log_table()
         shipped = "log space" if lik._f_log is not None else "linear"
         lik._f_log = None  # the cache stays keyed to this table: read linearly
-        lin = _shift_on_built(lik, truth)
+        lin = mle_shift(lik, truth)["shift_in_sd"]
         log = None
         if lik.f_table.min() >= 0.0:  # read in log space, whatever the axis
             lik._f_log = np.log(lik.f_table + LK.FORCE_LOG_FLOOR)
-            log = _shift_on_built(lik, truth)
+            log = mle_shift(lik, truth)["shift_in_sd"]
         print(
             f"{name} ({'forces + shapes' if a.shapes else 'forces'}): shift [sd] of log EI0, p"
             f"{', ' + effect if effect else ''}: linear {np.round(lin, 3).tolist()}, log space "
@@ -62,29 +55,6 @@ def main(argv=None) -> None:
             f"{time.perf_counter() - t:.0f} s",
             flush=True,
         )
-
-
-def _shift_on_built(lik, truth: dict) -> np.ndarray:
-    """table_shift_on's shift, on an already built likelihood."""
-    from scipy.optimize import minimize
-
-    from bayesrod.api.calibration import _hessian
-
-    effect = next((k for k in truth if k not in ("EI0", "p")), None)
-    value = float(truth[effect]) if effect else 0.0
-    fixed = {"sigma_force_N": TABLE_STUDY_NOISE[0], "sigma_shape_m": TABLE_STUDY_NOISE[1], "shape_sd_scale": 1.0}
-
-    def loglik(x) -> float:
-        params = {"EI0": np.exp(x[:1]), "p": x[1:2], **{k: np.array([v]) for k, v in fixed.items()}}
-        if effect:
-            params[effect] = x[2:3]
-        return float(lik.log_likelihood(params)[0]) if lik.in_table(params)[0] else -np.inf
-
-    x0 = np.array([np.log(truth["EI0"]), truth["p"]] + ([value] if effect else []))
-    res = minimize(lambda x: -loglik(x), x0, method="Nelder-Mead", options={"xatol": 1e-10, "fatol": 1e-10})
-    step = np.array([1e-4, 1e-4] + ([1e-4 * max(abs(value), 1.0)] if effect else []))
-    sd = np.sqrt(np.diag(np.linalg.inv(-_hessian(loglik, res.x, step))))
-    return (res.x - x0) / sd
 
 
 if __name__ == "__main__":

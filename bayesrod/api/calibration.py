@@ -164,16 +164,22 @@ def table_shift_on(
     :func:`table_shift` returns, plus ``loglik_truth`` and ``loglik_max``: the table log likelihood at
     the truth and at its maximum.
     """
-    from scipy.optimize import minimize
-
     from ..inference.likelihood import build_likelihood
     from ._common import as_dataset
 
     effect = next((k for k in truth if k not in ("EI0", "p")), None)
-    value = float(truth[effect]) if effect else 0.0
     lik = build_likelihood(
         as_dataset(data), prior, (effect,) if effect else (), use_shapes=use_shapes, n_effect=n_effect
     )
+    return mle_shift(lik, truth, noise=noise)
+
+
+def mle_shift(lik, truth: dict, *, noise: tuple[float, float] = TABLE_STUDY_NOISE) -> dict:
+    """:func:`table_shift_on` on a built likelihood ``lik`` (its tables as they are)."""
+    from scipy.optimize import minimize
+
+    effect = next((k for k in truth if k not in ("EI0", "p")), None)
+    value = float(truth[effect]) if effect else 0.0
     fixed = {"sigma_force_N": noise[0], "sigma_shape_m": noise[1], "shape_sd_scale": 1.0}
 
     def loglik(x) -> float:
