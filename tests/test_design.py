@@ -587,3 +587,20 @@ def test_a_varying_tabled_effect_is_an_axis_however_small_its_spread_and_only_on
     )
     assert lin["parameters"][-1] == "base_compliance_coordinate"
     assert np.isfinite(lin["candidates"][0]["expected_information_gain_nats"])
+
+
+def test_design_reads_friction_forces_in_log_space_as_the_likelihood_does():
+    """A planned push at the twig's lowest height with a contact-friction axis (the fit's nodes around mu 0.3),
+    to its branch end (0.745 L): the predictor's forces at p 0.43, mu 0.3 against an exact curve over the last half.
+    In log space 1.4e-4 of the peak; read linearly 1.5e-3 (the likelihood's own reading: session 46)."""
+    from bayesrod.inference.design import HeightPredictor
+    from bayesrod.inference.likelihood import EffectAxis, ForceCurves
+
+    L, h, EI0 = 0.8, 0.45, 2.63
+    mu_nodes = np.linspace(-0.8482, 0.8482, 25)[15:19]
+    (exact,) = ForceCurves.batch(np.array([h / L]), np.array([0.43]), n_f=160, effects_nd={"mu": np.array([0.3])})
+    D = np.linspace(0.5, 1.0, 40) * exact.d_end[0] * L
+    pred = HeightPredictor(h, L, D, (0.40, 0.46), effect_axis=EffectAxis("contact_friction", mu_nodes))
+    F = pred.forces(np.array([np.log(EI0)]), np.array([0.43]), u=np.array([0.3]))[0]
+    F_exact = EI0 / L**2 * exact.force(D / L)[0]
+    assert np.abs(F - F_exact).max() < 4e-4 * F_exact.max()

@@ -40,7 +40,7 @@ from scipy.special import logsumexp
 
 from ..physics import Effects
 from ..physics.lumped import ktheta_nd
-from .likelihood import TABLE_EFFECTS, EffectAxis, ForceCurves, _lagrange4
+from .likelihood import FORCE_LOG_FLOOR, LOG_FORCE_EFFECTS, TABLE_EFFECTS, EffectAxis, ForceCurves, _lagrange4
 from .summary import credible_interval
 
 TARGETS = ("params", "ei", "k_theta")
@@ -144,12 +144,16 @@ class HeightPredictor:
             self.f_table = np.stack([c.force(self.D / self.L) for c in rows])  # (E, P, n)
             self.d_end = np.stack([c.d_end for c in rows])  # (E, P)
             self.d_early = np.stack([c.d_early for c in rows])  # (E, P)
+            # read in log space along a friction axis, as the likelihood reads its own (RodLikelihood.interp_force)
+            log_axis = effect_axis.name in LOG_FORCE_EFFECTS and self.f_table.size and self.f_table.min() >= 0.0
+            self._f_log = np.log(self.f_table + FORCE_LOG_FLOOR) if log_axis else None
         else:
             eff_nd = Effects.from_mapping(tabled).nondim(self.L, EI0_ref) if tabled else None
             curves = ForceCurves(self.h / self.L, self.p_grid, effects_nd=eff_nd)
             self.f_table = curves.force(self.D / self.L)  # (P, n)
             self.d_end = curves.d_end  # (P,)
             self.d_early = curves.d_early  # (P,): where the force comes within SLIP_FORCE_REL of the end's
+            self._f_log = None
         self.offset = eff.force_offset
         self.yield_moment = eff.yield_moment
 
@@ -175,7 +179,10 @@ class HeightPredictor:
     def forces(self, log_EI0: NDArray, p: NDArray, offset=None, yield_moment=None, u=None) -> NDArray:
         """Noise-free sensor force (K, n) [N] for draws (K,), held at the slip value past the slip;
         ``u`` (K,): each draw's effect coordinate (with an effect axis)."""
-        f = self._interp(self.f_table, p, u)
+        if self._f_log is None:
+            f = self._interp(self.f_table, p, u)
+        else:
+            f = np.exp(self._interp(self._f_log, p, u)) - FORCE_LOG_FLOOR
         F = np.exp(np.atleast_1d(log_EI0))[:, None] / self.L**2 * f
         my = self.yield_moment if yield_moment is None else np.atleast_1d(yield_moment)[:, None]
         if np.any(np.isfinite(my)):
