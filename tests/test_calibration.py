@@ -70,8 +70,8 @@ def test_the_likelihood_reads_friction_forces_in_log_space_to_the_branch_end():
     """The twig's lowest push (eta 0.5625) with friction 0.3 runs to its branch end (0.745 L), where the force grows
     nearly exponentially along mu (f at 0.738 L: 6.7, 8.7, 11.8, 17.1 on the fit's nodes 0.21-0.42). The
     likelihood's table (4-point Lagrange in p and mu at the fit's spacing) against an exact curve at p 0.43, mu 0.3
-    over the last half of the push: read in log space 1.4e-4 of the peak force; linearly 1.5e-3, which moved a noise-free
-    friction fit's MLE of mu by +1.7 sd (docs/validation.md, session 46)."""
+    over the last half of the push: read in log space 1.4e-4 of the peak force; linearly 1.5e-3, which moved a
+    noise-free friction fit's MLE of mu by +1.7 sd (docs/validation.md, session 46)."""
     from bayesrod.inference.likelihood import EffectAxis, ForceCurves, RodLikelihood
 
     eta, p0, mu0 = 0.45 / 0.8, 0.43, 0.3
