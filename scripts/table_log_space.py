@@ -40,9 +40,9 @@ def main(argv=None) -> None:
         ds = simulate("twig", seed=1, noise_model=NoiseModel(force_sd_N=0.0, shape_sd_m=0.0), effects=effects)
         truth = {"EI0": ds.extra["truth"]["EI0"], "p": ds.extra["truth"]["p"], **effects}
         lik = LK.build_likelihood(as_dataset(ds), load_prior("woody"), (effect,) if effect else (), use_shapes=a.shapes)
-        lik._force_log_table()
-        shipped = "log space" if lik._f_log is not None else "linear"
-        lik._f_log = None  # the cache stays keyed to this table: read linearly
+        shipped = "linear" if LK.force_log_table(lik.f_table, lik.axis) is None else "log space"
+        lik._force_log_table()  # fill the cache, keyed to this table, then set it by hand: read linearly
+        lik._f_log = None
         lin = mle_shift(lik, truth)["shift_in_sd"]
         log = None
         if lik.f_table.min() >= 0.0:  # read in log space, whatever the axis

@@ -40,7 +40,7 @@ from scipy.special import logsumexp
 
 from ..physics import Effects
 from ..physics.lumped import ktheta_nd
-from .likelihood import FORCE_LOG_FLOOR, LOG_FORCE_EFFECTS, TABLE_EFFECTS, EffectAxis, ForceCurves, _lagrange4
+from .likelihood import FORCE_LOG_FLOOR, TABLE_EFFECTS, EffectAxis, ForceCurves, _lagrange4, force_log_table
 from .summary import credible_interval
 
 TARGETS = ("params", "ei", "k_theta")
@@ -145,8 +145,7 @@ class HeightPredictor:
             self.d_end = np.stack([c.d_end for c in rows])  # (E, P)
             self.d_early = np.stack([c.d_early for c in rows])  # (E, P)
             # read in log space along a friction axis, as the likelihood reads its own (RodLikelihood.interp_force)
-            log_axis = effect_axis.name in LOG_FORCE_EFFECTS and self.f_table.size and self.f_table.min() >= 0.0
-            self._f_log = np.log(self.f_table + FORCE_LOG_FLOOR) if log_axis else None
+            self._f_log = force_log_table(self.f_table, effect_axis)
         else:
             eff_nd = Effects.from_mapping(tabled).nondim(self.L, EI0_ref) if tabled else None
             curves = ForceCurves(self.h / self.L, self.p_grid, effects_nd=eff_nd)

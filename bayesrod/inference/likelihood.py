@@ -358,6 +358,14 @@ LOG_FORCE_EFFECTS = ("contact_friction",)
 _CURVE_CACHE: dict = {}
 
 
+def force_log_table(f_table: NDArray, axis: EffectAxis | None) -> NDArray | None:
+    """log(f_table + FORCE_LOG_FLOOR) where a force table is read in log space (an axis of ``LOG_FORCE_EFFECTS`` and
+    no negative force), else None (read linearly). Shared by the likelihood and the design's predictor."""
+    if axis is None or axis.name not in LOG_FORCE_EFFECTS or not f_table.size or not np.min(f_table) >= 0.0:
+        return None
+    return np.log(f_table + FORCE_LOG_FLOOR)
+
+
 def _lagrange4(grid: NDArray, p: NDArray):
     """Indices (W, 4) and weights (W, 4) of 4-point Lagrange interpolation on a uniform grid."""
     h = grid[1] - grid[0]
@@ -909,10 +917,8 @@ class RodLikelihood:
     def _force_log_table(self) -> NDArray | None:
         """log(f_table + FORCE_LOG_FLOOR), cached for the current ``f_table``; None (read linearly) without an
         axis of ``LOG_FORCE_EFFECTS`` or where a force is negative."""
-        if getattr(self, "_f_log_of", None) is not self.f_table:
-            on_axis = self.axis is not None and self.axis.name in LOG_FORCE_EFFECTS
-            ok = on_axis and self.f_table.size and np.min(self.f_table) >= 0.0
-            self._f_log = np.log(self.f_table + FORCE_LOG_FLOOR) if ok else None
+        if getattr(self, "_f_log_of", None) is not self.f_table:  # built, restricted or without the axis: anew
+            self._f_log = force_log_table(self.f_table, self.axis)
             self._f_log_of = self.f_table
         return self._f_log
 

@@ -715,9 +715,9 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
         fin = np.isfinite(rv)
         np.minimum.at(least, e[fin], mv[fin])
         np.maximum.at(most, e[fin], mv[fin])
-        above = np.where(fin, rv >= 0, over & ~(mv <= most[e])) & (mv > lo[e])
+        above = np.where(fin, rv >= 0, over & (mv > most[e])) & (mv > lo[e])
         np.minimum.at(hi, e[above], mv[above])
-        below = np.where(fin, rv < 0, ~over & ~(mv >= least[e])) & (mv < hi[e])
+        below = np.where(fin, rv < 0, ~over & (mv < least[e])) & (mv < hi[e])
         np.maximum.at(lo, e[below], mv[below])
         at_lo = below & (mv == lo[e])
         r_lo[e[at_lo]] = rv[at_lo]
@@ -739,8 +739,8 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
         # or where two rounds in a row found no contact inside a bracket between two contacts: there the
         # residual jumps over moments that miss the sensor (the contact leaving the tip), with no root in the gap
         still = np.where(width == last_width, still + 1, 0)
-        closed = np.isfinite(lo) & np.isfinite(hi) & (tight | far_below | (still >= 2))
         bracketed = np.isfinite(lo) & np.isfinite(hi)
+        closed = bracketed & (tight | far_below | (still >= 2))
         lost = ~np.isfinite(most) & (scans >= 2) & ~bracketed  # no moment reaches the sensor
         open_ = ~(conv | closed | lost)
         if not open_.any():
@@ -768,14 +768,13 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
         seen = i[~blind]
         sections = bracketed[seen] & (~inside[seen] | slow[seen])
         one, many = seen[~sections], seen[sections]
-        # a march costs about the same for 1 or 100 elements but grows with more: many open, plain bisection; but
-        # sections where the last round left the bracket as it was (its point a march without contact inside the
-        # moments that found one, which a bisection would repeat)
-        n_sec = BALANCE_SECTIONS if i.size <= BALANCE_FEW else 1
-        few = (still[many] >= 1) | (n_sec == BALANCE_SECTIONS)
-        many, many_one = many[few], many[~few]
-        one = np.concatenate([one, many_one])
-        inside[many_one], step[many_one] = True, 0.5 * (lo[many_one] + hi[many_one])
+        # a march costs about the same for 1 or 100 elements but grows with more: many open, plain bisection (the
+        # midpoint as a step); but sections where the last round left the bracket as it was (its point a march
+        # without contact inside the moments that found one, which a bisection would repeat)
+        bisect = (i.size > BALANCE_FEW) & (still[many] == 0)
+        many, halved = many[~bisect], many[bisect]
+        one = np.concatenate([one, halved])
+        inside[halved], step[halved] = True, 0.5 * (lo[halved] + hi[halved])
         n_sec = BALANCE_SECTIONS
         frac = np.arange(1, n_sec + 1) / (n_sec + 1.0)
         g = np.abs(guess[scan])[:, None]
