@@ -238,6 +238,7 @@ def fit_group(
     shared: Sequence[str] = STEM_PARAMETERS,
     force_noise: str = "ar1",
     force_offsets: bool = False,
+    pooled: Sequence[str] = (),
     seed: int = 0,
     progress: bool = True,
     max_steps: int = 6000,
@@ -266,6 +267,11 @@ def fit_group(
     force_offsets : bool
         A load-cell offset per condition, prior N(0, sd 5% of the condition's peak force), integrated out of the
         likelihood (not sampled); summary.json's ``force_offset_N`` holds its posterior (from up to 4000 draws).
+    pooled : sequence of str
+        Noise parameters the conditions pool (``("rho_force",)`` or none): each condition keeps its own AR(1)
+        correlation, drawn from a population they share (centre ``rho_force``, spread ``rho_force_spread`` on
+        Fisher's z), so conditions whose correlations agree read them from each other's pushes
+        (docs/inference.md, "One stem, many conditions"). summary.json's ``pooled`` holds the population.
     sharing : bool
         Run the sharing check (held-out refits of the joint and the separate models; a minute or more).
     max_steps, target_ess : int, float
@@ -300,7 +306,9 @@ def fit_group(
             + ", ".join(f"{c}: {v!r}" for c, v in species.items())
         )
     pr = load_prior(prior)
-    lik = GroupLikelihood(specs, pr, shared=tuple(shared), force_noise=force_noise, force_offsets=force_offsets)
+    lik = GroupLikelihood(
+        specs, pr, shared=tuple(shared), force_noise=force_noise, force_offsets=force_offsets, pooled=tuple(pooled)
+    )
     post = GroupPosterior(lik)
     log.info("%s: %d conditions, parameters %s", sid, len(specs), ", ".join(post.names))
     theta0 = post.settle_base_coordinates(start_point(post))
@@ -364,8 +372,8 @@ def _summary(sid, lik: GroupLikelihood, nat, per, samples, res, pr, check, secon
         for n in STEM_PARAMETERS:
             if n not in lik.shared:
                 row[n] = credible_interval(nat[loc[n]])
-        if "rho_force" in loc:
-            row["rho_force"] = credible_interval(nat[loc["rho_force"]])
+        if "rho_force" in per[c]:
+            row["rho_force"] = credible_interval(per[c]["rho_force"])
         if c in offsets:
             row["force_offset_N"] = credible_interval(offsets[c])
         out_conds[c] = row
@@ -406,6 +414,10 @@ def _summary(sid, lik: GroupLikelihood, nat, per, samples, res, pr, check, secon
         "stem_id": sid,
         "conditions_order": list(conds),
         "shared": shared,
+        "pooled": {
+            n: {"centre": credible_interval(nat[n]), "spread_fisher_z": credible_interval(nat[n + "_spread"])}
+            for n in lik.pooled
+        },
         "conditions": out_conds,
         "contrasts": contrasts,
         "sharing": check.to_dict() if check is not None else None,

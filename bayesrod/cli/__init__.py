@@ -125,6 +125,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="parameters shared by the conditions: of EI0, p (the stem) and sigma_force_N, rho_force (the force "
         "noise, where one rig recorded them all); default EI0,p; '' for none",
     )
+    fg.add_argument(
+        "--pooled",
+        default="",
+        help="noise parameters the conditions pool (each keeps its own, drawn from a population they share): "
+        "rho_force or '' (default: none)",
+    )
     fg.add_argument("--force-noise", default="ar1", choices=["iid", "ar1"], help="force noise per condition")
     fg.add_argument(
         "--force-offsets",
@@ -453,6 +459,7 @@ FLAGS = {
     "min_heldout_gain": "--min-heldout-gain",
     "n_workers": "--workers",
     "shared": "--shared",
+    "pooled": "--pooled",
     "stem_id": "--stem-id",
     "condition": "--condition",
     "checkpoint": "--resume",
@@ -958,10 +965,12 @@ def cmd_fit_group(args: argparse.Namespace) -> int:
 
     out = _prepare_out(args)
     shared = tuple(x.strip() for x in args.shared.split(",") if x.strip())
+    pooled = tuple(x.strip() for x in args.pooled.split(",") if x.strip())
     study = fit_groups(
         args.root,
         args.prior,
         shared=shared,
+        pooled=pooled,
         force_noise=args.force_noise,
         force_offsets=args.force_offsets,
         sharing=not args.no_sharing_check,

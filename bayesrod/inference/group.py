@@ -66,6 +66,11 @@ U_NODES = 25
 STEM_PARAMETERS = ("EI0", "p")
 #: force-noise parameters the conditions may share (one rig, one load cell: its noise correlation is the rig's)
 NOISE_PARAMETERS = ("sigma_force_N", "rho_force")
+#: parameters the conditions may pool (partial sharing): the AR(1) correlation
+POOLABLE_PARAMETERS = ("rho_force",)
+#: the prior of a pooled correlation's spread between conditions, on Fisher's z = atanh(rho): half-normal of this
+#: scale (0.5: one condition's correlation 0.9 where another's is 0.8 or 0.95 lies within one scale)
+POOL_SPREAD_SCALE = 0.5
 
 
 def condition_name(param: str, condition: str) -> str:
@@ -93,6 +98,13 @@ class GroupLikelihood:
         A load-cell offset per condition (prior N(0, sd 5% of its peak force)), integrated out of each
         condition's force likelihood in closed form (``RodLikelihood.offset_prior_sd``), not sampled: sampled,
         it traded off against the AR(1) correlation and slowed the chains (docs/validation.md, session 35).
+    pooled : sequence of str
+        Noise parameters the conditions *pool* (partial sharing; of :data:`POOLABLE_PARAMETERS`, not also in
+        ``shared``): each condition keeps its own AR(1) correlation, drawn from a population the conditions
+        share, atanh(rho_c) = atanh(rho_force) + rho_force_spread x rho_force_dev__<c> (non-centred:
+        ``rho_force`` the rig's correlation under the prior file's prior, ``rho_force_spread`` half-normal of
+        scale :data:`POOL_SPREAD_SCALE` on Fisher's z, each ``rho_force_dev__<c>`` N(0, 1)). Conditions whose
+        correlations agree borrow each other's pushes; conditions that differ keep their own.
     """
 
     def __init__(
@@ -103,6 +115,7 @@ class GroupLikelihood:
         force_noise: str = "ar1",
         anchorage: bool = True,
         force_offsets: bool = False,
+        pooled=(),
         _liks: dict | None = None,
     ):
         allowed = STEM_PARAMETERS + NOISE_PARAMETERS
@@ -111,6 +124,14 @@ class GroupLikelihood:
             raise ValueError(f"shared: expected a subset of {', '.join(allowed)}, got {', '.join(bad)}")
         if "rho_force" in shared and force_noise != "ar1":
             raise ValueError(f"shared: rho_force needs force_noise 'ar1', got force_noise {force_noise!r}")
+        bad = [s for s in pooled if s not in POOLABLE_PARAMETERS]
+        if bad:
+            raise ValueError(f"pooled: expected a subset of {', '.join(POOLABLE_PARAMETERS)}, got {', '.join(bad)}")
+        both = [s for s in pooled if s in shared]
+        if both:
+            raise ValueError(f"pooled: expected parameters not also shared, got {', '.join(both)} in both")
+        if "rho_force" in pooled and force_noise != "ar1":
+            raise ValueError(f"pooled: rho_force needs force_noise 'ar1', got force_noise {force_noise!r}")
         if len(specs) < 1:
             raise ValueError("specs: expected at least one condition, got none")
         self.conditions = list(specs)
@@ -118,6 +139,7 @@ class GroupLikelihood:
         self.anchorage = bool(anchorage)
         self.force_noise = force_noise
         self.force_offsets = bool(force_offsets)
+        self.pooled = tuple(s for s in POOLABLE_PARAMETERS if s in pooled)
         self.prior = prior
         lo, hi = prior.get("p").bounds()
         self.p_range = (lo, min(hi, 3.0))
@@ -148,6 +170,12 @@ class GroupLikelihood:
                     loc[n] = condition_name(n, c)
                     priors[loc[n]] = prior.get(n)
             for n in NOISE_PARAMETERS if force_noise == "ar1" else NOISE_PARAMETERS[:1]:
+                if n in self.pooled:  # the population's centre and spread, and this condition's deviation
+                    loc[n + "_dev"] = condition_name(n + "_dev", c)
+                    priors[loc[n + "_dev"]] = ParamPrior(loc[n + "_dev"], "normal", (0.0, 1.0), "1")
+                    priors[n] = prior.get(n)
+                    priors[n + "_spread"] = ParamPrior(n + "_spread", "halfnormal", (POOL_SPREAD_SCALE,), "1")
+                    continue
                 loc[n] = n if n in self.shared else condition_name(n, c)  # a shared one: the same name in each
                 priors[loc[n]] = prior.get(n)
             if anchorage:
@@ -159,7 +187,8 @@ class GroupLikelihood:
             self.local[c][n] for n in STEM_PARAMETERS if n not in self.shared for c in self.conditions
         ]
         rest = [n for c in self.conditions for n in self.local[c].values() if n not in stem]
-        self.names = stem + list(dict.fromkeys(rest))  # a shared noise parameter once, where it first appears
+        pool = [m for n in self.pooled for m in (n, n + "_spread")]
+        self.names = stem + pool + list(dict.fromkeys(rest))  # a shared noise parameter once, where it first appears
         self.priors = priors
         self.n_force = int(sum(lik.n_force for lik in self.liks.values()))
 
@@ -170,6 +199,10 @@ class GroupLikelihood:
         out["sigma_force_N"] = params[loc["sigma_force_N"]]
         if "rho_force" in loc:
             out["rho_force"] = params[loc["rho_force"]]
+        elif "rho_force_dev" in loc:
+            out["rho_force"] = pooled_value(
+                params["rho_force"], params["rho_force_spread"], params[loc["rho_force_dev"]]
+            )
         if self.anchorage:
             out["base_compliance"] = base_stiffness(clamp_or_u(params[loc["z_base"]]), out["EI0"], self.liks[c].L)
         return out
@@ -185,8 +218,20 @@ class GroupLikelihood:
         """The same model on a subset of each condition's force samples (``masks[c]`` (N_c,) bool)."""
         liks = {c: self.liks[c].restricted(masks[c]) for c in self.conditions}
         return GroupLikelihood(
-            self.specs, self.prior, self.shared, self.force_noise, self.anchorage, self.force_offsets, _liks=liks
+            self.specs,
+            self.prior,
+            self.shared,
+            self.force_noise,
+            self.anchorage,
+            self.force_offsets,
+            pooled=self.pooled,
+            _liks=liks,
         )
+
+
+def pooled_value(centre: NDArray, spread: NDArray, deviation: NDArray) -> NDArray:
+    """A condition's correlation from the pooled population: tanh(atanh(centre) + spread x deviation)."""
+    return np.tanh(np.arctanh(np.asarray(centre, float)) + np.asarray(spread, float) * np.asarray(deviation, float))
 
 
 def clamp_or_u(z: NDArray) -> NDArray:
@@ -342,6 +387,10 @@ def start_point(post: GroupPosterior) -> NDArray:
             nat[loc["sigma_force_N"]] = max(rms, 1e-4)
             if "rho_force" in loc:
                 nat[loc["rho_force"]] = 0.5
+            if "rho_force_dev" in loc:  # pooled: every condition at the population's centre
+                nat[loc["rho_force_dev"]] = 0.0
+        for n in lik.pooled:
+            nat[n], nat[n + "_spread"] = 0.5, 0.5 * POOL_SPREAD_SCALE
         top = max(scales.values())
         for c in lik.conditions:
             loc = lik.local[c]
@@ -506,6 +555,7 @@ def sharing_check(joint: GroupLikelihood, theta_joint: NDArray, tolerance: float
         force_noise=joint.force_noise,
         anchorage=False,
         force_offsets=joint.force_offsets,  # the copies keep each condition's integrated-out offset
+        pooled=joint.pooled,  # the noise as the joint model has it: the check is about the stem
         _liks={c: joint.liks[c].without_effect_axis() for c in joint.conditions},
     )
     post_j = GroupPosterior(joint)
