@@ -559,16 +559,12 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
         same(both["conditions"][c]["rho_force"], rho["b"])
         same(both["conditions"][c]["sigma_force_N"], sig[c])
     assert s["pooled"] == {} and both["pooled"] == {}
-    # a pooled correlation: the population under "pooled", each condition's own (centre, spread, deviation) under it
-    natural["rho_force"] = 0.85 + 0.01 * rng.standard_normal(n)
-    natural["rho_force_spread"] = np.abs(0.2 + 0.05 * rng.standard_normal(n))
-    for c in "ab":
-        want = np.arctanh(rho[c]) - np.arctanh(natural["rho_force"])
-        natural[f"rho_force_dev__{c}"] = want / natural["rho_force_spread"]
-    pool = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False, pooled=("rho_force",)).doc
-    assert set(pool["pooled"]) == {"rho_force"} and "rho_force" not in pool["shared"]
-    same(pool["pooled"]["rho_force"]["centre"], natural["rho_force"])
-    same(pool["pooled"]["rho_force"]["spread_fisher_z"], natural["rho_force_spread"])
+    # a pooled correlation: each condition's own, and the spread with the conditions' common correlation
+    pool = bayesrod.fit_group(
+        list(cut_pair), prior="woody", progress=False, sharing=False, pooled=("rho_force",), pool_spread=0.3
+    ).doc
+    assert set(pool["pooled"]) == {"rho_force"} and pool["pooled"]["rho_force"]["spread_fisher_z"] == 0.3
+    same(pool["pooled"]["rho_force"]["centre"], np.tanh((np.arctanh(rho["a"]) + np.arctanh(rho["b"])) / 2))
     for c in "ab":
         same(pool["conditions"][c]["rho_force"], rho[c])
 
@@ -674,75 +670,53 @@ def test_a_shared_noise_correlation_is_one_parameter_every_condition_reads(cut_p
         GroupLikelihood(specs, pr, shared=("EI0", "L"))
 
 
-def test_a_pooled_noise_correlation_is_each_conditions_own_drawn_from_one_population(cut_pair):
-    """pooled=("rho_force",): each condition's correlation is tanh(atanh(centre) + spread x its deviation); the
-    centre (under the prior file's rho prior), the spread (half-normal on Fisher's z) and a standard-normal
-    deviation per condition are sampled in place of the conditions' own correlations; the joint likelihood is the
-    sum of the conditions' at those correlations; each sd is sampled by its innovation sd against the centre (a
-    shear of unit Jacobian, round-tripped), and the prior is the product of the three pieces."""
-    from bayesrod.inference.group import POOL_SPREAD_SCALE, pooled_value
+def test_a_pooled_noise_correlation_adds_only_the_populations_term_to_the_prior(cut_pair):
+    """pooled=("rho_force",): the same parameters and likelihood as without, and a prior that gains, for the
+    conditions' Fisher z = atanh(rho_c), a normal population of sd pool_spread about a flat-prior centre
+    integrated out: -sum (z_c - mean z)^2 / (2 spread^2); zero where the correlations agree; wrong input refused."""
+    from bayesrod.inference.group import POOL_SPREAD
 
     specs = {d.extra["condition"]: d for d in cut_pair}
     pr = load_prior("woody")
     own = GroupLikelihood(specs, pr)
     lik = GroupLikelihood(specs, pr, pooled=("rho_force",), _liks=own.liks)
-    assert lik.names[:4] == ["EI0", "p", "rho_force", "rho_force_spread"]
-    assert not any(n.startswith("rho_force__") for n in lik.names)
-    assert {"rho_force_dev__a", "rho_force_dev__b", "sigma_force_N__a", "sigma_force_N__b"} <= set(lik.names)
+    assert lik.names == own.names and lik.pool_spread == POOL_SPREAD == 0.25
     params = {
-        "EI0": np.array([2.5, 2.7]),
-        "p": np.array([0.4, 0.45]),
-        "rho_force": np.array([0.8, 0.6]),
-        "rho_force_spread": np.array([0.3, 0.05]),
-        "rho_force_dev__a": np.array([1.5, -0.4]),
-        "rho_force_dev__b": np.array([-0.7, 2.0]),
-        "sigma_force_N__a": np.array([0.03, 0.05]),
-        "z_base__a": np.array([-0.5, float(z_of_u(0.05))]),
-        "sigma_force_N__b": np.array([0.04, 0.02]),
-        "z_base__b": z_of_u(np.array([0.2, 0.3])),
+        "EI0": np.array([2.5, 2.7, 2.6]),
+        "p": np.array([0.4, 0.45, 0.42]),
+        "sigma_force_N__a": np.array([0.03, 0.05, 0.04]),
+        "rho_force__a": np.array([0.8, 0.5, 0.9]),
+        "z_base__a": np.array([-0.5, float(z_of_u(0.05)), -0.2]),
+        "sigma_force_N__b": np.array([0.04, 0.02, 0.03]),
+        "rho_force__b": np.array([0.9, 0.7, 0.9]),
+        "z_base__b": z_of_u(np.array([0.2, 0.3, 0.25])),
     }
-    rho = {
-        c: np.tanh(np.arctanh(params["rho_force"]) + params["rho_force_spread"] * params[f"rho_force_dev__{c}"])
-        for c in "ab"
-    }
-    assert rho["a"][0] == pytest.approx(np.tanh(np.arctanh(0.8) + 0.45)) and rho["b"][1] < 0.7
-    np.testing.assert_allclose(pooled_value(0.8, 0.3, 1.5), rho["a"][0], rtol=1e-15)
-    each = {**params, "rho_force__a": rho["a"], "rho_force__b": rho["b"]}
-    np.testing.assert_allclose(lik.log_likelihood(params), own.log_likelihood(each), rtol=1e-12)
-    for c in "ab":
-        assert lik.condition_params(params, c)["rho_force"] == pytest.approx(rho[c], rel=1e-14)
-    post = GroupPosterior(lik)
-    r = lik.names.index("rho_force")
-    assert sorted(post.noise_pairs()) == sorted((lik.names.index(f"sigma_force_N__{c}"), r) for c in "ab")
-    theta = post.to_sample({k: v[:1] for k, v in params.items()})[0]
-    back = post.to_natural(theta)
-    for k, v in params.items():
-        assert back[k][0] == pytest.approx(v[0], rel=1e-12), k
-    s = lik.names.index("sigma_force_N__b")
-    assert theta[s] == pytest.approx(np.log(0.04 * np.sqrt(1 - 0.8**2)), rel=1e-12)
-    # the prior: the centre's is the file's rho prior, the spread half-normal, each deviation N(0, 1)
-    from scipy import stats
-
-    from bayesrod.inference.priors import NUISANCE_DEFAULTS
-
-    base = GroupPosterior(GroupLikelihood(specs, pr, shared=("EI0", "p", "rho_force"), _liks=own.liks))
-    t_base = base.to_sample({k: v[:1] for k, v in params.items() if k in base.names})[0]
-    extra = (
-        stats.halfnorm(scale=POOL_SPREAD_SCALE).logpdf(0.3)
-        + np.log(0.3)  # sampled as log spread
-        + stats.norm.logpdf(1.5)
-        + stats.norm.logpdf(-0.7)
-    )
-    assert post.log_prior(theta)[0] == pytest.approx(base.log_prior(t_base)[0] + extra, rel=1e-12)
-    assert lik.priors["rho_force"] == NUISANCE_DEFAULTS["rho_force"]
+    np.testing.assert_allclose(lik.log_likelihood(params), own.log_likelihood(params), rtol=1e-14)
+    za, zb = np.arctanh(params["rho_force__a"]), np.arctanh(params["rho_force__b"])
+    want = -((za - zb) ** 2) / 2 / (2 * 0.25**2)  # two conditions: each (z - mean)^2 = (za - zb)^2 / 4
+    np.testing.assert_allclose(lik.pool_log_prior(params), want, rtol=1e-12)
+    assert lik.pool_log_prior(params)[2] == 0.0 and own.pool_log_prior(params) == 0.0
+    post, base = GroupPosterior(lik), GroupPosterior(own)
+    theta = post.to_sample(params)
+    np.testing.assert_allclose(post.log_prior(theta), base.log_prior(theta) + want, rtol=1e-12)
+    np.testing.assert_allclose(post.log_prob(theta), base.log_prob(theta) + want, rtol=1e-12)
+    wider = GroupLikelihood(specs, pr, pooled=("rho_force",), pool_spread=0.5, _liks=own.liks)
+    np.testing.assert_allclose(wider.pool_log_prior(params), want / 4, rtol=1e-12)
+    outside = theta.copy()
+    outside[0, lik.names.index("rho_force__b")] = 1.5  # outside the correlation's prior: -inf, no warning
+    with np.errstate(all="raise"):
+        assert post.log_prior(outside[:1])[0] == -np.inf
     with pytest.raises(ValueError, match="rho_force needs force_noise 'ar1'"):
         GroupLikelihood(specs, pr, pooled=("rho_force",), force_noise="iid")
     with pytest.raises(ValueError, match="not also shared, got rho_force in both"):
         GroupLikelihood(specs, pr, shared=("EI0", "p", "rho_force"), pooled=("rho_force",))
     with pytest.raises(ValueError, match="pooled: expected a subset of rho_force, got sigma_force_N"):
         GroupLikelihood(specs, pr, pooled=("sigma_force_N",))
-    # the restricted copy (the sharing check's refits) keeps the pooling
-    assert lik.restricted({c: np.ones(lik.liks[c].F_obs.size, bool) for c in "ab"}).names == lik.names
+    with pytest.raises(ValueError, match="pool_spread: expected a positive number .* got 0"):
+        GroupLikelihood(specs, pr, pooled=("rho_force",), pool_spread=0)
+    # the restricted copy (the sharing check's refits) keeps the pooling and its spread
+    sub = wider.restricted({c: np.ones(lik.liks[c].F_obs.size, bool) for c in "ab"})
+    assert sub.pooled == ("rho_force",) and sub.pool_spread == 0.5
 
 
 def test_the_group_posteriors_guards(cut_pair, tmp_path):

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from .._version import __version__
 from ..inference.group import (
+    POOL_SPREAD,
     STEM_PARAMETERS,
     GroupLikelihood,
     GroupPosterior,
@@ -239,6 +240,7 @@ def fit_group(
     force_noise: str = "ar1",
     force_offsets: bool = False,
     pooled: Sequence[str] = (),
+    pool_spread: float = POOL_SPREAD,
     seed: int = 0,
     progress: bool = True,
     max_steps: int = 6000,
@@ -269,9 +271,12 @@ def fit_group(
         likelihood (not sampled); summary.json's ``force_offset_N`` holds its posterior (from up to 4000 draws).
     pooled : sequence of str
         Noise parameters the conditions pool (``("rho_force",)`` or none): each condition keeps its own AR(1)
-        correlation, drawn from a population they share (centre ``rho_force``, spread ``rho_force_spread`` on
-        Fisher's z), so conditions whose correlations agree read them from each other's pushes
-        (docs/inference.md, "One stem, many conditions"). summary.json's ``pooled`` holds the population.
+        correlation, and their Fisher z = atanh(rho) are a normal population of sd ``pool_spread`` about an
+        unknown centre, so conditions whose correlations agree read them from each other's pushes
+        (docs/inference.md, "One stem, many conditions"). summary.json's ``pooled`` holds the spread and the
+        conditions' common correlation tanh(mean z).
+    pool_spread : float
+        The population's sd on Fisher's z (default 0.25).
     sharing : bool
         Run the sharing check (held-out refits of the joint and the separate models; a minute or more).
     max_steps, target_ess : int, float
@@ -307,7 +312,13 @@ def fit_group(
         )
     pr = load_prior(prior)
     lik = GroupLikelihood(
-        specs, pr, shared=tuple(shared), force_noise=force_noise, force_offsets=force_offsets, pooled=tuple(pooled)
+        specs,
+        pr,
+        shared=tuple(shared),
+        force_noise=force_noise,
+        force_offsets=force_offsets,
+        pooled=tuple(pooled),
+        pool_spread=pool_spread,
     )
     post = GroupPosterior(lik)
     log.info("%s: %d conditions, parameters %s", sid, len(specs), ", ".join(post.names))
@@ -415,7 +426,12 @@ def _summary(sid, lik: GroupLikelihood, nat, per, samples, res, pr, check, secon
         "conditions_order": list(conds),
         "shared": shared,
         "pooled": {
-            n: {"centre": credible_interval(nat[n]), "spread_fisher_z": credible_interval(nat[n + "_spread"])}
+            n: {
+                "spread_fisher_z": lik.pool_spread,
+                "centre": credible_interval(
+                    np.tanh(np.mean([np.arctanh(nat[lik.local[c][n]]) for c in conds], axis=0))
+                ),
+            }
             for n in lik.pooled
         },
         "conditions": out_conds,

@@ -128,8 +128,14 @@ def build_parser() -> argparse.ArgumentParser:
     fg.add_argument(
         "--pooled",
         default="",
-        help="noise parameters the conditions pool (each keeps its own, drawn from a population they share): "
-        "rho_force or '' (default: none)",
+        help="noise parameters the conditions pool (each keeps its own; their Fisher z a normal population of sd "
+        "--pool-spread about an unknown centre): rho_force or '' (default: none)",
+    )
+    fg.add_argument(
+        "--pool-spread",
+        type=float,
+        default=0.25,
+        help="sd of the pooled correlations' Fisher z about their centre (default 0.25)",
     )
     fg.add_argument("--force-noise", default="ar1", choices=["iid", "ar1"], help="force noise per condition")
     fg.add_argument(
@@ -460,6 +466,7 @@ FLAGS = {
     "n_workers": "--workers",
     "shared": "--shared",
     "pooled": "--pooled",
+    "pool_spread": "--pool-spread",
     "stem_id": "--stem-id",
     "condition": "--condition",
     "checkpoint": "--resume",
@@ -971,6 +978,7 @@ def cmd_fit_group(args: argparse.Namespace) -> int:
         args.prior,
         shared=shared,
         pooled=pooled,
+        pool_spread=args.pool_spread,
         force_noise=args.force_noise,
         force_offsets=args.force_offsets,
         sharing=not args.no_sharing_check,

@@ -68,9 +68,9 @@ STEM_PARAMETERS = ("EI0", "p")
 NOISE_PARAMETERS = ("sigma_force_N", "rho_force")
 #: parameters the conditions may pool (partial sharing): the AR(1) correlation
 POOLABLE_PARAMETERS = ("rho_force",)
-#: the prior of a pooled correlation's spread between conditions, on Fisher's z = atanh(rho): half-normal of this
-#: scale (0.5: one condition's correlation 0.9 where another's is 0.8 or 0.95 lies within one scale)
-POOL_SPREAD_SCALE = 0.5
+#: how far a pooled correlation may differ between conditions: the sd of their Fisher z = atanh(rho) about
+#: their common (unknown) centre (0.25: at rho 0.9, one sd spans about 0.87-0.93)
+POOL_SPREAD = 0.25
 
 
 def condition_name(param: str, condition: str) -> str:
@@ -100,11 +100,14 @@ class GroupLikelihood:
         it traded off against the AR(1) correlation and slowed the chains (docs/validation.md, session 35).
     pooled : sequence of str
         Noise parameters the conditions *pool* (partial sharing; of :data:`POOLABLE_PARAMETERS`, not also in
-        ``shared``): each condition keeps its own AR(1) correlation, drawn from a population the conditions
-        share, atanh(rho_c) = atanh(rho_force) + rho_force_spread x rho_force_dev__<c> (non-centred:
-        ``rho_force`` the rig's correlation under the prior file's prior, ``rho_force_spread`` half-normal of
-        scale :data:`POOL_SPREAD_SCALE` on Fisher's z, each ``rho_force_dev__<c>`` N(0, 1)). Conditions whose
-        correlations agree borrow each other's pushes; conditions that differ keep their own.
+        ``shared``): each condition keeps its own AR(1) correlation ``rho_force__<c>`` under its own prior, and
+        the conditions' Fisher z = atanh(rho) are a normal population of sd ``pool_spread`` about a centre of
+        flat prior, integrated out: the prior gains -sum_c (z_c - mean z)^2 / (2 pool_spread^2)
+        (:meth:`pool_log_prior`). No parameter is added. Conditions whose correlations agree read them from
+        each other's pushes; a condition whose correlation differs by many ``pool_spread`` is pulled toward
+        the others, so pool only conditions one rig recorded alike.
+    pool_spread : float
+        The population's sd on Fisher's z (default :data:`POOL_SPREAD`).
     """
 
     def __init__(
@@ -116,6 +119,7 @@ class GroupLikelihood:
         anchorage: bool = True,
         force_offsets: bool = False,
         pooled=(),
+        pool_spread: float = POOL_SPREAD,
         _liks: dict | None = None,
     ):
         allowed = STEM_PARAMETERS + NOISE_PARAMETERS
@@ -132,6 +136,8 @@ class GroupLikelihood:
             raise ValueError(f"pooled: expected parameters not also shared, got {', '.join(both)} in both")
         if "rho_force" in pooled and force_noise != "ar1":
             raise ValueError(f"pooled: rho_force needs force_noise 'ar1', got force_noise {force_noise!r}")
+        if not (isinstance(pool_spread, (int, float)) and math.isfinite(pool_spread) and pool_spread > 0):
+            raise ValueError(f"pool_spread: expected a positive number (sd on Fisher's z), got {pool_spread!r}")
         if len(specs) < 1:
             raise ValueError("specs: expected at least one condition, got none")
         self.conditions = list(specs)
@@ -140,6 +146,7 @@ class GroupLikelihood:
         self.force_noise = force_noise
         self.force_offsets = bool(force_offsets)
         self.pooled = tuple(s for s in POOLABLE_PARAMETERS if s in pooled)
+        self.pool_spread = float(pool_spread)
         self.prior = prior
         lo, hi = prior.get("p").bounds()
         self.p_range = (lo, min(hi, 3.0))
@@ -170,12 +177,6 @@ class GroupLikelihood:
                     loc[n] = condition_name(n, c)
                     priors[loc[n]] = prior.get(n)
             for n in NOISE_PARAMETERS if force_noise == "ar1" else NOISE_PARAMETERS[:1]:
-                if n in self.pooled:  # the population's centre and spread, and this condition's deviation
-                    loc[n + "_dev"] = condition_name(n + "_dev", c)
-                    priors[loc[n + "_dev"]] = ParamPrior(loc[n + "_dev"], "normal", (0.0, 1.0), "1")
-                    priors[n] = prior.get(n)
-                    priors[n + "_spread"] = ParamPrior(n + "_spread", "halfnormal", (POOL_SPREAD_SCALE,), "1")
-                    continue
                 loc[n] = n if n in self.shared else condition_name(n, c)  # a shared one: the same name in each
                 priors[loc[n]] = prior.get(n)
             if anchorage:
@@ -187,8 +188,7 @@ class GroupLikelihood:
             self.local[c][n] for n in STEM_PARAMETERS if n not in self.shared for c in self.conditions
         ]
         rest = [n for c in self.conditions for n in self.local[c].values() if n not in stem]
-        pool = [m for n in self.pooled for m in (n, n + "_spread")]
-        self.names = stem + pool + list(dict.fromkeys(rest))  # a shared noise parameter once, where it first appears
+        self.names = stem + list(dict.fromkeys(rest))  # a shared noise parameter once, where it first appears
         self.priors = priors
         self.n_force = int(sum(lik.n_force for lik in self.liks.values()))
 
@@ -199,10 +199,6 @@ class GroupLikelihood:
         out["sigma_force_N"] = params[loc["sigma_force_N"]]
         if "rho_force" in loc:
             out["rho_force"] = params[loc["rho_force"]]
-        elif "rho_force_dev" in loc:
-            out["rho_force"] = pooled_value(
-                params["rho_force"], params["rho_force_spread"], params[loc["rho_force_dev"]]
-            )
         if self.anchorage:
             out["base_compliance"] = base_stiffness(clamp_or_u(params[loc["z_base"]]), out["EI0"], self.liks[c].L)
         return out
@@ -225,13 +221,19 @@ class GroupLikelihood:
             self.anchorage,
             self.force_offsets,
             pooled=self.pooled,
+            pool_spread=self.pool_spread,
             _liks=liks,
         )
 
-
-def pooled_value(centre: NDArray, spread: NDArray, deviation: NDArray) -> NDArray:
-    """A condition's correlation from the pooled population: tanh(atanh(centre) + spread x deviation)."""
-    return np.tanh(np.arctanh(np.asarray(centre, float)) + np.asarray(spread, float) * np.asarray(deviation, float))
+    def pool_log_prior(self, params: dict) -> NDArray | float:
+        """The pooling's term of the log prior (0 without ``pooled``): for each pooled parameter, the conditions'
+        Fisher z = atanh(rho_c) as a normal population of sd ``pool_spread`` whose centre, under a flat prior,
+        is integrated out: -sum_c (z_c - mean z)^2 / (2 pool_spread^2), up to a constant."""
+        out = 0.0
+        for n in self.pooled:
+            z = np.stack([np.arctanh(np.asarray(params[self.local[c][n]], float)) for c in self.conditions])
+            out = out - np.sum((z - z.mean(axis=0)) ** 2, axis=0) / (2.0 * self.pool_spread**2)
+        return out
 
 
 def clamp_or_u(z: NDArray) -> NDArray:
@@ -274,6 +276,15 @@ class GroupPosterior(PosteriorBase):
         self.stiffness_at = one_height_stiffness(heights, [lk.L for lk in liks], "length_m" in self.names)
         #: each soft base sampled relative to the stem at the one height (:meth:`settle_base_coordinates`)
         self.relative_bases = False
+
+    def log_prior(self, theta) -> NDArray:
+        """The conditions' priors, and the pooling's term (:meth:`GroupLikelihood.pool_log_prior`)."""
+        lp = super().log_prior(theta)
+        if not self.likelihood.pooled:
+            return lp
+        with np.errstate(invalid="ignore", divide="ignore"):  # a correlation outside (-1, 1): -inf already
+            pool = self.likelihood.pool_log_prior(self.to_natural(np.atleast_2d(theta)))
+        return np.where(np.isfinite(lp), lp + np.where(np.isfinite(pool), pool, -np.inf), -np.inf)
 
     def settle_base_coordinates(self, theta: NDArray) -> NDArray:
         """The start ``theta`` (ndim,) in the coordinates the sampler will use: at one height (EI0 sampled as
@@ -387,10 +398,6 @@ def start_point(post: GroupPosterior) -> NDArray:
             nat[loc["sigma_force_N"]] = max(rms, 1e-4)
             if "rho_force" in loc:
                 nat[loc["rho_force"]] = 0.5
-            if "rho_force_dev" in loc:  # pooled: every condition at the population's centre
-                nat[loc["rho_force_dev"]] = 0.0
-        for n in lik.pooled:
-            nat[n], nat[n + "_spread"] = 0.5, 0.5 * POOL_SPREAD_SCALE
         top = max(scales.values())
         for c in lik.conditions:
             loc = lik.local[c]
@@ -556,6 +563,7 @@ def sharing_check(joint: GroupLikelihood, theta_joint: NDArray, tolerance: float
         anchorage=False,
         force_offsets=joint.force_offsets,  # the copies keep each condition's integrated-out offset
         pooled=joint.pooled,  # the noise as the joint model has it: the check is about the stem
+        pool_spread=joint.pool_spread,
         _liks={c: joint.liks[c].without_effect_axis() for c in joint.conditions},
     )
     post_j = GroupPosterior(joint)
