@@ -1,6 +1,6 @@
 """Replicate study of ``bayesrod.fit_group`` on simulated brace-root series (issue 23).
 
-    python scripts/group_study.py --out group-study --replicates 30 --workers 2 [--heights 0.55]
+    python scripts/group_study.py --out group-study --replicates 30 --workers 2 [--heights 0.55] [--pooled rho_force]
 
 Each replicate is one stem (the twig: L = 0.8 m) with realistic spread -- EI0 log-normal around
 2.63 N m^2 (log-sd 0.3), p uniform on [0.3, 0.6] -- pushed under four conditions with AR(1)
@@ -74,10 +74,12 @@ def replicate_data(rep: int, kind: str, heights) -> tuple:
 
 
 def one(job) -> dict:
-    rep, kind, heights, ess = job
+    rep, kind, heights, ess, options = job
     t0 = time.perf_counter()
     dss, EI0, p, truth_C = replicate_data(rep, kind, heights)
-    g = bayesrod.fit_group(list(dss), prior="woody", progress=False, target_ess=ess, max_steps=5000, seed=rep)
+    g = bayesrod.fit_group(
+        list(dss), prior="woody", progress=False, target_ess=ess, max_steps=5000, seed=rep, **options
+    )
     d = g.to_dict()
     row = {"rep": rep, "kind": kind, "heights": " ".join(f"{h:g}" for h in heights), "EI0": EI0, "p": p}
     q = d["shared"]["EI0"]
@@ -180,14 +182,18 @@ def main() -> None:
     ap.add_argument("--heights", default="0.55", help="contact heights [m], comma separated")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--target-ess", type=float, default=200.0)
+    ap.add_argument("--shared", default="EI0,p", help="fit_group's shared (comma list)")
+    ap.add_argument("--pooled", default="", help="fit_group's pooled (comma list; default none)")
     args = ap.parse_args()
+    options = {"shared": tuple(x for x in args.shared.split(",") if x)}
+    options["pooled"] = tuple(x for x in args.pooled.split(",") if x)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     csv = out / "group_study.csv"
     done = {int(r["rep"]) for r in read_rows(csv)}
     heights = [float(h) for h in args.heights.split(",")]
     jobs = [
-        (r, "stem" if (r + 1) % args.stem_change_every == 0 else "base", heights, args.target_ess)
+        (r, "stem" if (r + 1) % args.stem_change_every == 0 else "base", heights, args.target_ess, options)
         for r in range(args.replicates)
         if r not in done
     ]

@@ -1,6 +1,7 @@
 """One stem under several conditions (issue 23): grouping, the joint posterior, the sharing check, the CLI."""
 
 import copy
+import dataclasses
 import json
 import math
 import re
@@ -670,11 +671,16 @@ def test_a_shared_noise_correlation_is_one_parameter_every_condition_reads(cut_p
         GroupLikelihood(specs, pr, shared=("EI0", "L"))
 
 
-def test_a_pooled_noise_correlation_adds_only_the_populations_term_to_the_prior(cut_pair):
-    """pooled=("rho_force",): the same parameters and likelihood as without, and a prior that gains, for the
-    conditions' Fisher z = atanh(rho_c), a normal population of sd pool_spread about a flat-prior centre
-    integrated out: -sum (z_c - mean z)^2 / (2 spread^2); zero where the correlations agree; wrong input refused."""
+def test_a_pooled_noise_correlation_is_a_population_whose_centre_has_the_files_prior(cut_pair):
+    """pooled=("rho_force",): the same parameters and likelihood as without; the correlations' prior is the joint
+    density of z_c = atanh(rho_c) ~ N(m, spread) with the centre m under the file's rho prior, integrated out:
+    against quadrature over m at single points (the definition), a density that integrates to 1, a marginal of the
+    conditions' common correlation that is the file's (not (1 - r^2) as with the file's prior on every condition);
+    the posterior's prior swaps it for the conditions' own; wrong input refused."""
+    from scipy import integrate, stats
+
     from bayesrod.inference.group import POOL_SPREAD
+    from bayesrod.inference.priors import ParamPrior
 
     specs = {d.extra["condition"]: d for d in cut_pair}
     pr = load_prior("woody")
@@ -685,27 +691,62 @@ def test_a_pooled_noise_correlation_adds_only_the_populations_term_to_the_prior(
         "EI0": np.array([2.5, 2.7, 2.6]),
         "p": np.array([0.4, 0.45, 0.42]),
         "sigma_force_N__a": np.array([0.03, 0.05, 0.04]),
-        "rho_force__a": np.array([0.8, 0.5, 0.9]),
+        "rho_force__a": np.array([0.8, 0.5, 0.99]),
         "z_base__a": np.array([-0.5, float(z_of_u(0.05)), -0.2]),
         "sigma_force_N__b": np.array([0.04, 0.02, 0.03]),
-        "rho_force__b": np.array([0.9, 0.7, 0.9]),
+        "rho_force__b": np.array([0.9, -0.2, 0.95]),
         "z_base__b": z_of_u(np.array([0.2, 0.3, 0.25])),
     }
     np.testing.assert_allclose(lik.log_likelihood(params), own.log_likelihood(params), rtol=1e-14)
-    za, zb = np.arctanh(params["rho_force__a"]), np.arctanh(params["rho_force__b"])
-    want = -((za - zb) ** 2) / 2 / (2 * 0.25**2)  # two conditions: each (z - mean)^2 = (za - zb)^2 / 4
-    np.testing.assert_allclose(lik.pool_log_prior(params), want, rtol=1e-12)
-    assert lik.pool_log_prior(params)[2] == 0.0 and own.pool_log_prior(params) == 0.0
+    arc = lik.priors["rho_force__a"]
+
+    def by_quadrature(rhos, spread=0.25, prior=arc):
+        z = np.arctanh(rhos)
+        lo, hi = (np.arctanh(b) for b in prior.bounds())
+
+        def f(m):
+            return (
+                float(np.exp(prior.logpdf_sample(np.tanh(m))))
+                * (1 - np.tanh(m) ** 2)
+                * np.prod(stats.norm.pdf(z, m, spread))
+            )
+
+        val = integrate.quad(f, lo, hi, points=[float(np.mean(z))], limit=200, epsabs=0, epsrel=1e-10)[0]
+        return math.log(val) - np.sum(np.log1p(-(np.asarray(rhos) ** 2)))
+
+    got = lik.pool_log_prior(params)
+    for k in range(3):
+        want = by_quadrature([params["rho_force__a"][k], params["rho_force__b"][k]])
+        assert got[k] == pytest.approx(want, abs=2e-5), k  # 6e-6 on the one whose mean lies 4 s from the edge
+    # the posterior's prior: the conditions' own correlation priors swapped for the pooled density
     post, base = GroupPosterior(lik), GroupPosterior(own)
     theta = post.to_sample(params)
-    np.testing.assert_allclose(post.log_prior(theta), base.log_prior(theta) + want, rtol=1e-12)
-    np.testing.assert_allclose(post.log_prob(theta), base.log_prob(theta) + want, rtol=1e-12)
-    wider = GroupLikelihood(specs, pr, pooled=("rho_force",), pool_spread=0.5, _liks=own.liks)
-    np.testing.assert_allclose(wider.pool_log_prior(params), want / 4, rtol=1e-12)
+    own_rho = sum(arc.logpdf_sample(params[f"rho_force__{c}"]) for c in "ab")
+    np.testing.assert_allclose(post.log_prior(theta), base.log_prior(theta) - own_rho + got, rtol=1e-12)
+    np.testing.assert_allclose(post.log_prob(theta), base.log_prob(theta) - own_rho + got, rtol=1e-12)
     outside = theta.copy()
-    outside[0, lik.names.index("rho_force__b")] = 1.5  # outside the correlation's prior: -inf, no warning
+    outside[0, lik.names.index("rho_force__b")] = 0.999  # outside the file's support [-0.5, 0.995]: -inf, quietly
     with np.errstate(all="raise"):
         assert post.log_prior(outside[:1])[0] == -np.inf
+    # a density: over a prior of nearly all of (-1, 1), it integrates to 1 (grid in z, where it is smooth)
+    wide = ParamPrior("rho_force", "uniform", (-0.9999999, 0.9999999), "1")
+    wpr = dataclasses.replace(pr, params={**pr.params, "rho_force": wide})
+    wlik = GroupLikelihood(specs, wpr, pooled=("rho_force",), pool_spread=0.4, _liks=own.liks)
+    z = np.linspace(-8.0, 8.0, 801)
+    za, zb = (g.ravel() for g in np.meshgrid(z, z))
+    dens = np.exp(wlik.pool_log_prior({"rho_force__a": np.tanh(za), "rho_force__b": np.tanh(zb)}))
+    mass = np.sum(dens * (1 - np.tanh(za) ** 2) * (1 - np.tanh(zb) ** 2)) * (z[1] - z[0]) ** 2
+    assert mass == pytest.approx(1.0, abs=2e-3)
+    assert wlik.pool_log_prior({"rho_force__a": np.array([0.3]), "rho_force__b": np.array([0.3])})[0] == (
+        pytest.approx(by_quadrature([0.3, 0.3], 0.4, wide), abs=1e-6)
+    )
+    # the conditions' common correlation r keeps the file's arcsine: along rho_a = rho_b = r the pooled density
+    # times the (1 - r^2) of the diagonal's width in rho goes as (1 - r^2)^(-1/2) for two conditions
+    r = np.array([0.0, 0.5, 0.8, 0.9])
+    d = lik.pool_log_prior({"rho_force__a": r, "rho_force__b": r}) + np.log1p(-(r**2))
+    # (up to the centre's smoothing by N(0, spread / sqrt(2)): 0.025 at r = 0.9; the file's prior on each condition
+    # gave log(1 - r^2) here, -1.66 at r = 0.9 against +0.83)
+    np.testing.assert_allclose(d - d[0], -0.5 * np.log1p(-(r**2)), atol=0.05)
     with pytest.raises(ValueError, match="rho_force needs force_noise 'ar1'"):
         GroupLikelihood(specs, pr, pooled=("rho_force",), force_noise="iid")
     with pytest.raises(ValueError, match="not also shared, got rho_force in both"):
@@ -715,8 +756,8 @@ def test_a_pooled_noise_correlation_adds_only_the_populations_term_to_the_prior(
     with pytest.raises(ValueError, match="pool_spread: expected a positive number .* got 0"):
         GroupLikelihood(specs, pr, pooled=("rho_force",), pool_spread=0)
     # the restricted copy (the sharing check's refits) keeps the pooling and its spread
-    sub = wider.restricted({c: np.ones(lik.liks[c].F_obs.size, bool) for c in "ab"})
-    assert sub.pooled == ("rho_force",) and sub.pool_spread == 0.5
+    sub = wlik.restricted({c: np.ones(lik.liks[c].F_obs.size, bool) for c in "ab"})
+    assert sub.pooled == ("rho_force",) and sub.pool_spread == 0.4
 
 
 def test_the_group_posteriors_guards(cut_pair, tmp_path):

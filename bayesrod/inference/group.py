@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize
+from scipy.special import logsumexp
 
 from .diagnose import BLOCK_TRAIN
 from .likelihood import EffectAxis, PosteriorBase, RodLikelihood, _ident, force_scale_fit, one_height_stiffness
@@ -71,6 +72,8 @@ POOLABLE_PARAMETERS = ("rho_force",)
 #: how far a pooled correlation may differ between conditions: the sd of their Fisher z = atanh(rho) about
 #: their common (unknown) centre (0.25: at rho 0.9, one sd spans about 0.87-0.93)
 POOL_SPREAD = 0.25
+#: Gauss-Hermite nodes of the pooled correlations' centre integral (:meth:`GroupLikelihood.pool_log_prior`)
+POOL_QUADRATURE = 16
 
 
 def condition_name(param: str, condition: str) -> str:
@@ -100,12 +103,12 @@ class GroupLikelihood:
         it traded off against the AR(1) correlation and slowed the chains (docs/validation.md, session 35).
     pooled : sequence of str
         Noise parameters the conditions *pool* (partial sharing; of :data:`POOLABLE_PARAMETERS`, not also in
-        ``shared``): each condition keeps its own AR(1) correlation ``rho_force__<c>`` under its own prior, and
-        the conditions' Fisher z = atanh(rho) are a normal population of sd ``pool_spread`` about a centre of
-        flat prior, integrated out: the prior gains -sum_c (z_c - mean z)^2 / (2 pool_spread^2)
-        (:meth:`pool_log_prior`). No parameter is added. Conditions whose correlations agree read them from
-        each other's pushes; a condition whose correlation differs by many ``pool_spread`` is pulled toward
-        the others, so pool only conditions one rig recorded alike.
+        ``shared``): each condition keeps its own AR(1) correlation ``rho_force__<c>``, and the conditions'
+        Fisher z = atanh(rho) are a normal population of sd ``pool_spread`` about a centre m whose prior is the
+        prior file's ``rho_force`` prior (on tanh m), integrated out (:meth:`pool_log_prior`). No parameter is
+        added. Conditions whose correlations agree read them from each other's pushes; a condition whose
+        correlation differs by many ``pool_spread`` is pulled toward the others, so pool only conditions one
+        rig recorded alike.
     pool_spread : float
         The population's sd on Fisher's z (default :data:`POOL_SPREAD`).
     """
@@ -226,13 +229,40 @@ class GroupLikelihood:
         )
 
     def pool_log_prior(self, params: dict) -> NDArray | float:
-        """The pooling's term of the log prior (0 without ``pooled``): for each pooled parameter, the conditions'
-        Fisher z = atanh(rho_c) as a normal population of sd ``pool_spread`` whose centre, under a flat prior,
-        is integrated out: -sum_c (z_c - mean z)^2 / (2 pool_spread^2), up to a constant."""
+        """The joint log prior density of the pooled correlations (0 without ``pooled``), in place of each
+        condition's own prior: z_c = atanh(rho_c) ~ N(m, pool_spread) given the centre m, whose prior is the
+        prior file's on tanh m (density p(tanh m) (1 - tanh^2 m) in m), integrated out. With zbar the mean of
+        the C conditions' z and s = pool_spread / sqrt(C) (up to rounding exact, the integral over m by
+        Gauss-Hermite quadrature on N(zbar, s)):
+
+            log int p_m(m) N(m; zbar, s) dm - sum_c (z_c - zbar)^2 / (2 pool_spread^2)
+            - (C - 1) log(sqrt(2 pi) pool_spread) - log sqrt(C) - sum_c log(1 - rho_c^2)
+
+        A density in the rho_c that integrates to 1 (tests/test_group.py); each rho_c is kept to the file's
+        support (-inf outside) as without pooling. The file's prior applied to every condition instead (a
+        first version, times the population term with a flat centre) put a prior (1 - r^2) on the
+        conditions' common correlation r rather than the file's arcsine (1 - r^2)^(-1/2), for four conditions:
+        it leaned away from r = 1 and narrowed the intervals."""
         out = 0.0
+        C = len(self.conditions)
+        x, w = np.polynomial.hermite_e.hermegauss(POOL_QUADRATURE)
         for n in self.pooled:
-            z = np.stack([np.arctanh(np.asarray(params[self.local[c][n]], float)) for c in self.conditions])
-            out = out - np.sum((z - z.mean(axis=0)) ** 2, axis=0) / (2.0 * self.pool_spread**2)
+            pr = self.priors[self.local[self.conditions[0]][n]]
+            rho = np.stack([np.asarray(params[self.local[c][n]], float) for c in self.conditions])
+            lo, hi = pr.bounds()
+            inside = np.all((rho >= lo) & (rho <= hi), axis=0)
+            rho = np.where(inside, rho, 0.0)
+            z = np.arctanh(rho)
+            zbar = z.mean(axis=0)
+            m = zbar[..., None] + self.pool_spread / math.sqrt(C) * x  # (..., K) nodes on N(zbar, s)
+            t = np.tanh(m)
+            with np.errstate(divide="ignore"):  # a node outside the centre's support: weight 0
+                log_pm = pr.logpdf_sample(t) + np.log1p(-(t**2))
+            centre = logsumexp(log_pm + np.log(w / math.sqrt(2 * math.pi)), axis=-1)
+            spread = np.sum((z - zbar) ** 2, axis=0) / (2.0 * self.pool_spread**2)
+            norm = (C - 1) * math.log(math.sqrt(2 * math.pi) * self.pool_spread) + 0.5 * math.log(C)
+            lp = centre - spread - norm - np.sum(np.log1p(-(rho**2)), axis=0)
+            out = out + np.where(inside, lp, -np.inf)
         return out
 
 
@@ -278,13 +308,19 @@ class GroupPosterior(PosteriorBase):
         self.relative_bases = False
 
     def log_prior(self, theta) -> NDArray:
-        """The conditions' priors, and the pooling's term (:meth:`GroupLikelihood.pool_log_prior`)."""
+        """The parameters' priors, the pooled correlations' joint one (:meth:`GroupLikelihood.pool_log_prior`)
+        in place of each condition's own."""
         lp = super().log_prior(theta)
-        if not self.likelihood.pooled:
+        lik = self.likelihood
+        if not lik.pooled:
             return lp
-        with np.errstate(invalid="ignore", divide="ignore"):  # a correlation outside (-1, 1): -inf already
-            pool = self.likelihood.pool_log_prior(self.to_natural(np.atleast_2d(theta)))
-        return np.where(np.isfinite(lp), lp + np.where(np.isfinite(pool), pool, -np.inf), -np.inf)
+        theta = np.atleast_2d(theta)
+        pc = self.prior_coordinates(theta)
+        cols = [self.names.index(lik.local[c][n]) for n in lik.pooled for c in lik.conditions]
+        with np.errstate(invalid="ignore", divide="ignore"):  # outside the support: -inf already
+            own = sum(self.priors[i].logpdf_sample(pc[:, i]) for i in cols)
+            pool = lik.pool_log_prior(self.to_natural(theta))
+            return np.where(np.isfinite(lp) & np.isfinite(pool), lp - own + pool, -np.inf)
 
     def settle_base_coordinates(self, theta: NDArray) -> NDArray:
         """The start ``theta`` (ndim,) in the coordinates the sampler will use: at one height (EI0 sampled as
