@@ -1,5 +1,6 @@
 """One stem under several conditions (issue 23): grouping, the joint posterior, the sharing check, the CLI."""
 
+import contextlib
 import copy
 import dataclasses
 import json
@@ -888,7 +889,46 @@ def test_fit_group_refuses_what_it_cannot_fit_and_defaults_as_documented(cut_pai
     }
     want = {"prior": None, "shared": ("EI0", "p"), "force_noise": "ar1", "force_offsets": False, "seed": 0}
     want |= {"progress": True, "max_steps": 6000, "target_ess": 400.0, "sharing": True, "stem_id": None}
+    want |= {"pooled": (), "pool_spread": 0.25}
     assert got == want
+
+
+def test_fit_group_cli_passes_the_pooling_and_refuses_a_bad_one(tmp_path, monkeypatch, capsys):
+    """--pooled and --pool-spread reach fit_groups as pooled and pool_spread; a bad spread or name is one line
+    naming the flag, no traceback."""
+    import bayesrod.api as api
+
+    seen = {}
+
+    class Study:
+        fits, problems = {}, ()
+
+        def save(self, out, overwrite=False):
+            seen["saved"] = out
+
+    def fake(root, prior, **kw):
+        seen.update(kw)
+        # the library's own checks of the two, which run before any dataset is looked at
+        with (
+            pytest.raises(ValueError, match="at least one condition")
+            if kw["pool_spread"] > 0 and set(kw["pooled"]) <= {"rho_force"}
+            else contextlib.nullcontext()
+        ):
+            GroupLikelihood({}, None, pooled=kw["pooled"], pool_spread=kw["pool_spread"])
+        return Study()
+
+    monkeypatch.setattr(api, "fit_groups", fake)
+    args = ["fit-group", str(tmp_path), "--out", str(tmp_path / "run"), "--quiet"]
+    assert main([*args, "--pooled", "rho_force", "--pool-spread", "0.4"]) == 0
+    assert seen["pooled"] == ("rho_force",) and seen["pool_spread"] == 0.4
+    assert main(args) == 0 and seen["pooled"] == () and seen["pool_spread"] == 0.25
+    capsys.readouterr()
+    assert main([*args, "--pooled", "sigma_force_N", "--force"]) != 0
+    err = capsys.readouterr().err
+    assert "--pooled: expected a subset of rho_force, got sigma_force_N" in err and "Traceback" not in err
+    assert main([*args, "--pooled", "rho_force", "--pool-spread", "-1", "--force"]) != 0
+    err = capsys.readouterr().err
+    assert "--pool-spread: expected a positive number" in err and "got -1.0" in err and "Traceback" not in err
 
 
 def test_at_one_height_the_stiffest_condition_starts_as_a_clamp_not_on_the_ridge(tmp_path):
