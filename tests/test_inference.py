@@ -578,3 +578,39 @@ def test_a_base_spring_is_sampled_in_u_only_on_forces_alone():
     for n_points, want in ((0, (0, 3)), (500, None)):
         lik = SimpleNamespace(names=names, p_grid=np.linspace(0.0, 3.0, 61), L=0.8, n_points=n_points)
         assert LogPosterior(lik, prior).base_pair() == want
+
+
+def test_each_effect_axis_gets_the_documented_nodes(monkeypatch):
+    """25 nodes by default; 49 for rest curvature and base tilt with shapes (SHAPE_EFFECT_NODES) and for contact
+    friction with or without them (FORCE_EFFECT_NODES: 25 moved mu's MLE by +0.115 sd, docs/validation.md)."""
+    from bayesrod.inference import likelihood as LK
+
+    class Built(Exception):
+        pass
+
+    seen = []
+
+    def axis(name, prior, ei0_range, L, n=13):
+        seen.append(n)
+        raise Built  # the axis is all this test needs: no table is built
+
+    monkeypatch.setattr(LK.EffectAxis, "from_prior", staticmethod(axis))
+    ds = bayesrod.simulate("twig", seed=2, config_overrides={"heights_m": (0.55,), "n_frames_engaged": 2})
+    prior = load_prior("woody")
+    cases = {
+        ("contact_friction", False): 49,
+        ("contact_friction", True): 49,
+        ("rest_curvature", True): 49,
+        ("rest_curvature", False): 25,
+        ("base_tilt", True): 49,
+        ("base_tilt", False): 25,
+        ("base_compliance", True): 25,
+        ("base_compliance", False): 25,
+    }
+    for (effect, shapes), want in cases.items():
+        with pytest.raises(Built):
+            LK.build_likelihood(ds, prior, (effect,), use_shapes=shapes)
+        assert seen.pop() == want, (effect, shapes)
+    with pytest.raises(Built):
+        LK.build_likelihood(ds, prior, ("contact_friction",), use_shapes=False, n_effect=13)
+    assert seen.pop() == 13

@@ -340,6 +340,10 @@ class ForceCurves:
 
 #: effect-axis nodes of a fit with shapes, where 25 are not enough (build_likelihood)
 SHAPE_EFFECT_NODES = {"rest_curvature": 49, "base_tilt": 49}
+#: effect-axis nodes where 25 are not enough on forces alone (build_likelihood): a friction axis, read in log
+#: space, moved the forces-only twig's MLE of mu by +0.115 sd with 25 nodes and by -0.023 sd with 49
+#: (docs/validation.md, session 47)
+FORCE_EFFECT_NODES = {"contact_friction": 49}
 
 #: nondimensional step before a curve's end over which a shape's slope in d is taken (RodLikelihood)
 SHAPE_END_STEP = 0.01
@@ -1586,12 +1590,15 @@ def build_likelihood(
     (``scripts/table_accuracy.py``, docs/validation.md). The tables take about twice as long to build.
     With shapes, rest curvature and base tilt get 49 nodes (:data:`SHAPE_EFFECT_NODES`): the centerline
     above the contact, nearly level late in a push, moves steeply with either, and 25 nodes moved the
-    estimate by up to 0.50 sd (49: at most 0.015 sd). ``slip`` adds the term for where each push's slip
-    lies (:meth:`RodLikelihood.slip_loglik`; docs/inference.md, "The slip").
+    estimate by up to 0.50 sd (49: at most 0.015 sd). Contact friction gets 49 with or without shapes
+    (:data:`FORCE_EFFECT_NODES`; its tables take twice as long to build). ``slip`` adds the term for where
+    each push's slip lies (:meth:`RodLikelihood.slip_loglik`; docs/inference.md, "The slip").
     """
     tabled = [e for e in effects if e in TABLE_EFFECTS]
     if n_effect is None:
-        n_effect = SHAPE_EFFECT_NODES.get(tabled[0], 25) if (tabled and use_shapes) else 25
+        n_effect = FORCE_EFFECT_NODES.get(tabled[0], 25) if tabled else 25
+        if tabled and use_shapes:
+            n_effect = max(n_effect, SHAPE_EFFECT_NODES.get(tabled[0], 25))
     lo, hi = prior.get("p").bounds()
     p_range = (lo, min(hi, 3.0))
     axis = None
