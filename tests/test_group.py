@@ -560,7 +560,16 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     for c in "ab":
         same(both["conditions"][c]["rho_force"], rho["b"])
         same(both["conditions"][c]["sigma_force_N"], sig[c])
-    assert s["pooled"] == {} and both["pooled"] == {}
+    # by default (AR(1) noise, the correlation not shared) the conditions' correlations are pooled; a shared one is
+    # not, nor with pooled=()
+    assert set(s["pooled"]) == {"rho_force"} and s["pooled"]["rho_force"]["spread_fisher_z"] == 0.25
+    assert both["pooled"] == {}
+    apart = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False, pooled=()).doc
+    assert apart["pooled"] == {} and apart["conditions"] == s["conditions"]
+    iid = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False, force_noise="iid").doc
+    assert iid["pooled"] == {} and "rho_force" not in iid["conditions"]["a"]
+    with pytest.raises(ValueError, match="pooled: expected 'auto' or a sequence of parameter names, got 'yes'"):
+        bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False, pooled="yes")
     # a pooled correlation: each condition's own, and the spread with the conditions' common correlation
     pool = bayesrod.fit_group(
         list(cut_pair), prior="woody", progress=False, sharing=False, pooled=("rho_force",), pool_spread=0.3
@@ -889,7 +898,7 @@ def test_fit_group_refuses_what_it_cannot_fit_and_defaults_as_documented(cut_pai
     }
     want = {"prior": None, "shared": ("EI0", "p"), "force_noise": "ar1", "force_offsets": False, "seed": 0}
     want |= {"progress": True, "max_steps": 6000, "target_ess": 400.0, "sharing": True, "stem_id": None}
-    want |= {"pooled": (), "pool_spread": 0.25}
+    want |= {"pooled": "auto", "pool_spread": 0.25}
     assert got == want
 
 
@@ -908,20 +917,22 @@ def test_fit_group_cli_passes_the_pooling_and_refuses_a_bad_one(tmp_path, monkey
 
     def fake(root, prior, **kw):
         seen.update(kw)
-        # the library's own checks of the two, which run before any dataset is looked at
+        # the library's own checks of the two, which run before any dataset is looked at ("auto": fit_group's)
+        pooled = ("rho_force",) if kw["pooled"] == "auto" else kw["pooled"]
         with (
             pytest.raises(ValueError, match="at least one condition")
-            if kw["pool_spread"] > 0 and set(kw["pooled"]) <= {"rho_force"}
+            if kw["pool_spread"] > 0 and set(pooled) <= {"rho_force"}
             else contextlib.nullcontext()
         ):
-            GroupLikelihood({}, None, pooled=kw["pooled"], pool_spread=kw["pool_spread"])
+            GroupLikelihood({}, None, pooled=pooled, pool_spread=kw["pool_spread"])
         return Study()
 
     monkeypatch.setattr(api, "fit_groups", fake)
     args = ["fit-group", str(tmp_path), "--out", str(tmp_path / "run"), "--quiet"]
     assert main([*args, "--pooled", "rho_force", "--pool-spread", "0.4"]) == 0
     assert seen["pooled"] == ("rho_force",) and seen["pool_spread"] == 0.4
-    assert main(args) == 0 and seen["pooled"] == () and seen["pool_spread"] == 0.25
+    assert main(args) == 0 and seen["pooled"] == "auto" and seen["pool_spread"] == 0.25
+    assert main([*args, "--pooled", "", "--force"]) == 0 and seen["pooled"] == ()
     capsys.readouterr()
     assert main([*args, "--pooled", "sigma_force_N", "--force"]) != 0
     err = capsys.readouterr().err

@@ -239,7 +239,7 @@ def fit_group(
     shared: Sequence[str] = STEM_PARAMETERS,
     force_noise: str = "ar1",
     force_offsets: bool = False,
-    pooled: Sequence[str] = (),
+    pooled: Sequence[str] | str = "auto",
     pool_spread: float = POOL_SPREAD,
     seed: int = 0,
     progress: bool = True,
@@ -269,12 +269,14 @@ def fit_group(
     force_offsets : bool
         A load-cell offset per condition, prior N(0, sd 5% of the condition's peak force), integrated out of the
         likelihood (not sampled); summary.json's ``force_offset_N`` holds its posterior (from up to 4000 draws).
-    pooled : sequence of str
+    pooled : sequence of str or "auto"
         Noise parameters the conditions pool (``("rho_force",)`` or none): each condition keeps its own AR(1)
         correlation, and their Fisher z = atanh(rho) are a normal population of sd ``pool_spread`` about an
         unknown centre, so conditions whose correlations agree read them from each other's pushes
-        (docs/inference.md, "One stem, many conditions"). summary.json's ``pooled`` holds the spread and the
-        conditions' common correlation tanh(mean z).
+        (docs/inference.md, "One stem, many conditions"). ``"auto"`` (default): the correlation is pooled with
+        AR(1) noise unless ``shared`` names it. summary.json's ``pooled`` holds the spread and the conditions'
+        common correlation tanh(mean z). ``()`` gives each condition its own correlation under its own prior
+        (the default before session 47).
     pool_spread : float
         The population's sd on Fisher's z (default 0.25).
     sharing : bool
@@ -311,6 +313,10 @@ def fit_group(
             + ", ".join(f"{c}: {v!r}" for c, v in species.items())
         )
     pr = load_prior(prior)
+    if isinstance(pooled, str):
+        if pooled != "auto":
+            raise ValueError(f"pooled: expected 'auto' or a sequence of parameter names, got {pooled!r}")
+        pooled = ("rho_force",) if force_noise == "ar1" and "rho_force" not in shared else ()
     lik = GroupLikelihood(
         specs,
         pr,

@@ -127,9 +127,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     fg.add_argument(
         "--pooled",
-        default="",
+        default="auto",
         help="noise parameters the conditions pool (each keeps its own; their Fisher z a normal population of sd "
-        "--pool-spread about an unknown centre): rho_force or '' (default: none)",
+        "--pool-spread about an unknown centre): rho_force, '' for none, or auto (default: rho_force with AR(1) "
+        "noise unless --shared names it)",
     )
     fg.add_argument(
         "--pool-spread",
@@ -972,7 +973,7 @@ def cmd_fit_group(args: argparse.Namespace) -> int:
 
     out = _prepare_out(args)
     shared = tuple(x.strip() for x in args.shared.split(",") if x.strip())
-    pooled = tuple(x.strip() for x in args.pooled.split(",") if x.strip())
+    pooled = "auto" if args.pooled == "auto" else tuple(x.strip() for x in args.pooled.split(",") if x.strip())
     study = fit_groups(
         args.root,
         args.prior,
