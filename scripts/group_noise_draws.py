@@ -1,6 +1,7 @@
 """One stem, many noise draws: is a joint posterior as wide as its median scatters? (issue 23)
 
-    python scripts/group_noise_draws.py --rep 1 --draws 16 --out draws.jsonl [--shared EI0,p] [--pooled rho_force]
+    python scripts/group_noise_draws.py --rep 1 --draws 16 --out draws.jsonl [--shared EI0,p]
+        [--pooled auto|rho_force|'']
 
 Replicate ``--rep`` of scripts/group_study.py (two heights, 0.45 and 0.65 m; intact and three cuts; AR(1)
 force noise, rho 0.9) with its stem and anchorage held, simulated again under ``--draws`` fresh noise draws
@@ -32,10 +33,10 @@ def main(argv=None) -> None:
     ap.add_argument("--draws", type=int, default=16)
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--shared", default="EI0,p", help="fit_group's shared (comma list)")
-    ap.add_argument("--pooled", default="", help="fit_group's pooled (comma list)")
+    ap.add_argument("--pooled", default="auto", help="fit_group's pooled (comma list, '' for none; default auto)")
     a = ap.parse_args(argv)
     shared = tuple(x for x in a.shared.split(",") if x)
-    pooled = tuple(x for x in a.pooled.split(",") if x)
+    pooled = "auto" if a.pooled == "auto" else tuple(x for x in a.pooled.split(",") if x)
     EI0, p, conds, truth_c = stem(a.rep)
     truth = {"EI0": EI0, "p": p, **truth_c}
     done = {json.loads(x)["draw"] for x in a.out.read_text().splitlines()} if a.out.exists() else set()

@@ -1,6 +1,7 @@
 """Replicate study of ``bayesrod.fit_group`` on simulated brace-root series (issue 23).
 
-    python scripts/group_study.py --out group-study --replicates 30 --workers 2 [--heights 0.55] [--pooled rho_force]
+    python scripts/group_study.py --out group-study --replicates 30 --workers 2 [--heights 0.55]
+        [--pooled auto|rho_force|'']
 
 Each replicate is one stem (the twig: L = 0.8 m) with realistic spread -- EI0 log-normal around
 2.63 N m^2 (log-sd 0.3), p uniform on [0.3, 0.6] -- pushed under four conditions with AR(1)
@@ -183,10 +184,10 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--target-ess", type=float, default=200.0)
     ap.add_argument("--shared", default="EI0,p", help="fit_group's shared (comma list)")
-    ap.add_argument("--pooled", default="", help="fit_group's pooled (comma list; default none)")
+    ap.add_argument("--pooled", default="auto", help="fit_group's pooled (comma list, '' for none; default auto)")
     args = ap.parse_args()
     options = {"shared": tuple(x for x in args.shared.split(",") if x)}
-    options["pooled"] = tuple(x for x in args.pooled.split(",") if x)
+    options["pooled"] = "auto" if args.pooled == "auto" else tuple(x for x in args.pooled.split(",") if x)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     csv = out / "group_study.csv"
