@@ -316,10 +316,10 @@ class GroupPosterior(PosteriorBase):
             return lp
         theta = np.atleast_2d(theta)
         pc = self.prior_coordinates(theta)
-        cols = [self.names.index(lik.local[c][n]) for n in lik.pooled for c in lik.conditions]
+        cols = {lik.local[c][n]: self.names.index(lik.local[c][n]) for n in lik.pooled for c in lik.conditions}
         with np.errstate(invalid="ignore", divide="ignore"):  # outside the support: -inf already
-            own = sum(self.priors[i].logpdf_sample(pc[:, i]) for i in cols)
-            pool = lik.pool_log_prior(self.to_natural(theta))
+            own = sum(self.priors[i].logpdf_sample(pc[:, i]) for i in cols.values())
+            pool = lik.pool_log_prior({name: self.priors[i].from_sample(pc[:, i]) for name, i in cols.items()})
             return np.where(np.isfinite(lp) & np.isfinite(pool), lp - own + pool, -np.inf)
 
     def settle_base_coordinates(self, theta: NDArray) -> NDArray:
