@@ -6,8 +6,8 @@ Each case is scripts/table_accuracy.py's noise-free twig (three heights, exact f
 given value). The likelihood is built once; its MLE shift from the truth in Laplace sds (as
 :func:`bayesrod.api.calibration.table_shift_on` computes it) is found with the force table read linearly and
 in log space (``FORCE_LOG_FLOOR``; not possible where the table holds a negative force). As shipped only a
-friction axis is read in log space (``LOG_FORCE_EFFECTS``). About 1-5 min per case; 25 min for
-contact_friction (its tables). docs/validation.md, session 46.
+friction axis is read in log space (``LOG_FORCE_EFFECTS``). About 1-5 min per case; 49 min for
+contact_friction on its 49 nodes (27 min with 25; both beside another job). docs/validation.md, sessions 46-47.
 """
 
 from __future__ import annotations

@@ -70,7 +70,7 @@ NOISE_PARAMETERS = ("sigma_force_N", "rho_force")
 #: parameters the conditions may pool (partial sharing): the AR(1) correlation
 POOLABLE_PARAMETERS = ("rho_force",)
 #: how far a pooled correlation may differ between conditions: the sd of their Fisher z = atanh(rho) about
-#: their common (unknown) centre (0.25: at rho 0.9, one sd spans about 0.87-0.93)
+#: their common (unknown) centre (0.25: at rho 0.9, one sd spans about 0.84-0.94)
 POOL_SPREAD = 0.25
 #: Gauss-Hermite nodes of the pooled correlations' centre integral (:meth:`GroupLikelihood.pool_log_prior`)
 POOL_QUADRATURE = 16
@@ -232,7 +232,7 @@ class GroupLikelihood:
         """The joint log prior density of the pooled correlations (0 without ``pooled``), in place of each
         condition's own prior: z_c = atanh(rho_c) ~ N(m, pool_spread) given the centre m, whose prior is the
         prior file's on tanh m (density p(tanh m) (1 - tanh^2 m) in m), integrated out. With zbar the mean of
-        the C conditions' z and s = pool_spread / sqrt(C) (up to rounding exact, the integral over m by
+        the C conditions' z and s = pool_spread / sqrt(C) (the integral over m by POOL_QUADRATURE-point
         Gauss-Hermite quadrature on N(zbar, s)):
 
             log int p_m(m) N(m; zbar, s) dm - sum_c (z_c - zbar)^2 / (2 pool_spread^2)
@@ -306,20 +306,24 @@ class GroupPosterior(PosteriorBase):
         self.stiffness_at = one_height_stiffness(heights, [lk.L for lk in liks], "length_m" in self.names)
         #: each soft base sampled relative to the stem at the one height (:meth:`settle_base_coordinates`)
         self.relative_bases = False
+        #: the pooled correlations' columns by name (:meth:`log_prior`)
+        self._pool_cols = {
+            likelihood.local[c][n]: self.names.index(likelihood.local[c][n])
+            for n in likelihood.pooled
+            for c in likelihood.conditions
+        }
 
     def log_prior(self, theta) -> NDArray:
         """The parameters' priors, the pooled correlations' joint one (:meth:`GroupLikelihood.pool_log_prior`)
         in place of each condition's own."""
         lp = super().log_prior(theta)
-        lik = self.likelihood
-        if not lik.pooled:
+        if not self._pool_cols:
             return lp
-        theta = np.atleast_2d(theta)
-        pc = self.prior_coordinates(theta)
-        cols = {lik.local[c][n]: self.names.index(lik.local[c][n]) for n in lik.pooled for c in lik.conditions}
+        pc = self.prior_coordinates(np.atleast_2d(theta))
+        cols = self._pool_cols
         with np.errstate(invalid="ignore", divide="ignore"):  # outside the support: -inf already
             own = sum(self.priors[i].logpdf_sample(pc[:, i]) for i in cols.values())
-            pool = lik.pool_log_prior({name: self.priors[i].from_sample(pc[:, i]) for name, i in cols.items()})
+            pool = self.likelihood.pool_log_prior({n: self.priors[i].from_sample(pc[:, i]) for n, i in cols.items()})
             return np.where(np.isfinite(lp) & np.isfinite(pool), lp - own + pool, -np.inf)
 
     def settle_base_coordinates(self, theta: NDArray) -> NDArray:
