@@ -1,6 +1,6 @@
 """The table likelihood's MLE shift with the force table read linearly and in log space, from one build per case.
 
-    python scripts/table_log_space.py [--only contact_friction] [--shapes]
+    python scripts/table_log_space.py [--only contact_friction] [--shapes] [--workers 2]
 
 Each case is scripts/table_accuracy.py's noise-free twig (three heights, exact forces; the effect on at the
 given value). The likelihood is built once; its MLE shift from the truth in Laplace sds (as
@@ -30,6 +30,7 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", default="", help="comma list of case names")
     ap.add_argument("--shapes", action="store_true", help="forces and centerlines (default: forces only)")
+    ap.add_argument("--workers", type=int, default=1, help="processes building the tables (the same tables)")
     a = ap.parse_args(argv)
     only = {c for c in a.only.split(",") if c}
     for name, effect, value in CASES:
@@ -39,7 +40,10 @@ def main(argv=None) -> None:
         effects = {effect: value} if effect else {}
         ds = simulate("twig", seed=1, noise_model=NoiseModel(force_sd_N=0.0, shape_sd_m=0.0), effects=effects)
         truth = {"EI0": ds.extra["truth"]["EI0"], "p": ds.extra["truth"]["p"], **effects}
-        lik = LK.build_likelihood(as_dataset(ds), load_prior("woody"), (effect,) if effect else (), use_shapes=a.shapes)
+        with LK.table_workers(a.workers, progress=True):
+            lik = LK.build_likelihood(
+                as_dataset(ds), load_prior("woody"), (effect,) if effect else (), use_shapes=a.shapes
+            )
         shipped = "linear" if LK.force_log_table(lik.f_table, lik.axis) is None else "log space"
         lik._force_log_table()  # fill the cache, keyed to this table, then set it by hand: read linearly
         lik._f_log = None

@@ -35,6 +35,7 @@ from ..inference.likelihood import (
     length_is_approximate,
     one_height_stiffness,
     table_check,
+    table_workers,
 )
 from ..inference.priors import load_prior
 from ..inference.sampler import convergence_message, find_start, run_ensembles
@@ -749,6 +750,7 @@ def fit(
     force_offsets: bool = False,
     diameter: str = "auto",
     slip: bool = False,
+    n_workers: int = 1,
 ) -> Posterior:
     """Posterior of EI0, p, the noise and the fitted effects for one dataset (emcee).
 
@@ -804,12 +806,19 @@ def fit(
     checkpoint : path or None
         An HDF5 file the chains are checkpointed to; an interrupted fit called again with the same
         arguments and checkpoint resumes from it. None (default): nothing is written.
+    n_workers : int
+        Processes that build the likelihood's tables (default 1: this one). Worth it with
+        ``contact_friction``, whose tables take minutes per height on one core (49 friction nodes, each a
+        force curve that searches the base moment); the tables, and so the draws, are the same whatever
+        ``n_workers`` (docs/performance.md).
 
     Returns
     -------
     Posterior
     """
     t0 = time.perf_counter()
+    if isinstance(n_workers, bool) or not isinstance(n_workers, (int, np.integer)) or n_workers < 1:
+        raise ValueError(f"n_workers: expected an integer >= 1, got {n_workers!r}")
     spec = as_dataset(dataset)
     effects = tuple(effects)
     if isinstance(shape_weight, str):
@@ -862,7 +871,15 @@ def fit(
     t_tables = time.perf_counter()
     if preload and use_shapes and any(p.shapes for p in spec.pushes):  # the one build that takes long
         log.info("%s: tabling the centerlines over each push's preload (several seconds per push)", spec.specimen)
-    lik = build_likelihood(spec, pr, effects, **_likelihood_options(config))
+    if "contact_friction" in effects:
+        log.info(
+            "%s: tabling contact friction (minutes per height; on %d process%s)",
+            spec.specimen,
+            n_workers,
+            "" if n_workers == 1 else "es",
+        )
+    with table_workers(n_workers, progress=progress_enabled(progress)):
+        lik = build_likelihood(spec, pr, effects, **_likelihood_options(config))
     log.info("%s: likelihood tables built in %.1f s", spec.specimen, time.perf_counter() - t_tables)
     if lik.length_prior is not None:
         lo, hi = lik.length_prior.bounds()

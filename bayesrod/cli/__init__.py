@@ -344,6 +344,13 @@ def build_parser() -> argparse.ArgumentParser:
     ft.add_argument(
         "--target-ess", type=float, default=1000.0, help="stop once EI0 and p have this bulk ESS (default 1000)"
     )
+    ft.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="processes that build the likelihood's tables (default 1); worth it with contact_friction, whose "
+        "tables take minutes per height; the draws are the same whatever the number",
+    )
     ft.add_argument("--resume", action="store_true", help="continue an interrupted run in --out")
     ft.add_argument("--force", action="store_true", help="replace a non-empty --out directory")
 
@@ -905,6 +912,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
         force_offsets=args.force_offsets,
         diameter=args.diameter,
         slip=args.slip,
+        n_workers=args.workers,
     )
     _print_fit(post.to_dict(), out, args)
     return 0

@@ -32,6 +32,9 @@ Miller & Dunson 2019), measured from the residuals at the posterior mode by
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -199,6 +202,91 @@ def _slip_window(force, eng) -> dict:
 #: interior forces per round of the branch end's search (:class:`ForceCurves`): the bracket shrinks 8x per round
 BRANCH_SECTIONS = 7
 
+#: how :meth:`ForceCurves.batch` runs its solves: ``(processes, progress bar)``, set by :func:`table_workers`
+_TABLE_BUILD: ContextVar[tuple[int, bool]] = ContextVar("bayesrod_table_build", default=(1, False))
+#: effects whose solves search the base moment (:mod:`bayesrod.physics.elastica`): each curve takes seconds to a
+#: minute, so they are solved one curve per call and spread over the workers (docs/performance.md)
+SLOW_EFFECT_KEYS = ("mu", "w0")
+
+
+@contextmanager
+def table_workers(n: int, progress: bool = False) -> Iterator[int]:
+    """Within the block, :meth:`ForceCurves.batch` solves its curves in ``n`` processes (1: in this one).
+
+    A likelihood's tables come from one batch of force curves (heights x effect nodes). With contact friction
+    each curve takes about half a minute on one core (docs/performance.md), and a three-height friction fit
+    spends most of its time there; the curves are independent, so ``n`` processes take about 1/n of the
+    time, and the tables are the same whatever ``n`` (:func:`_solve_spread`).
+
+    Parameters
+    ----------
+    n : int
+        Processes, at least 1.
+    progress : bool
+        A progress bar over the curves of slow effects (:data:`SLOW_EFFECT_KEYS`); the caller decides
+        whether a terminal shows it.
+    """
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ValueError(f"n_workers: expected an integer >= 1, got {n!r}")
+    token = _TABLE_BUILD.set((int(n), bool(progress)))
+    try:
+        yield int(n)
+    finally:
+        _TABLE_BUILD.reset(token)
+
+
+def _solve_chunk(etas: NDArray, p_grid: NDArray, n_f: int, eff: dict | None) -> list:
+    """ForceCurves._solve in a worker process (a module-level function: picklable)."""
+    return ForceCurves._solve(etas, p_grid, n_f, eff)
+
+
+def _solve_spread(cls, etas: NDArray, p_grid: NDArray, n_f: int, rows: list, todo: list, keys: list) -> list:
+    """The curves of rows ``todo`` of :meth:`ForceCurves.batch`, in this process or, under :func:`table_workers`
+    with more than one worker, over a process pool.
+
+    Curves with a slow effect (:data:`SLOW_EFFECT_KEYS`) are solved one per call, in either case: the base
+    moment's search takes other paths in batches of other sizes, and near a stem's tip it misses different
+    forces (the fast path and the reference alike find no equilibrium at some forces just below the branch
+    end), so the branch end found in a batch depended on what else was in it (by up to 0.009 L at 4 of 61 p
+    nodes, mu 0.2, eta 0.45: docs/performance.md). One per call, a curve depends on its own height, effect and
+    p grid only, and the tables are the same whatever the workers. Other curves (milliseconds each in a
+    batch, and exact per element) go in one batch, or one chunk per worker.
+    """
+    from tqdm.auto import tqdm
+
+    def sub(idx):
+        return {k: np.array([rows[q][k] for q in idx]) for k in keys} or None
+
+    workers, progress = _TABLE_BUILD.get()
+    slow = any(k in SLOW_EFFECT_KEYS and rows[q][k] != 0.0 for q in todo for k in keys)
+    n_tasks = len(todo) if slow else min(workers, len(todo))
+    chunks = [todo[i::n_tasks] for i in range(n_tasks)]  # interleaved: heights and nodes mixed in each
+    label = f"force curves ({', '.join(keys)})"
+    bar = tqdm(total=len(todo), desc=label, unit="curve", disable=not (progress and slow), leave=False)
+    done: dict = {}
+    with bar:
+        if workers <= 1 or n_tasks < 2:
+            for c in chunks:
+                done.update(zip(c, cls._solve(etas[c], p_grid, n_f, sub(c)), strict=True))
+                bar.update(len(c))
+        else:
+            from concurrent.futures import ProcessPoolExecutor, as_completed
+
+            with ProcessPoolExecutor(max_workers=min(workers, n_tasks)) as pool:
+                futures = {pool.submit(_solve_chunk, etas[c], p_grid, n_f, sub(c)): c for c in chunks}
+                for fut in as_completed(futures):
+                    done.update(zip(futures[fut], fut.result(), strict=True))
+                    bar.update(len(futures[fut]))
+    return [done[q] for q in todo]
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(max_workers=min(workers, n_tasks)) as pool:
+        futures = [pool.submit(_solve_chunk, etas[c], p_grid, n_f, sub(c)) for c in chunks]
+        done = {}
+        for c, fut in zip(chunks, futures, strict=True):
+            done.update(zip(c, fut.result(), strict=True))
+    return [done[q] for q in todo]
+
 
 class ForceCurves:
     """Force-displacement curves f(d) at one height for every p of a grid, from forward solves.
@@ -236,8 +324,8 @@ class ForceCurves:
         # taken before anything is added: inserting the new curves may evict cached ones
         out = {q: _CURVE_CACHE[keys[q]] for q in range(Q) if keys[q] in _CURVE_CACHE}
         if todo:
-            sub = {k: np.array([rows[q][k] for q in todo]) for k in eff} or None
-            for q, c in zip(todo, cls._solve(etas[todo], p_grid, n_f, sub), strict=True):
+            solved = _solve_spread(cls, etas, p_grid, n_f, rows, todo, list(eff))
+            for q, c in zip(todo, solved, strict=True):
                 c.effects_nd = rows[q] or effects_nd
                 out[q] = c
                 _CURVE_CACHE[keys[q]] = c
