@@ -352,14 +352,18 @@ def test_force_only_fit_of_a_blueberry_cane(tmp_path):
 
 
 def _fit_effect(tmp_path, name, value, use_shapes, n_effect=None, prior="woody"):
-    from bayesrod.inference.likelihood import build_likelihood
+    import os
+
+    from bayesrod.inference.likelihood import build_likelihood, table_workers
     from bayesrod.inference.sampler import find_start
     from bayesrod.physics import Effects
 
     ds = make_dataset(tmp_path / "ds", "twig", seed=5, effects=Effects.from_mapping({name: value}))
     spec = read_dataset(ds)
     pr = load_prior(prior)
-    lik = build_likelihood(spec, pr, (name,), use_shapes=use_shapes, n_effect=n_effect)
+    # slow tests only: the tables over two processes (the same tables; a friction build takes half the time)
+    with table_workers(min(2, os.cpu_count() or 1)):
+        lik = build_likelihood(spec, pr, (name,), use_shapes=use_shapes, n_effect=n_effect)
     post = LogPosterior(lik, pr)
     res = run_ensembles(post, find_start(post, np.random.default_rng(0)), progress=False, target_ess=400)
     nat = post.to_natural(res.chain.reshape(-1, post.ndim))
