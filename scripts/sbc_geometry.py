@@ -297,6 +297,11 @@ def main(argv=None) -> None:
         default="all",
         help="replicates to run: all, only the forces-only ones, or only the one-height forces-only ones",
     )
+    ap.add_argument(
+        "--skip-none",
+        action="store_true",
+        help="leave out the replicates without an effect (e.g. --effects base_compliance --skip-none: only springs)",
+    )
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     csv = args.out / "sbc_geometry.csv"
@@ -305,9 +310,14 @@ def main(argv=None) -> None:
     bad = [e for e in effects[1:] if e not in EFFECTS]
     if bad:
         ap.error(f"--effects: expected names among {', '.join(EFFECTS[1:])}, got {', '.join(bad)}")
-    if args.only != "all":
+    if args.only != "all" or args.skip_none:
         cases = {s: draw_case(s, effects) for s in seeds}
-        seeds = [s for s, c in cases.items() if not c["shapes"] and (args.only == "forces" or len(c["heights_m"]) == 1)]
+        keep = {
+            "all": lambda c: True,
+            "forces": lambda c: not c["shapes"],
+            "one-height-forces": lambda c: not c["shapes"] and len(c["heights_m"]) == 1,
+        }[args.only]
+        seeds = [s for s, c in cases.items() if keep(c) and not (args.skip_none and c["effect"] is None)]
     from bayesrod.dataset.io import read_rows
 
     fn = partial(replicate, cap_l=args.cap_l, slip=args.slip, step_l=args.step_l or None, effects=effects)

@@ -247,8 +247,8 @@ def _solve_spread(cls, etas: NDArray, p_grid: NDArray, n_f: int, rows: list, tod
     Curves with a slow effect (:data:`SLOW_EFFECT_KEYS`) are solved one per call, in either case: the base
     moment's search takes other paths in batches of other sizes, and near a stem's tip it misses different
     forces (the fast path and the reference alike find no equilibrium at some forces just below the branch
-    end), so the branch end found in a batch depended on what else was in it (by up to 0.009 L at 4 of 61 p
-    nodes, mu 0.2, eta 0.45: docs/performance.md). One per call, a curve depends on its own height, effect and
+    end), so the branch end found in a batch depended on what else was in it (four curves at 61 p nodes: by
+    more than 1e-3 L at 1-9 nodes per curve, up to 0.016 L; docs/performance.md). One per call, a curve depends on its own height, effect and
     p grid only, and the tables are the same whatever the workers. Other curves (milliseconds each in a
     batch, and exact per element) go in one batch, or one chunk per worker.
     """
