@@ -810,7 +810,8 @@ def fit(
         Processes that build the likelihood's tables (default 1: this one). Worth it with
         ``contact_friction``, whose tables take minutes per height on one core (49 friction nodes, each a
         force curve that searches the base moment); the tables, and so the draws, are the same whatever
-        ``n_workers`` (docs/performance.md).
+        ``n_workers`` (docs/performance.md). Where processes are spawned (macOS, Windows), a script calls
+        it under ``if __name__ == "__main__":``.
 
     Returns
     -------
