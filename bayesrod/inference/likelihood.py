@@ -244,13 +244,14 @@ def _solve_spread(cls, etas: NDArray, p_grid: NDArray, n_f: int, rows: list, tod
     """The curves of rows ``todo`` of :meth:`ForceCurves.batch`, in this process or, under :func:`table_workers`
     with more than one worker, over a process pool.
 
-    Curves with a slow effect (:data:`SLOW_EFFECT_KEYS`) are solved one per call, in either case: the base
-    moment's search takes other paths in batches of other sizes, and near a stem's tip it misses different
-    forces (the fast path and the reference alike find no equilibrium at some forces just below the branch
-    end), so the branch end found in a batch depended on what else was in it (four curves at 61 p nodes: by
-    more than 1e-3 L at 1-9 nodes per curve, up to 0.016 L; docs/performance.md). One per call, a curve depends on its own height, effect and
-    p grid only, and the tables are the same whatever the workers. Other curves (milliseconds each in a
-    batch, and exact per element) go in one batch, or one chunk per worker.
+    Curves with a slow effect (:data:`SLOW_EFFECT_KEYS`) are solved one per call, in either case: near a fold
+    of the force curve the base moment's search misses equilibria at some forces (between forces where it holds
+    the stem on the curve's smooth continuation; the reference solver found none at the six such forces checked),
+    and which it misses depends on the batch (the search takes other paths in batches of other sizes). So the
+    branch end found in a batch depended on what else was in it (four curves at 61 p nodes: by more than 1e-3 L
+    at 1-9 nodes per curve, up to 0.016 L; docs/performance.md). One per call, a curve depends on its own
+    height, effect and p grid only, and the tables are the same whatever the workers. Other curves (milliseconds
+    each in a batch, and exact per element) go in one batch, or one chunk per worker.
     """
     from tqdm.auto import tqdm
 
