@@ -30,6 +30,7 @@ from ..dataset.plausibility import starts_loaded
 from ..inference.likelihood import (
     LogPosterior,
     build_likelihood,
+    check_workers,
     effective_shape_weight,
     geometry_blocker,
     length_is_approximate,
@@ -818,8 +819,7 @@ def fit(
     Posterior
     """
     t0 = time.perf_counter()
-    if isinstance(n_workers, bool) or not isinstance(n_workers, (int, np.integer)) or n_workers < 1:
-        raise ValueError(f"n_workers: expected an integer >= 1, got {n_workers!r}")
+    check_workers(n_workers)  # before any work
     spec = as_dataset(dataset)
     effects = tuple(effects)
     if isinstance(shape_weight, str):

@@ -214,7 +214,7 @@ def table_workers(n: int, progress: bool = False) -> Iterator[int]:
     """Within the block, :meth:`ForceCurves.batch` solves its curves in ``n`` processes (1: in this one).
 
     A likelihood's tables come from one batch of force curves (heights x effect nodes). With contact friction
-    each curve takes about half a minute on one core (docs/performance.md), and a three-height friction fit
+    each curve takes 20-25 s on one core (docs/performance.md), and a three-height friction fit
     spends most of its time there; the curves are independent, so ``n`` processes take about 1/n of the
     time, and the tables are the same whatever ``n`` (:func:`_solve_spread`).
 
@@ -226,18 +226,18 @@ def table_workers(n: int, progress: bool = False) -> Iterator[int]:
         A progress bar over the curves of slow effects (:data:`SLOW_EFFECT_KEYS`); the caller decides
         whether a terminal shows it.
     """
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise ValueError(f"n_workers: expected an integer >= 1, got {n!r}")
-    token = _TABLE_BUILD.set((int(n), bool(progress)))
+    token = _TABLE_BUILD.set((check_workers(n), bool(progress)))
     try:
         yield int(n)
     finally:
         _TABLE_BUILD.reset(token)
 
 
-def _solve_chunk(etas: NDArray, p_grid: NDArray, n_f: int, eff: dict | None) -> list:
-    """ForceCurves._solve in a worker process (a module-level function: picklable)."""
-    return ForceCurves._solve(etas, p_grid, n_f, eff)
+def check_workers(n) -> int:
+    """``n`` as a number of processes (an integer >= 1, not a bool), else ValueError naming ``n_workers``."""
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ValueError(f"n_workers: expected an integer >= 1, got {n!r}")
+    return int(n)
 
 
 def _solve_spread(cls, etas: NDArray, p_grid: NDArray, n_f: int, rows: list, todo: list, keys: list) -> list:
@@ -274,18 +274,10 @@ def _solve_spread(cls, etas: NDArray, p_grid: NDArray, n_f: int, rows: list, tod
             from concurrent.futures import ProcessPoolExecutor, as_completed
 
             with ProcessPoolExecutor(max_workers=min(workers, n_tasks)) as pool:
-                futures = {pool.submit(_solve_chunk, etas[c], p_grid, n_f, sub(c)): c for c in chunks}
+                futures = {pool.submit(cls._solve, etas[c], p_grid, n_f, sub(c)): c for c in chunks}
                 for fut in as_completed(futures):
                     done.update(zip(futures[fut], fut.result(), strict=True))
                     bar.update(len(futures[fut]))
-    return [done[q] for q in todo]
-    from concurrent.futures import ProcessPoolExecutor
-
-    with ProcessPoolExecutor(max_workers=min(workers, n_tasks)) as pool:
-        futures = [pool.submit(_solve_chunk, etas[c], p_grid, n_f, sub(c)) for c in chunks]
-        done = {}
-        for c, fut in zip(chunks, futures, strict=True):
-            done.update(zip(c, fut.result(), strict=True))
     return [done[q] for q in todo]
 
 
