@@ -233,6 +233,14 @@ TARGETS["elastica_core"] = (
     ],
 )
 
+# added in session 49: the two functions session 46 rewrote (a march that bends back below the sensor has no contact;
+# the base-moment search moves its bracket by the stem's class), run alone on the core's tests
+TARGETS["moment_search"] = (
+    "bayesrod/physics/elastica.py",
+    TARGETS["elastica_core"][1],
+    [f"*.x_{f}__mutmut_*" for f in ("_march", "_balance_base_moment")],
+)
+
 # added in session 35: the joint posterior of one stem under several conditions (issue 23) and its summary
 TARGETS["group"] = ("bayesrod/inference/group.py", ["tests/test_group.py"], None)
 TARGETS["group_summary"] = (
