@@ -5,8 +5,9 @@ the solver's core (``--only elastica_core``) most survivors change the path of a
 tolerance, not its answer. This script settles which: it applies each survivor's diff to a copy of the
 package, runs a forward sweep in a fresh process (both directions, contact from force with the shape grid
 and force from displacement, over a plain rod, a taper, a base spring, a tilt, a rest curvature, self
-weight, friction either way, a yield moment and a sensor offset, at several heights) and compares every
-number with the unmutated code's: ``found``/``slipped``/``yielded`` must agree exactly and every value to
+weight, friction either way, a yield moment and a sensor offset, at several heights, and friction stems near
+the tip and below a fold, where the base-moment search decides) and compares every number with the unmutated
+code's: ``found``/``slipped``/``yielded`` must agree exactly and every value to
 ``--rtol`` (NaN where the original has NaN). A mutant that changes nothing here cannot change what the
 likelihood reads from this solver on these rods; one that does is a missing test, unless the default suite's
 other tests kill it: ``--tests`` runs them on each changed mutant (in a copy of the tracked tree).
@@ -69,6 +70,16 @@ MIXED = [
     ),
 ]
 
+#: friction stems whose contact nears the tip or a fold, where session 46's base-moment search decides (added in
+#: session 49 for the ``moment_search`` target): (name, eta, p, effects, nondimensional forces f = F L^2 / EI0)
+#: -- the islands and gaps near the tip (eta 0.5625, p 0.4, mu 0.424), the holes below a fold (eta 0.45,
+#: p 0.55, mu 0.2) and the contact only the wide scan finds (eta 0.45, p 0.3, mu 0.3 near f 26.74)
+NEAR_TIP = [
+    ("friction_tip", 0.5625, 0.4, {"mu": 0.424}, np.linspace(13.0, 19.6, 34)),
+    ("friction_fold", 0.45, 0.55, {"mu": 0.2}, np.linspace(12.5, 14.5, 21)),
+    ("friction_wide_scan", 0.45, 0.3, {"mu": 0.3}, np.linspace(25.0, 28.0, 13)),
+]
+
 
 def _readable(a: dict) -> dict:
     """What :func:`~bayesrod.physics.elastica.contact_from_force` lets a user read of a force-direction solve:
@@ -99,6 +110,9 @@ def compute() -> dict[str, np.ndarray]:
         b = force_from_displacement_nd(DISPLACEMENTS[:, None] * eta, eta, p, eff)
         out.update({f"{name}/force/{k}": np.asarray(v) for k, v in a.items()})
         out.update({f"{name}/displacement/{k}": np.asarray(v) for k, v in b.items()})
+    for name, eta, p, eff, f in NEAR_TIP:
+        a = _readable(contact_from_force_nd(f, eta, p, eff, keep_shape=True))
+        out.update({f"{name}/force/{k}": np.asarray(v) for k, v in a.items()})
     return out
 
 
