@@ -17,6 +17,8 @@ Usage::
     python scripts/mutant_sweep.py RESULTS.json --target elastica_core --out classes.json
     python scripts/mutant_sweep.py RESULTS.json --out classes.json --tests tests/test_elastica.py tests/test_slip.py
     python scripts/mutant_sweep.py --compute OUT.npz        # the sweep alone, with the bayesrod on PYTHONPATH
+    python scripts/mutant_sweep.py RESULTS.json --target moment_search --out classes.json --near-tip-only \
+        --only-class same                # the survivors found the same, again on the dense friction stems only
 
 The result (``--out``): per survivor ``same`` (every number within rtol), ``changed`` (with the largest
 relative change and where), ``timeout``/``error`` (the mutant hangs or raises on the sweep: a user would see
@@ -72,12 +74,17 @@ MIXED = [
 
 #: friction stems whose contact nears the tip or a fold, where session 46's base-moment search decides (added in
 #: session 49 for the ``moment_search`` target): (name, eta, p, effects, nondimensional forces f = F L^2 / EI0)
-#: -- the islands and gaps near the tip (eta 0.5625, p 0.4, mu 0.424), the holes below a fold (eta 0.45,
-#: p 0.55, mu 0.2) and the contact only the wide scan finds (eta 0.45, p 0.3, mu 0.3 near f 26.74)
+#: -- the islands and gaps near the tip (eta 0.5625, p 0.4, mu 0.424; its branch ends at 19.53), the holes below a
+#: fold (eta 0.45, p 0.55, mu 0.2: 30 of the 100 forces without an equilibrium), the contact only the wide scan
+#: finds (eta 0.45, p 0.3, mu 0.3 near f 26.74), a fold with holes at eta 0.6 (p 0.6, mu 0.2, its last held force
+#: 4.011) and friction against the push (mu -0.25) to past its end. Dense: a force the search misses lies
+#: between forces it holds, so a sparse sweep passes over a mutant that opens a hole (14 forces per case did).
 NEAR_TIP = [
-    ("friction_tip", 0.5625, 0.4, {"mu": 0.424}, np.linspace(13.0, 19.6, 34)),
-    ("friction_fold", 0.45, 0.55, {"mu": 0.2}, np.linspace(12.5, 14.5, 21)),
-    ("friction_wide_scan", 0.45, 0.3, {"mu": 0.3}, np.linspace(25.0, 28.0, 13)),
+    ("friction_tip", 0.5625, 0.4, {"mu": 0.424}, np.linspace(13.0, 19.6, 200)),
+    ("friction_fold", 0.45, 0.55, {"mu": 0.2}, np.linspace(12.5, 14.5, 100)),
+    ("friction_wide_scan", 0.45, 0.3, {"mu": 0.3}, np.linspace(20.0, 28.0, 100)),
+    ("friction_fold_high", 0.6, 0.6, {"mu": 0.2}, np.linspace(3.0, 4.1, 100)),
+    ("friction_against_end", 0.5, 0.3, {"mu": -0.25}, np.linspace(2.0, 12.0, 100)),
 ]
 
 
@@ -93,19 +100,20 @@ def _readable(a: dict) -> dict:
     return out
 
 
-def compute() -> dict[str, np.ndarray]:
-    """The sweep with whatever bayesrod is importable: arrays keyed ``<case>/<direction>/<field>``."""
+def compute(near_tip_only: bool = False) -> dict[str, np.ndarray]:
+    """The sweep with whatever bayesrod is importable: arrays keyed ``<case>/<direction>/<field>``
+    (``near_tip_only``: only the friction stems of :data:`NEAR_TIP`)."""
     from bayesrod.physics.elastica import contact_from_force_nd, force_from_displacement_nd
 
     out = {}
-    for name, eta, p, eff in CASES:
+    for name, eta, p, eff in [] if near_tip_only else CASES:
         a = _readable(contact_from_force_nd(FORCES * eta**-2, eta, p, eff, keep_shape=True))
         for k, v in a.items():
             out[f"{name}/force/{k}"] = np.asarray(v)
         b = force_from_displacement_nd(DISPLACEMENTS * eta, eta, p, eff)
         for k, v in b.items():
             out[f"{name}/displacement/{k}"] = np.asarray(v)
-    for name, eta, p, eff in MIXED:
+    for name, eta, p, eff in [] if near_tip_only else MIXED:
         a = _readable(contact_from_force_nd(FORCES[:, None] * eta**-2, eta, p, eff, keep_shape=True))
         b = force_from_displacement_nd(DISPLACEMENTS[:, None] * eta, eta, p, eff)
         out.update({f"{name}/force/{k}": np.asarray(v) for k, v in a.items()})
@@ -183,9 +191,10 @@ def _tests_fail(root: Path, tests: list[str], timeout: float) -> bool:
         return True
 
 
-def _run(root: Path, out: Path, timeout: float) -> str:
+def _run(root: Path, out: Path, timeout: float, near_tip_only: bool = False) -> str:
     """The sweep with the copy at ``root``, saved to ``out``: "ok", "timeout" or "error: <last line>"."""
     cmd = [sys.executable, str(Path(__file__).resolve()), "--compute", str(out)]
+    cmd += ["--near-tip-only"] if near_tip_only else []
     try:
         r = subprocess.run(cmd, env=_env(root), capture_output=True, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
@@ -202,21 +211,27 @@ def main(argv=None) -> None:
     ap.add_argument("--rtol", type=float, default=1e-9)
     ap.add_argument("--timeout", type=float, default=300.0)
     ap.add_argument("--tests", nargs="*", default=[], help="test files run on each changed mutant")
+    ap.add_argument("--near-tip-only", action="store_true", help="sweep only the friction stems near the tip")
+    ap.add_argument("--only-class", help="rerun only the survivors an earlier --out gave this class (e.g. same)")
     args = ap.parse_args(argv)
     if args.compute:
-        np.savez(args.compute, **compute())
+        np.savez(args.compute, **compute(args.near_tip_only))
         return
     if not args.results or not args.out:
         ap.error("results and --out are needed (or --compute)")
     survivors = json.loads(Path(args.results).read_text())[args.target]["survivors"]
     out_path = Path(args.out)
     done = json.loads(out_path.read_text()) if out_path.exists() else {}  # resumable
+    if args.only_class:  # a second, stricter sweep of what an earlier one left: its classes are redone
+        survivors = {m: v for m, v in survivors.items() if done.get(m, {}).get("class") == args.only_class}
+        out_path = out_path.with_name(out_path.stem + f".{args.only_class}.rerun.json")
+        done = json.loads(out_path.read_text()) if out_path.exists() else {}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         _copy_tree(tmp)
         target = tmp / MODULE
         original = target.read_text().splitlines(keepends=True)
-        if _run(tmp, tmp / "ref.npz", args.timeout) != "ok":
+        if _run(tmp, tmp / "ref.npz", args.timeout, args.near_tip_only) != "ok":
             raise SystemExit("the unmutated sweep failed")
         ref = dict(np.load(tmp / "ref.npz"))
         todo = [m for m in survivors if m not in done]
@@ -228,7 +243,7 @@ def main(argv=None) -> None:
                 verdicts = []
                 for way in ways:
                     target.write_text("".join(way))
-                    status = _run(tmp, tmp / "new.npz", args.timeout)
+                    status = _run(tmp, tmp / "new.npz", args.timeout, args.near_tip_only)
                     if status == "ok":
                         same, why = compare(ref, dict(np.load(tmp / "new.npz")), args.rtol)
                         cls = "same" if same else "changed"
