@@ -396,3 +396,13 @@ def test_forces_from_displacements_with_friction_against_the_push_match_the_refe
     ref = R.solve_displacement(0.3, 0.5, 0.3, {"mu": -0.25})
     assert float(sol["f"][6]) == pytest.approx(ref["f"], abs=1e-8)
     assert float(sol["sig_c"][6]) == pytest.approx(ref["sig_c"], abs=1e-8)
+
+
+def test_a_displacement_far_past_the_slip_of_a_sprung_stem_with_friction_against_the_push_is_slipped():
+    """eta 0.75, p 0.6, a base spring (c 0.4), friction against the push (mu -0.1) and a rest curvature (0.1): the
+    fast path holds the stem at d 0.45 with the reference's force (0.553764) and calls d = eta slipped, without a
+    force. There the base-moment search steps past its one finite end (``beyond``), which no other test reached:
+    a mutant setting that step to None raised a TypeError on a user's sweep (session 49, scripts/mutant_sweep.py)."""
+    out = force_from_displacement_nd(np.array([0.45, 0.75]), 0.75, 0.6, {"c_base": 0.4, "mu": -0.1, "kappa0": 0.1})
+    np.testing.assert_allclose(out["f"][0], 0.5537636597277417, rtol=1e-6)  # reference.solve_displacement
+    assert out["slipped"].tolist() == [False, True] and np.isnan(out["f"][1])
