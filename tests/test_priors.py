@@ -553,3 +553,19 @@ def test_a_one_height_fit_records_its_stiffness_coordinates_for_resuming():
     fit = bayesrod.fit(one, use_shapes=False, progress=False, max_steps=100, target_ess=10)
     assert fit.config["stiffness_coordinates"] == "log_k_at_height"
     assert fit.config["noise_coordinates"] == "marginal_sd" and fit.config["base_coordinates"] == "log_k"
+
+
+def test_a_walker_far_out_in_log_space_maps_to_inf_without_a_warning():
+    """A sampler's walker at log EI0 = 1000 (a stretch move between distant walkers) is EI0 = inf, silently: the
+    prior's log density there is below -1e5. numpy's overflow warning reached users' terminals during fit-group
+    (session 49)."""
+    import warnings
+
+    from bayesrod.inference.priors import ParamPrior
+
+    pr = ParamPrior("EI0", "lognormal", (3.0, 1.5), "N m^2")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        x = pr.from_sample(np.array([0.0, 1000.0]))
+    assert x[0] == 1.0 and np.isinf(x[1])
+    assert pr.logpdf_sample(np.array([1000.0]))[0] < -1e5  # the prior's weight there is nil

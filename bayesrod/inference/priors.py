@@ -40,7 +40,10 @@ class ParamPrior:
         return np.log(x) if self.log_space else np.asarray(x, float)
 
     def from_sample(self, u):
-        return np.exp(u) if self.log_space else np.asarray(u, float)
+        if not self.log_space:
+            return np.asarray(u, float)
+        with np.errstate(over="ignore"):  # a walker far out (u > 709) is inf, where its prior has no weight
+            return np.exp(u)
 
     def _angles(self) -> tuple[float, float]:
         """An arcsine prior's support as angles: x = sin(t) with t uniform on (asin(low), asin(high))."""
