@@ -1,6 +1,7 @@
 """What the study scripts share: skip the jobs whose rows are already in the results CSV, run the rest in a
 process pool and append each row as it finishes (an interrupted study resumes); simulate and extract one
-rendered push of a stem with its drawn diameter profile (the width studies)."""
+rendered push of a stem with its drawn diameter profile (the width studies); the calibration statistics of the
+SBC scripts' tables (:func:`calibration_stats`)."""
 
 from __future__ import annotations
 
@@ -61,3 +62,27 @@ def extracted_push(stem: str, seed: int, graded: bool, folder: Path, style: str 
     drawn = stem_diameter(ex.diameters.s_m, truth["base_diameter_m"], truth["diameter_taper"], ds.length_m)
     metres_per_px = ex.doc["pushes"][ds.pushes[0].id]["plane_depth_m"] / ds.camera.fx
     return ex, np.asarray(drawn, float), float(metres_per_px)
+
+
+def calibration_stats(covered, ranks, n_rank: int) -> dict:
+    """One row of an SBC table: ``covered`` (n,) whether each 90% interval held the truth, ``ranks`` (n,) the
+    truth's rank among ``n_rank`` draws. Returns n, the coverage, the binomial 95% range of a calibrated 90%
+    (``lo``, ``hi``), the misses with the truth above / below the draws' middle, the mean rank with the se of a
+    uniform one, and the rank histogram's chi-square p (10 bins; NaN under 20 replicates)."""
+    from scipy.stats import binom, chisquare
+
+    covered, ranks = np.asarray(covered, bool), np.asarray(ranks, float)
+    n = covered.size
+    missed = ranks[~covered]
+    counts = np.histogram(ranks, bins=10, range=(0, n_rank + 1))[0]
+    return {
+        "n": n,
+        "coverage": float(covered.mean()),
+        "lo": binom.ppf(0.025, n, 0.9) / n,
+        "hi": binom.ppf(0.975, n, 0.9) / n,
+        "above": int(np.sum(missed > n_rank / 2)),
+        "below": int(np.sum(missed <= n_rank / 2)),
+        "mean_rank": float(ranks.mean()),
+        "se": float(np.sqrt(((n_rank + 1) ** 2 - 1) / 12 / n)),  # sd of a uniform rank on 0..n_rank over sqrt(n)
+        "chi2_p": float(chisquare(counts).pvalue) if n >= 20 else float("nan"),
+    }

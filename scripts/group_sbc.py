@@ -36,7 +36,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _study import run_pending  # noqa: E402
+from _study import calibration_stats, run_pending  # noqa: E402
 
 import bayesrod  # noqa: E402
 from bayesrod.dataset.simulate import NoiseModel  # noqa: E402
@@ -140,14 +140,14 @@ def one(job) -> dict:
 
 
 def table(rows: list[dict]) -> str:
-    """Coverage and the rank histogram's chi-square (10 bins) per parameter kind, over the replicates that fitted."""
-    from scipy import stats
-
+    """Coverage, misses, mean rank and the rank histogram's chi-square per parameter kind, over the replicates
+    that fitted (:func:`_study.calibration_stats`, as scripts/sbc_geometry.py)."""
     ok = [r for r in rows if not r.get("error")]
     out = [
         f"{len(ok)} replicates fitted ({len(rows) - len(ok)} refused or failed)\n",
-        "| parameter | n | 90% covered | binomial 5-95% of 0.9 | mean rank (49.5 uniform) | rank chi-square p |",
-        "|---|---|---|---|---|---|",
+        "| parameter | n | 90% covered | binomial 95% range | misses: truth above / below | "
+        f"mean rank (uniform {N_RANK / 2:g}) +- se | rank chi2 p (10 bins) |",
+        "|---|---|---|---|---|---|---|",
     ]
     kinds = {"EI0": ["EI0"], "p": ["p"]}
     kinds |= {f"{k} (4 conditions)": [f"{k}__{c}" for c in CONDITIONS] for k in ("C", "sigma", "rho")}
@@ -159,15 +159,11 @@ def table(rows: list[dict]) -> str:
             cols = [(r, k) for r in ok for k in keys]
         if not cols:
             continue
-        cov = np.array([int(r[f"{k}_covered"]) for r, k in cols])
-        ranks = np.array([int(r[f"{k}_rank"]) for r, k in cols])
-        n = cov.size
-        lo, hi = stats.binom.ppf([0.05, 0.95], n, 0.9)
-        hist = np.histogram(ranks, bins=10, range=(0, N_RANK + 1))[0]
-        chi = stats.chisquare(hist).pvalue
+        c = calibration_stats([int(r[f"{k}_covered"]) for r, k in cols], [int(r[f"{k}_rank"]) for r, k in cols], N_RANK)
         out.append(
-            f"| {label} | {n} | {cov.sum()}/{n} ({cov.mean():.2f}) | {lo:.0f}-{hi:.0f} | {ranks.mean():.1f} "
-            f"| {chi:.2f} |"
+            f"| {label} | {c['n']} | {round(c['coverage'] * c['n'])}/{c['n']} ({c['coverage']:.2f}) | "
+            f"{c['lo']:.2f}-{c['hi']:.2f} | {c['above']} / {c['below']} | {c['mean_rank']:.1f} +- {c['se']:.1f} | "
+            f"{c['chi2_p']:.2f} |"
         )
     rh = np.array([float(r["rhat"]) for r in ok]) if ok else np.array([])
     if rh.size:

@@ -212,7 +212,10 @@ def main(argv=None) -> None:
     ap.add_argument("--timeout", type=float, default=300.0)
     ap.add_argument("--tests", nargs="*", default=[], help="test files run on each changed mutant")
     ap.add_argument("--near-tip-only", action="store_true", help="sweep only the friction stems near the tip")
-    ap.add_argument("--only-class", help="rerun only the survivors an earlier --out gave this class (e.g. same)")
+    ap.add_argument(
+        "--only-class",
+        help="rerun only the survivors --out gave this class (e.g. same); writes <out>.<class>.rerun.json beside it",
+    )
     args = ap.parse_args(argv)
     if args.compute:
         np.savez(args.compute, **compute(args.near_tip_only))
@@ -261,7 +264,7 @@ def main(argv=None) -> None:
             tmp_out.replace(out_path)
             if sys.stderr.isatty():
                 print(f"\r{n}/{len(todo)} {m}: {done[m]['class']}   ", end="", file=sys.stderr)
-    print(json.dumps(Counter(v["class"] for v in done.values())))
+    print(json.dumps(Counter(v["class"] for v in done.values())), f"-> {out_path}")
 
 
 if __name__ == "__main__":

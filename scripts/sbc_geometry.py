@@ -37,7 +37,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _study import run_pending  # noqa: E402
+from _study import calibration_stats, run_pending  # noqa: E402
 
 from bayesrod import simulate  # noqa: E402
 from bayesrod.api.calibration import fit_for_calibration, rank_columns  # noqa: E402
@@ -203,8 +203,6 @@ def _num(v) -> float:
 
 
 def summarise(rows: list[dict], out: Path) -> str:
-    from scipy.stats import binom, chisquare
-
     ok = [r for r in rows if np.isfinite(_num(r.get("rhat_max")))]
     refused = [r for r in rows if "DatasetError" in str(r.get("error", ""))]
     lines = [
@@ -220,20 +218,14 @@ def summarise(rows: list[dict], out: Path) -> str:
 
     def row_for(k, sel, label):
         vals = [r for r in sel if str(r.get(f"{k}_covered", "")) in ("True", "False", "1", "0")]
-        n = len(vals)
-        if n == 0:
+        if not vals:
             return
-        cov = np.mean([str(r[f"{k}_covered"]) in ("True", "1") for r in vals])
-        lo, hi = binom.ppf(0.025, n, 0.9) / n, binom.ppf(0.975, n, 0.9) / n
-        ranks = np.array([_num(r[f"{k}_rank"]) for r in vals])
-        counts = np.histogram(ranks, bins=10, range=(0, N_RANK + 1))[0]
-        pval = chisquare(counts).pvalue if n >= 20 else float("nan")
-        missed = [_num(r[f"{k}_rank"]) for r in vals if str(r[f"{k}_covered"]) in ("False", "0")]
-        above, below = sum(m > N_RANK / 2 for m in missed), sum(m <= N_RANK / 2 for m in missed)
-        se = np.sqrt(((N_RANK + 1) ** 2 - 1) / 12 / n)  # sd of a uniform rank on 0..N_RANK over sqrt(n)
+        c = calibration_stats(
+            [str(r[f"{k}_covered"]) in ("True", "1") for r in vals], [_num(r[f"{k}_rank"]) for r in vals], N_RANK
+        )
         lines.append(
-            f"| {k} | {label} | {n} | {cov:.2f} | {lo:.2f}-{hi:.2f} | {above} / {below} | "
-            f"{ranks.mean():.1f} +- {se:.1f} | {pval:.2f} |"
+            f"| {k} | {label} | {c['n']} | {c['coverage']:.2f} | {c['lo']:.2f}-{c['hi']:.2f} | {c['above']} / "
+            f"{c['below']} | {c['mean_rank']:.1f} +- {c['se']:.1f} | {c['chi2_p']:.2f} |"
         )
 
     for k in PARAMS:
