@@ -51,6 +51,11 @@ __all__ = [
 
 DEFAULT_STEPS = 48
 TIP_TOLERANCE = 1e-4
+#: the largest turn of the tangent [rad] over a march's last step (into the tip) taken as one step; a larger one is
+#: taken again in the substeps of TIP_SUBSTEPS, fractions of h left to the tip: each halves the distance to the
+#: tip, where e(sigma) = (1 - sigma)^(4p) vanishes (2^-30 h: under 2e-11 of L)
+TIP_CALM = 0.25
+TIP_SUBSTEPS = np.concatenate([2.0 ** -np.arange(31), [0.0]])
 """Contact up to this fraction of L past the tip is taken as contact at the tip."""
 _TINY = 1e-300
 _HALF_PI = 0.5 * np.pi
@@ -371,7 +376,6 @@ def _march(f, m0, phi0, P, n_steps, keep=False):
     """
     P = _prepare(P)
     B = f.shape[0]
-    eta = P["eta"]
     h = 1.0 / n_steps
     Y = np.zeros((4, B))
     Y[2], Y[3] = phi0, m0
@@ -421,35 +425,71 @@ def _march(f, m0, phi0, P, n_steps, keep=False):
         out["m_c"][j] = yc[3]
         return ic, yc, dc
 
-    def advance(Y, sig, step):
-        new = _step(Y, sig, step, f, P, active)
+    def advance(Y, sig, step, sel=None, new=None):
+        """One step of the elements ``sel`` (all: None) from their states ``Y`` (or its result ``new``, if taken
+        already); close those it takes past the sensor height or past horizontal."""
+        g = np.arange(B) if sel is None else sel
+        Pg = P if sel is None else _subset(P, sel)
+        if new is None:
+            new = _step(Y, sig, step, f[g], Pg, active[g])
+        op = open_[g]
         # bent back past horizontal (away from the push) below the sensor: no contact ahead (the tip of a tapered
         # stem then spins, and a contact it finds is not an equilibrium the reference holds)
-        back = open_ & (new[2] <= -_HALF_PI) & (new[1] < eta)
-        bent_back[back] = True
-        closing = open_ & ((new[1] >= eta) | (new[2] >= _HALF_PI) | back)
+        back = op & (new[2] <= -_HALF_PI) & (new[1] < Pg["eta"])
+        bent_back[g[back]] = True
+        closing = op & ((new[1] >= Pg["eta"]) | (new[2] >= _HALF_PI) | back)
         if closing.any():
-            idx = np.flatnonzero(closing)
+            loc = np.flatnonzero(closing)
+            idx = g[loc]
             if run_to_tip:
-                ic, yc, dc = resolve(idx, Y[:, idx], sig, step)
+                ic, yc, dc = resolve(idx, Y[:, loc], sig, step)
                 if ic.size:
                     j = idx[ic]
                     if not P["_weighted"]:
                         yc = yc.copy()
                         yc[3] = 0.0  # no load above the contact: M = 0 exactly (round-off / e -> inf at the tip)
-                    new[:, j] = _step(yc, sig + dc, step - dc, f[j], _subset(P, j), 0.0)
+                    new[:, loc[ic]] = _step(yc, sig + dc, step - dc, f[j], _subset(P, j), 0.0)
             else:
                 pend[idx] = True
-                pend_Y[:, idx] = Y[:, idx]
+                pend_Y[:, idx] = Y[:, loc]
                 pend_sig[idx] = sig
                 pend_h[idx] = step
             open_[idx] = False
             active[idx] = 0.0
         return new
 
+    def last_step(Y):
+        """The step into the tip, where e(sigma) -> 0. An element still open whose tangent this one step turns by
+        more than :data:`TIP_CALM` takes it again in the substeps of :data:`TIP_SUBSTEPS`: one step across the tip
+        can spin the tangent through hundreds of radians and jump over a contact early in the step (holes in a
+        friction branch below its end, session 50)."""
+        sig = 1.0 - h
+        trial = _step(Y, sig, h, f, P, active)
+        wild = open_ & ~(np.abs(trial[2] - Y[2]) <= TIP_CALM)  # NaN too
+        if not wild.any():
+            return advance(Y, sig, h, new=trial)
+        new = Y.copy()
+        rest = np.flatnonzero(~wild)
+        if rest.size:
+            new[:, rest] = advance(Y[:, rest], sig, h, rest, new=trial[:, rest])
+        w = np.flatnonzero(wild)
+        Yw = Y[:, w]
+        edges = 1.0 - h * TIP_SUBSTEPS
+        for a, b in zip(edges[:-1], edges[1:], strict=True):
+            Yw = advance(Yw, float(a), float(b - a), w)
+            done = ~open_[w]
+            if done.any():  # closed: the rest of the way to the tip unloaded, in one step
+                j = w[done]
+                new[:, j] = _step(Yw[:, done], float(b), 1.0 - float(b), f[j], _subset(P, j), 0.0)
+                w, Yw = w[~done], Yw[:, ~done]
+                if w.size == 0:
+                    return new
+        new[:, w] = Yw
+        return new
+
     with np.errstate(all="ignore"):
         for k in range(n_steps):
-            Y = advance(Y, k * h, h)
+            Y = last_step(Y) if k == n_steps - 1 else advance(Y, k * h, h)
             if keep:
                 grid[k + 1] = Y[:3]
             if not run_to_tip and not open_.any():
@@ -658,6 +698,10 @@ BALANCE_ITERATIONS = 60
 BALANCE_SECTIONS = 15
 #: ... while at most this many elements are open (more: one point, bisection: a march's cost grows with its batch)
 BALANCE_FEW = 256
+#: a root of :func:`_balance_base_moment` too steep for round-off: the largest change of the residual across a bracket
+#: closed to round-off (relative to 1 + |m0|) and the largest move of the contact (sigma) between its ends
+STEEP_ROOT_JUMP = 1e-4
+STEEP_ROOT_MOVE = 1e-3
 #: points of :func:`_balance_base_moment`'s first scan for a moment that reaches the sensor (4x in the second)
 BALANCE_SCAN = 15
 
@@ -690,6 +734,7 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
     r = np.array(sol["resid"], float)
     lo, hi = np.full(B, -np.inf), np.full(B, np.inf)
     r_lo, r_hi = np.full(B, np.nan), np.full(B, np.nan)  # the residuals at the bracket's ends (NaN: no contact)
+    s_lo, s_hi = np.full(B, np.nan), np.full(B, np.nan)  # and their contacts' sigma
     least, most = np.full(B, np.inf), np.full(B, -np.inf)  # the least and largest moments that found a contact
     m_prev, r_prev = np.full(B, np.nan), np.full(B, np.nan)
     last_width = np.full(B, np.inf)
@@ -701,12 +746,26 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
     def balanced(m, r):
         """The residual vanishes to 1e-12; or to 1e-9 where the bracket has closed to round-off between two
         moments that reach the sensor (next to the bend the residual rises by up to 1e5 per unit moment, and 1e-12
-        is below its round-off; a jump of the residual, where the contact moves along the rod, leaves |r| large)."""
+        is below its round-off; a jump of the residual, where the contact moves along the rod, leaves |r| large).
+        Where the branch nears its end the residual may rise faster still (3e-8 per ulp of the moment at eta 0.45,
+        p 0.55, mu 0.2, f 13.95: no moment leaves it under 1e-9): a bracket closed to round-off whose ends' residuals
+        change sign continuously (by at most ``STEEP_ROOT_JUMP`` (1 + |m|), their contacts at most ``STEEP_ROOT_MOVE``
+        apart) holds the root at its better end (a point no farther from zero than half the change; session 50: such
+        roots, which the reference's ODE confirms, were holes in the branch)."""
         tight = (hi - lo <= 1e-14 * (1.0 + np.abs(hi))) & np.isfinite(r_lo) & np.isfinite(r_hi)
         tol = np.where(tight, 1e-9, 1e-12) * (1.0 + np.abs(m))
-        return np.isfinite(r) & (np.abs(r) <= tol)
+        with np.errstate(invalid="ignore"):
+            steep = (
+                tight
+                & (r_lo < 0.0)
+                & (r_hi >= 0.0)
+                & (r_hi - r_lo <= STEEP_ROOT_JUMP * (1.0 + np.abs(m)))
+                & (np.abs(s_hi - s_lo) <= STEEP_ROOT_MOVE)
+                & (np.abs(r) <= 0.5 * (r_hi - r_lo))
+            )
+        return np.isfinite(r) & ((np.abs(r) <= tol) | steep)
 
-    def narrow(e, mv, rv, over):
+    def narrow(e, mv, rv, over, sv):
         """Move the brackets of elements ``e`` with the marches at ``mv`` (residuals ``rv``, NaN: no contact;
         ``over``: a march without contact bent over toward the push, else back). A march without contact counts
         by its class only outside the moments that found one (near the tip the class flips in islands: a stem bent
@@ -720,11 +779,11 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
         below = np.where(fin, rv < 0, ~over & (mv < least[e])) & (mv < hi[e])
         np.maximum.at(lo, e[below], mv[below])
         at_lo = below & (mv == lo[e])
-        r_lo[e[at_lo]] = rv[at_lo]
+        r_lo[e[at_lo]], s_lo[e[at_lo]] = rv[at_lo], sv[at_lo]
         at_hi = above & (mv == hi[e])
-        r_hi[e[at_hi]] = rv[at_hi]
+        r_hi[e[at_hi]], s_hi[e[at_hi]] = rv[at_hi], sv[at_hi]
 
-    narrow(np.arange(B), m, r, sol["bent_over"])
+    narrow(np.arange(B), m, r, sol["bent_over"], sol["sig_c"])
     best_m, best_r = m.copy(), r.copy()  # each element's moment of least |residual| so far
     for _ in range(BALANCE_ITERATIONS):
         finite = np.isfinite(r)
@@ -800,7 +859,7 @@ def _balance_base_moment(f, phi_fixed, P, n_steps, keep, m, sol):
             ]
         )
         s = _march(f[e], mv, phi_fixed[e] + P["c_base"][e] * mv, _subset(P, e), n_steps, keep)
-        narrow(e, mv, s["resid"], s["bent_over"])
+        narrow(e, mv, s["resid"], s["bent_over"], s["sig_c"])
         # each element's new point: its march of smallest |residual| (one without contact if none found one)
         score = np.where(np.isfinite(s["resid"]), np.abs(s["resid"]), np.inf)
         order = np.lexsort((score, e))

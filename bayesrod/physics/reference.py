@@ -20,6 +20,10 @@ RTOL = 1e-12
 ATOL = 1e-14
 
 
+#: brentq's relative tolerance on the base moment: its least (4 eps), so its root is a few ulps from the sign change
+_RTOL_M0 = 4.0 * np.finfo(float).eps
+
+
 def _ei(sig: float, p: float) -> float:
     return max(1.0 - sig, 0.0) ** (4.0 * p) if p > 0 else 1.0
 
@@ -108,11 +112,30 @@ def solve_force(
         lo, hi = hi, 2.0 * hi
         if hi > 1e6:
             return {"found": False}
-    m0 = brentq(resid, lo, hi, xtol=1e-15, rtol=1e-14)
+    m0 = brentq(resid, lo, hi, xtol=1e-15, rtol=_RTOL_M0)
     out = shoot(m0)
-    if not out["found"] or abs(out["resid"]) > 1e-9 * (1.0 + abs(m0)):
-        return {"found": False}  # the bracket closed on the branch's end: no equilibrium holds
-    return out
+    if out["found"] and abs(out["resid"]) <= 1e-9 * (1.0 + abs(m0)):
+        return out
+    # Next to the branch's end the residual may rise by 3e-8 per ulp of m0 (eta 0.45, p 0.55, mu 0.2, f 13.95): no
+    # moment leaves it under 1e-9. A root still holds where the residual changes sign continuously across brentq's
+    # tolerance either side (by at most 1e-4 (1 + |m0|), the contact moving at most 1e-3 L): bisected there to a few
+    # ulps, the moment of least |residual|. Else the bracket closed on the branch's end (the contact jumps, or the
+    # stem bends over): no equilibrium holds.
+    d = 2.0 * (1e-15 + _RTOL_M0 * abs(m0))
+    a, b = m0 - d, m0 + d
+    below, above = shoot(a), shoot(b)
+    if not (below["found"] and above["found"] and below["resid"] < 0.0 <= above["resid"]):
+        return {"found": False}
+    if above["resid"] - below["resid"] > 1e-4 * (1.0 + abs(m0)) or abs(above["sig_c"] - below["sig_c"]) > 1e-3:
+        return {"found": False}
+    best = min((below, above), key=lambda o: abs(o["resid"]))
+    while b - a > 4.0 * np.spacing(abs(m0)):
+        mid = shoot(0.5 * (a + b))
+        if not mid["found"]:
+            return {"found": False}
+        a, b = (mid["m0"], b) if mid["resid"] < 0.0 else (a, mid["m0"])
+        best = min((best, mid), key=lambda o: abs(o["resid"]))
+    return best
 
 
 def solve_displacement(d: float, eta: float, p: float, eff: dict | None = None, rtol: float = RTOL) -> dict:
