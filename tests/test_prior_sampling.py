@@ -5,7 +5,8 @@ by its table coordinate u on forces alone, EI0 as the log stiffness at the heigh
 AR(1) noise by its innovation sd. Each map has a Jacobian; one wrong term leaves every fit looking fine and every
 interval wrong. With a zero log likelihood the posterior is the prior restricted to the tables (a tabled effect's
 coordinate inside its axis), so the draws are compared with direct draws from the prior, masked the same way:
-Kolmogorov-Smirnov distance of every parameter and of u, and the 5%, 50% and 95% quantiles.
+Kolmogorov-Smirnov distance of every parameter and of u, and the 5%, 50% and 95% quantiles (of the log of a
+positive parameter).
 """
 
 from __future__ import annotations
@@ -61,6 +62,10 @@ def test_the_sampler_returns_the_prior_when_the_likelihood_is_off(case):
     for name, (a, b) in pairs.items():
         ks = stats.ks_2samp(a, b).statistic
         assert ks < KS_MAX, f"{name}: KS distance {ks:.3f} from the prior"
+        if (b > 0).all():  # a scale over decades (the spring's compliance spans 0.6-280 m/N between 5% and 95%): its
+            # quantiles in log, where the chain's 95% is no noisier than the others (on the natural scale it moved by
+            # 263-309 for the prior's 284 over sampler seeds 1-6, beyond 6% of the spread; session 50)
+            a, b = np.log(a), np.log(b)
         qa, qb = np.quantile(a, [0.05, 0.5, 0.95]), np.quantile(b, [0.05, 0.5, 0.95])
         spread = qb[2] - qb[0]
         np.testing.assert_allclose(qa, qb, atol=0.06 * spread, err_msg=name)
