@@ -1,7 +1,7 @@
 """Replicate study of ``bayesrod.fit_group`` on simulated brace-root series (issue 23).
 
     python scripts/group_study.py --out group-study --replicates 30 --workers 2 [--heights 0.55]
-        [--pooled auto|rho_force|'']
+        [--pooled auto|rho_force|''] [--rho 0.9 | --rho intact=0.3,cut1=0.6,cut2=0.9,cut3=0.97]
 
 Each replicate is one stem (the twig: L = 0.8 m) with realistic spread -- EI0 log-normal around
 2.63 N m^2 (log-sd 0.3), p uniform on [0.3, 0.6] -- pushed under four conditions with AR(1)
@@ -12,7 +12,9 @@ brace-root means). Every ``--stem-change-every``-th replicate is instead a stem 
 (``fit_group``: AR(1) noise, prior ``woody``), whether the shared EI0's 90% interval covers the
 truth, each cut's base-compliance interval covers its truth, P(cut3 softer than intact), the
 sharing verdict, and the apparent EI0 drop of separate plain fits (MAP per condition) for contrast.
-Writes group_study.csv (resumable) and group_study.md (the tables of docs/validation.md).
+``--rho`` gives the conditions differing noise correlations (a rig whose noise changes between pushes), and the
+table then adds whether each condition's rho interval covers its own. Writes group_study.csv (resumable) and
+group_study.md (the tables of docs/validation.md).
 """
 
 from __future__ import annotations
@@ -37,6 +39,8 @@ FIELDS = ["rep", "kind", "heights", "EI0", "p", "EI0_med", "EI0_q05", "EI0_q95",
 FIELDS += [f"C_{c}_{k}" for c in RATIOS for k in ("true", "med", "q05", "q95", "cover")]
 FIELDS += [f"D_{c}_{k}" for c in RATIOS for k in ("med", "q05", "q95", "cover")]
 FIELDS += ["prob_cut3_softer", "sharing", "rmse_joint", "rmse_separate", "apparent_drop_cut3", "rhat", "seconds"]
+CONDITIONS = ("intact", *RATIOS)
+FIELDS += [f"rho_{c}_{k}" for c in CONDITIONS for k in ("true", "med", "q05", "q95", "cover")]
 
 
 def stem(rep: int, kind: str = "base") -> tuple[float, float, dict, dict]:
@@ -57,9 +61,9 @@ def stem(rep: int, kind: str = "base") -> tuple[float, float, dict, dict]:
     return EI0, p, conds, truth_C
 
 
-def replicate_data(rep: int, kind: str, heights) -> tuple:
-    """The datasets of replicate ``rep`` (``kind`` base: the anchorage changes; stem: the stem softens),
-    its EI0 and p, and each cut's true base compliance."""
+def replicate_data(rep: int, kind: str, heights, rho=0.9) -> tuple:
+    """The datasets of replicate ``rep`` (``kind`` base: the anchorage changes; stem: the stem softens;
+    ``rho`` the noise correlation, one or per condition), its EI0 and p, and each cut's true base compliance."""
     EI0, p, conds, truth_C = stem(rep, kind)
     change = {"cut2": 0.7, "cut3": 0.7} if kind == "stem" else None
     dss = bayesrod.simulate_group(
@@ -67,7 +71,7 @@ def replicate_data(rep: int, kind: str, heights) -> tuple:
         conditions=conds,
         seed=rep,
         heights_m=heights,
-        noise_rho=0.9,
+        noise_rho=rho,
         stem_change=change,
         config_overrides={"n_frames_engaged": 2, "EI0": EI0, "p": p},
     )
@@ -75,9 +79,9 @@ def replicate_data(rep: int, kind: str, heights) -> tuple:
 
 
 def one(job) -> dict:
-    rep, kind, heights, ess, options = job
+    rep, kind, heights, ess, options, rho = job
     t0 = time.perf_counter()
-    dss, EI0, p, truth_C = replicate_data(rep, kind, heights)
+    dss, EI0, p, truth_C = replicate_data(rep, kind, heights, rho)
     g = bayesrod.fit_group(
         list(dss), prior="woody", progress=False, target_ess=ess, max_steps=5000, seed=rep, **options
     )
@@ -118,6 +122,12 @@ def one(job) -> dict:
     nat = post.to_natural(start_point(post))
     row["apparent_drop_cut3"] = 1.0 - float(nat["EI0__cut3"][0] / nat["EI0__intact"][0])
     row["rhat"] = d["convergence"]["rhat_max"]
+    for c in CONDITIONS:  # each condition's noise correlation against its own truth
+        r_true = rho.get(c, 0.0) if isinstance(rho, dict) else rho
+        qr = d["conditions"][c].get("rho_force")
+        if qr is not None:
+            row.update({f"rho_{c}_true": r_true, f"rho_{c}_med": qr["median"], f"rho_{c}_q05": qr["q05"]})
+            row.update({f"rho_{c}_q95": qr["q95"], f"rho_{c}_cover": int(qr["q05"] <= r_true <= qr["q95"])})
     row["seconds"] = round(time.perf_counter() - t0, 1)
     return row
 
@@ -166,6 +176,15 @@ def table(rows) -> str:
             f"{np.median(drop):.0%} [{min(drop):.0%}, {max(drop):.0%}] |"
         )
         out.append(f"| sharing supported | {np.mean(shared):.0%} ({sum(shared)}/{n}) |")
+        for c in CONDITIONS:
+            got = [r for r in rs if r.get(f"rho_{c}_cover") not in (None, "")]
+            if got:
+                rc = [int(r[f"rho_{c}_cover"]) for r in got]
+                mid = np.median([float(r[f"rho_{c}_med"]) for r in got])
+                out.append(
+                    f"| noise rho of {c} (true {float(got[0][f'rho_{c}_true']):g}): 90% interval covers, median"
+                    f" of the medians | {np.mean(rc):.0%} ({sum(rc)}/{len(rc)}), {mid:.3f} |"
+                )
         out.append(f"| median wall time per stem | {np.median([float(r['seconds']) for r in rs]):.0f} s |")
         out.append(
             f"| R-hat max: median [max] | {np.median([float(r['rhat']) for r in rs]):.3f} "
@@ -185,7 +204,15 @@ def main() -> None:
     ap.add_argument("--target-ess", type=float, default=200.0)
     ap.add_argument("--shared", default="EI0,p", help="fit_group's shared (comma list)")
     ap.add_argument("--pooled", default="auto", help="fit_group's pooled (comma list, '' for none; default auto)")
+    ap.add_argument("--rho", default="0.9", help="the noise's AR(1) correlation: one, or condition=rho,... for each")
     args = ap.parse_args()
+    if "=" in args.rho:
+        rho = {k: float(v) for k, v in (x.split("=") for x in args.rho.split(","))}
+        unknown = sorted(set(rho) - set(CONDITIONS))
+        if unknown:
+            raise SystemExit(f"--rho: expected conditions from {', '.join(CONDITIONS)}, got {unknown[0]!r}")
+    else:
+        rho = float(args.rho)
     options = {"shared": tuple(x for x in args.shared.split(",") if x)}
     options["pooled"] = "auto" if args.pooled == "auto" else tuple(x for x in args.pooled.split(",") if x)
     out = Path(args.out)
@@ -194,7 +221,7 @@ def main() -> None:
     done = {int(r["rep"]) for r in read_rows(csv)}
     heights = [float(h) for h in args.heights.split(",")]
     jobs = [
-        (r, "stem" if (r + 1) % args.stem_change_every == 0 else "base", heights, args.target_ess, options)
+        (r, "stem" if (r + 1) % args.stem_change_every == 0 else "base", heights, args.target_ess, options, rho)
         for r in range(args.replicates)
         if r not in done
     ]

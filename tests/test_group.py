@@ -33,6 +33,7 @@ from bayesrod.physics import k_x
 EI0, P, L = 2.63, 0.43, 0.80
 H_REF = 0.55
 QUIET = {"noise_rho": 0.9, "config_overrides": {"n_frames_engaged": 2}}
+QUIET_SHAPES = {"config_overrides": {"n_frames_engaged": 2}}
 
 
 def _kb(ratio: float) -> float:
@@ -56,6 +57,24 @@ def cut_pair():
     return bayesrod.simulate_group(
         "twig", conditions={"a": math.inf, "b": _kb(0.64)}, heights_m=[0.55], seed=2, stem_id="s1", **QUIET
     )
+
+
+def test_simulate_group_gives_each_condition_its_own_noise_correlation_when_asked():
+    """A rig whose noise differs between conditions: ``noise_rho`` by condition (unnamed: iid), recorded in each
+    truth and seen in the noise (lag-1 correlation of the force residuals about the noiseless forces); a name that
+    is not a condition is refused."""
+    conds = {"a": math.inf, "b": math.inf, "c": math.inf}
+    dss = bayesrod.simulate_group(
+        "twig", conditions=conds, heights_m=[0.55], seed=4, noise_rho={"a": 0.2, "b": 0.95}, **QUIET_SHAPES
+    )
+    got = [d.extra["truth"]["noise"].get("force_rho", 0.0) for d in dss]
+    assert got == [0.2, 0.95, 0.0]
+    same = bayesrod.simulate_group("twig", conditions=conds, heights_m=[0.55], seed=4, noise_rho=0.2, **QUIET_SHAPES)
+    assert [d.extra["truth"]["noise"]["force_rho"] for d in same] == [0.2] * 3
+    np.testing.assert_array_equal(dss[0].pushes[0].force.force_N, same[0].pushes[0].force.force_N)
+    assert not np.array_equal(dss[1].pushes[0].force.force_N, same[1].pushes[0].force.force_N)
+    with pytest.raises(ValueError, match=r"noise_rho: expected condition names from conditions, got 'd'"):
+        bayesrod.simulate_group("twig", conditions=conds, noise_rho={"d": 0.5}, **QUIET_SHAPES)
 
 
 def test_group_likelihood_is_the_sum_of_the_single_condition_likelihoods(cut_pair):

@@ -177,7 +177,12 @@ def simulate(
         "EI0": cfg.EI0,
         "p": cfg.p,
         "effects": cfg.effects.to_mapping(),
-        "noise": {"force_sd_N": cfg.noise.force_sd_N, "shape_sd_m": cfg.noise.shape_sd_m},
+        "noise": {
+            "force_sd_N": cfg.noise.force_sd_N,
+            "shape_sd_m": cfg.noise.shape_sd_m,
+            # as the dataset's files record it (dataset/simulate.py): the AR(1) correlation where there is one
+            **({"force_rho": cfg.noise.force_rho} if cfg.noise.force_rho else {}),
+        },
         "seed": cfg.seed,
     }
     pushes = tuple(pushes)
@@ -204,7 +209,7 @@ def simulate_group(
     stem_id: str = "stem-1",
     seed: int = 0,
     heights_m: Sequence[float] | None = None,
-    noise_rho: float = 0.0,
+    noise_rho: float | Mapping[str, float] = 0.0,
     stem_change: Mapping[str, float] | None = None,
     config_overrides: Mapping | None = None,
 ) -> tuple[SimulatedDataset, ...]:
@@ -222,8 +227,9 @@ def simulate_group(
         Condition i is simulated with seed ``seed + i``.
     heights_m : sequence of float or None
         Contact heights of every condition; default the preset's.
-    noise_rho : float
-        Lag-1 correlation of the AR(1) force noise.
+    noise_rho : float or mapping of str to float
+        Lag-1 correlation of the AR(1) force noise: one for every condition, or condition -> correlation
+        (conditions not named: 0; rigs whose noise differs between conditions).
     stem_change : mapping of str to float or None
         Condition -> factor on EI0 (the stem itself changed: e.g. ``{"dry": 0.7}``); default 1.
     config_overrides : mapping or None
@@ -246,6 +252,10 @@ def simulate_group(
     unknown = sorted(set(stem_change) - set(conditions))
     if unknown:
         raise ValueError(f"stem_change: expected condition names from conditions, got {unknown[0]!r}")
+    rho_of = dict(noise_rho) if isinstance(noise_rho, Mapping) else dict.fromkeys(conditions, noise_rho)
+    unknown = sorted(set(rho_of) - set(conditions))
+    if unknown:
+        raise ValueError(f"noise_rho: expected condition names from conditions, got {unknown[0]!r}")
     out = []
     for i, (cond, kb) in enumerate(conditions.items()):
         kb = float(kb)
@@ -258,7 +268,7 @@ def simulate_group(
             seed=seed + i,
             effects={"base_compliance": kb} if math.isfinite(kb) else None,
             heights_m=heights_m,
-            noise_rho=noise_rho,
+            noise_rho=float(rho_of.get(cond, 0.0)),
             config_overrides={**dict(config_overrides or {}), **change},
         )
         out.append(replace(ds, extra={**ds.extra, "stem_id": stem_id, "condition": cond}))
