@@ -211,6 +211,7 @@ def test_the_walkers_restarted_count_every_walker_moved(monkeypatch):
     real = sampler.replace_stuck_walkers
 
     def three(chain, log_prob, rng, **kw):
+        assert kw.get("log_prob_fn") is not None  # the repair checks its nudges against the posterior
         real(chain, log_prob, rng, **kw)
         out = chain[-1].copy()
         out[:3] = out[5] + 1e-6 * np.arange(1, 4)[:, None]
@@ -318,3 +319,43 @@ def test_rhat_over_walkers_is_what_their_autocorrelation_time_gives():
     assert sampler.steps_needed(5000, 1.005, 250.0, 50.0, target_ess=1000) == 20000  # ESS grows as steps
     assert sampler.steps_needed(5000, 1.005, 5000.0, 500.0) == 25000  # emcee's 50 tau
     assert sampler.steps_needed(8000, 1.0, 5000.0, 10.0) == 9000  # never fewer than were run
+
+
+class _Orthant:
+    """A standard normal restricted to the positive orthant of 12 dimensions: a start at the origin sits on the
+    boundary in every coordinate, so a nudge about it lands inside with probability 2^-12."""
+
+    ndim = 12
+
+    def log_prob(self, theta):
+        t = np.atleast_2d(theta)
+        out = np.where(np.all(t >= 0.0, axis=-1), -0.5 * np.sum(t**2, axis=-1), -np.inf)
+        return out if np.ndim(theta) > 1 else out[0]
+
+
+def test_the_start_ball_never_leaves_a_walker_outside_the_support():
+    """A walker the ball cannot nudge inside in 100 draws starts on the start itself: emcee would keep one at
+    -inf and warn of inf - inf at every step (one of 56 walkers of a four-condition group fit, session 50)."""
+    post = _Orthant()
+    out = sampler._ball(np.zeros(12), 32, np.random.default_rng(0), post)
+    assert np.isfinite(post.log_prob(out)).all()
+    assert np.all(out == 0.0, axis=1).sum() >= 30  # (1 - 2^-12)^100: almost every one falls back
+
+
+def test_a_stuck_walker_nudged_outside_the_support_stays_on_its_donor():
+    """Donors on the support's boundary: with the posterior's density at hand, a nudge outside is not taken."""
+    rng = np.random.default_rng(3)
+    post = _Orthant()
+    chain = np.abs(rng.standard_normal((100, 40, 12)))
+    stuck = np.arange(0, 40, 4)
+    chain[-1, ::2, 0] = 0.0  # half the walkers' last positions on the boundary x0 = 0
+    lp = post.log_prob(chain.reshape(-1, 12)).reshape(100, 40)
+    lp[:, stuck] -= 100.0
+    out = replace_stuck_walkers(chain, lp, np.random.default_rng(4), log_prob_fn=post.log_prob)
+    assert np.isfinite(post.log_prob(out)).all()
+    good = np.setdiff1d(np.arange(40), stuck)
+    for w in stuck:  # on a donor exactly, or nudged inside
+        assert out[w, 0] >= 0.0
+    assert any(any(np.array_equal(out[w], chain[-1, g]) for g in good) for w in stuck)
+    blind = replace_stuck_walkers(chain, lp, np.random.default_rng(4))  # without the density: half land outside
+    assert not np.isfinite(post.log_prob(blind)).all()

@@ -215,7 +215,9 @@ def steps_needed(
     return int(1000 * np.ceil(max(max(need), n_steps + 1) / 1000))
 
 
-def replace_stuck_walkers(chain: NDArray, log_prob: NDArray, rng, p_miss: float = 1e-6) -> NDArray | None:
+def replace_stuck_walkers(
+    chain: NDArray, log_prob: NDArray, rng, p_miss: float = 1e-6, log_prob_fn=None
+) -> NDArray | None:
     """Walkers left in a far worse region after burn-in, moved onto the others (Hou, Goodman & Hogg 2012).
 
     An affine-invariant ensemble cannot pull back a walker that sits in a separate, much lower
@@ -235,6 +237,9 @@ def replace_stuck_walkers(chain: NDArray, log_prob: NDArray, rng, p_miss: float 
         walkers' median by more than half the ``1 - p_miss`` quantile of a chi-square with ndim degrees
         of freedom: the drop of a single draw from a Gaussian posterior's mode would exceed that with
         probability ``p_miss``; a mean over many steps almost never.
+    log_prob_fn : callable or None
+        The posterior's vectorised log density: a nudge it puts outside the support (a donor on a boundary)
+        leaves the walker on its donor instead (emcee would start it at -inf, and warn of inf - inf).
 
     Returns
     -------
@@ -254,10 +259,18 @@ def replace_stuck_walkers(chain: NDArray, log_prob: NDArray, rng, p_miss: float 
     spread = np.std(last[good], axis=0)
     donors = rng.choice(good, size=int(stuck.sum()))
     last[stuck] = last[donors] + 1e-3 * spread * rng.standard_normal((donors.size, ndim))
+    if log_prob_fn is not None:
+        moved = np.flatnonzero(stuck)
+        outside = ~np.isfinite(np.asarray(log_prob_fn(last[moved]), float))
+        last[moved[outside]] = chain[-1][donors[outside]]
     return last
 
 
 def _ball(theta0, n, rng, post):
+    """``n`` walkers about ``theta0``, each nudged by N(0, 1e-3) per coordinate and drawn again (up to 100 times)
+    while outside the support; a walker still outside starts on ``theta0`` itself. (Where the start sits on a
+    boundary in several coordinates, as a group fit's clamps can, most nudges leave the support: one of 56
+    walkers of a four-condition fit stayed at -inf, and emcee warned of inf - inf at every step; session 50.)"""
     scale = np.full(theta0.size, 1e-3)
     out = theta0 + scale * rng.standard_normal((n, theta0.size))
     for i in range(n):
@@ -265,6 +278,8 @@ def _ball(theta0, n, rng, post):
         while not np.isfinite(post.log_prob(out[i])) and tries < 100:
             out[i] = theta0 + scale * rng.standard_normal(theta0.size)
             tries += 1
+        if not np.isfinite(post.log_prob(out[i])):
+            out[i] = theta0
     return out
 
 
@@ -327,7 +342,7 @@ def run_ensembles(
             s.run_mcmc(init, todo, progress=progress, progress_kwargs={"desc": desc, "leave": False})
             if init is not None:  # the first stretch from the start ball: a walker left behind starts again
                 chain = s.get_chain()
-                moved = replace_stuck_walkers(chain, s.get_log_prob(), rng)
+                moved = replace_stuck_walkers(chain, s.get_log_prob(), rng, log_prob_fn=post.log_prob)
                 if moved is not None:
                     replaced[k] = int(np.sum(np.any(moved != chain[-1], axis=1)))
                     s.reset()  # the stretch with the stuck walkers is discarded
