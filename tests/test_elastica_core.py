@@ -415,11 +415,11 @@ def test_friction_forces_up_to_the_branch_end_hold_with_their_shapes_and_none_pa
     both solvers left holes there (the fast path held 70 of the 84 forces up to 14.15, the reference 63; the
     reference's own ODE changes sign continuously at each). Each force up to 14.2 holds, each past 14.25 does not
     (the end is near 14.2 at every step count from 48 to 384; at 14.157-14.197 the contacts at a round-off bracket's
-    ends lie 2e-6 to 1.2e-4 L apart, so a tighter STEEP_ROOT_MOVE opens holes there), the reference holds 14.035 with the same moment and
-    none at 14.3; each held shape is finite, under the sensor below the contact and straight along the contact's
-    tangent above it (to 1e-9). Some
-    of these forces are kept at the best moment the search saw and marched again (its shape copied back); a tolerance
-    of 1 instead of 1e-9 on a tight bracket held forces past the end (session 49's dense sweep)."""
+    ends lie 2e-6 to 1.2e-4 L apart, so a tighter STEEP_ROOT_MOVE opens holes there), the reference holds 14.035
+    with the same moment and none at 14.3; each held shape is finite, under the sensor below the contact and
+    straight along the contact's tangent above it (to 1e-9). Some of these forces are kept at the best moment the
+    search saw and marched again (its shape copied back); a tolerance of 1 instead of 1e-9 on a tight bracket held
+    forces past the end (session 49's dense sweep)."""
     F = np.linspace(12.5, 14.5, 100)
     a = contact_from_force_nd(F, 0.45, 0.55, {"mu": 0.2}, keep_shape=True)
     held = a["found"]
