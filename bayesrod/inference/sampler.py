@@ -275,10 +275,10 @@ def _ball(theta0, n, rng, post):
     out = theta0 + scale * rng.standard_normal((n, theta0.size))
     for i in range(n):
         tries = 0
-        while not np.isfinite(post.log_prob(out[i])) and tries < 100:
+        while not (inside := np.isfinite(post.log_prob(out[i]))) and tries < 100:
             out[i] = theta0 + scale * rng.standard_normal(theta0.size)
             tries += 1
-        if not np.isfinite(post.log_prob(out[i])):
+        if not inside:
             out[i] = theta0
     return out
 

@@ -51,12 +51,12 @@ __all__ = [
 
 DEFAULT_STEPS = 48
 TIP_TOLERANCE = 1e-4
+"""Contact up to this fraction of L past the tip is taken as contact at the tip."""
 #: the largest turn of the tangent [rad] over a march's last step (into the tip) taken as one step; a larger one is
 #: taken again in the substeps of TIP_SUBSTEPS, fractions of h left to the tip: each halves the distance to the
 #: tip, where e(sigma) = (1 - sigma)^(4p) vanishes (2^-30 h: under 2e-11 of L)
 TIP_CALM = 0.25
 TIP_SUBSTEPS = np.concatenate([2.0 ** -np.arange(31), [0.0]])
-"""Contact up to this fraction of L past the tip is taken as contact at the tip."""
 _TINY = 1e-300
 _HALF_PI = 0.5 * np.pi
 _EFFECT_KEYS = ("c_base", "kappa0", "tilt", "mu", "f_offset", "w0", "m_yield")

@@ -14,7 +14,7 @@ import numpy as np
 from scipy.integrate import quad, solve_ivp
 from scipy.optimize import brentq
 
-from .elastica import TIP_TOLERANCE
+from .elastica import STEEP_ROOT_JUMP, STEEP_ROOT_MOVE, TIP_TOLERANCE
 
 RTOL = 1e-12
 ATOL = 1e-14
@@ -118,15 +118,16 @@ def solve_force(
         return out
     # Next to the branch's end the residual may rise by 3e-8 per ulp of m0 (eta 0.45, p 0.55, mu 0.2, f 13.95): no
     # moment leaves it under 1e-9. A root still holds where the residual changes sign continuously across brentq's
-    # tolerance either side (by at most 1e-4 (1 + |m0|), the contact moving at most 1e-3 L): bisected there to a few
-    # ulps, the moment of least |residual|. Else the bracket closed on the branch's end (the contact jumps, or the
-    # stem bends over): no equilibrium holds.
+    # tolerance either side (by at most STEEP_ROOT_JUMP (1 + |m0|), the contact moving at most STEEP_ROOT_MOVE L: the
+    # fast path's rule, elastica.py): bisected there to a few ulps, the moment of least |residual|. Else the bracket
+    # closed on the branch's end (the contact jumps, or the stem bends over): no equilibrium holds.
     d = 2.0 * (1e-15 + _RTOL_M0 * abs(m0))
     a, b = m0 - d, m0 + d
     below, above = shoot(a), shoot(b)
     if not (below["found"] and above["found"] and below["resid"] < 0.0 <= above["resid"]):
         return {"found": False}
-    if above["resid"] - below["resid"] > 1e-4 * (1.0 + abs(m0)) or abs(above["sig_c"] - below["sig_c"]) > 1e-3:
+    jump = above["resid"] - below["resid"] > STEEP_ROOT_JUMP * (1.0 + abs(m0))
+    if jump or abs(above["sig_c"] - below["sig_c"]) > STEEP_ROOT_MOVE:
         return {"found": False}
     best = min((below, above), key=lambda o: abs(o["resid"]))
     while b - a > 4.0 * np.spacing(abs(m0)):
