@@ -412,7 +412,7 @@ def test_friction_forces_up_to_the_branch_end_hold_with_their_shapes_and_none_pa
     """eta 0.45, p 0.55, mu 0.2: 100 forces across the end of the friction branch (12.5-14.5). Next to the end the
     contact nears the tip at the friction angle atan(1 / mu) and the residual rises by up to 2e9 per unit moment (3e-8
     to 2e-6 per ulp of m0): no moment leaves it under the 1e-9 of a root closed to round-off, and until session 50
-    both solvers left holes there (the fast path held 70 of the 84 forces up to 14.15, the reference 63; the
+    both solvers left holes there (the fast path held 70 of the 82 forces up to 14.15, the reference 63; the
     reference's own ODE changes sign continuously at each). Each force up to 14.2 holds, each past 14.25 does not
     (the end is near 14.2 at every step count from 48 to 384; at 14.157-14.197 the contacts at a round-off bracket's
     ends lie 2e-6 to 1.2e-4 L apart, so a tighter STEEP_ROOT_MOVE opens holes there), the reference holds 14.035
