@@ -428,19 +428,18 @@ def _march(f, m0, phi0, P, n_steps, keep=False):
     def advance(Y, sig, step, sel=None, new=None):
         """One step of the elements ``sel`` (all: None) from their states ``Y`` (or its result ``new``, if taken
         already); close those it takes past the sensor height or past horizontal."""
-        g = np.arange(B) if sel is None else sel
-        Pg = P if sel is None else _subset(P, sel)
+        # every element (the march's steps: no copies) or those of ``sel`` (the last step's substeps)
+        Pg, fg, ag, op = (P, f, active, open_) if sel is None else (_subset(P, sel), f[sel], active[sel], open_[sel])
         if new is None:
-            new = _step(Y, sig, step, f[g], Pg, active[g])
-        op = open_[g]
+            new = _step(Y, sig, step, fg, Pg, ag)
         # bent back past horizontal (away from the push) below the sensor: no contact ahead (the tip of a tapered
         # stem then spins, and a contact it finds is not an equilibrium the reference holds)
         back = op & (new[2] <= -_HALF_PI) & (new[1] < Pg["eta"])
-        bent_back[g[back]] = True
+        bent_back[back if sel is None else sel[back]] = True
         closing = op & ((new[1] >= Pg["eta"]) | (new[2] >= _HALF_PI) | back)
         if closing.any():
             loc = np.flatnonzero(closing)
-            idx = g[loc]
+            idx = loc if sel is None else sel[loc]
             if run_to_tip:
                 ic, yc, dc = resolve(idx, Y[:, loc], sig, step)
                 if ic.size:
