@@ -582,8 +582,8 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     # not, nor with pooled=()
     assert set(s["pooled"]) == {"rho_force"} and s["pooled"]["rho_force"]["spread_fisher_z"] == 0.25
     assert both["pooled"] == {}
-    apart = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False, pooled=()).doc
-    assert apart["pooled"] == {} and apart["conditions"] == s["conditions"]
+    apart_doc = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False, pooled=()).doc
+    assert apart_doc["pooled"] == {} and apart_doc["conditions"] == s["conditions"]
     iid = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False, force_noise="iid").doc
     assert iid["pooled"] == {} and "rho_force" not in iid["conditions"]["a"]
     with pytest.raises(ValueError, match="pooled: expected 'auto' or a sequence of parameter names, got 'yes'"):
@@ -594,6 +594,15 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     ).doc
     assert set(pool["pooled"]) == {"rho_force"} and pool["pooled"]["rho_force"]["spread_fisher_z"] == 0.3
     same(pool["pooled"]["rho_force"]["centre"], np.tanh((np.arctanh(rho["a"]) + np.arctanh(rho["b"])) / 2))
+    # the conditions' correlations apart by more than the pool's spread are warned about: 0.8 and 0.9 are 0.264
+    # apart in the sd of their Fisher z, beyond the default 0.25 and within 0.3
+    apart = np.std(np.arctanh([np.median(rho["a"]), np.median(rho["b"])]), ddof=1)
+    assert 0.25 < apart < 0.3
+    for doc, warned in ((s, True), (pool, False)):
+        assert doc["pooled"]["rho_force"]["conditions_spread_fisher_z"] == pytest.approx(apart, rel=1e-12)
+        told = [w for w in doc["warnings"] if w.startswith("the conditions' rho_force (a 0.80, b 0.90) spread")]
+        assert len(told) == warned, doc["warnings"]
+    assert not any("spread further than the pool" in w for w in both["warnings"] + apart_doc["warnings"])
     for c in "ab":
         same(pool["conditions"][c]["rho_force"], rho[c])
 

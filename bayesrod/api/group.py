@@ -426,20 +426,29 @@ def _summary(sid, lik: GroupLikelihood, nat, per, samples, res, pr, check, secon
             "sharing rejected: the joint model predicts held-out pushes worse than separate fits; the stem itself "
             "seems to differ between conditions, so the compliances above are not the whole story"
         )
+    pooled = {}
+    for n in lik.pooled:
+        z = np.arctanh([np.median(nat[lik.local[c][n]]) for c in conds])
+        apart = float(np.std(z, ddof=1))
+        pooled[n] = {
+            "spread_fisher_z": lik.pool_spread,
+            "centre": credible_interval(np.tanh(np.mean([np.arctanh(nat[lik.local[c][n]]) for c in conds], axis=0))),
+            "conditions_spread_fisher_z": apart,
+        }
+        if apart > lik.pool_spread:
+            each = ", ".join(f"{c} {np.tanh(v):.2f}" for c, v in zip(conds, z, strict=True))
+            warnings.append(
+                f"the conditions' {n} ({each}) spread further than the pool allows (sd of their Fisher z "
+                f"{apart:.2f}, the pool's {lik.pool_spread:g}): pooling pulls them together, which narrows or "
+                "shifts the compliances if the rig's noise really differed between conditions; fit them unpooled "
+                "(docs/inference.md, 'One stem, many conditions') and compare"
+            )
     diag = res.diagnostics
     return {
         "stem_id": sid,
         "conditions_order": list(conds),
         "shared": shared,
-        "pooled": {
-            n: {
-                "spread_fisher_z": lik.pool_spread,
-                "centre": credible_interval(
-                    np.tanh(np.mean([np.arctanh(nat[lik.local[c][n]]) for c in conds], axis=0))
-                ),
-            }
-            for n in lik.pooled
-        },
+        "pooled": pooled,
         "conditions": out_conds,
         "contrasts": contrasts,
         "sharing": check.to_dict() if check is not None else None,
