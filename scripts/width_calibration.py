@@ -11,7 +11,9 @@ pixel's exact coverage (``exact_width``), then ``bayesrod.extract``. Printed per
   s/L = 0.3;
 - ``median_abs_err_px``: the stations' median absolute error [px];
 - ``rel_base``: the median relative error of the stations below s/L = 0.3 (the error d0 inherits), with the
-  profile's declared ``shared_scale_sd``, its ``base_width_px`` and whether extract warned.
+  profile's declared ``shared_scale_sd``, its ``base_width_px`` and whether extract warned;
+- ``thin_width_px``: the 5th percentile of the ok stations' widths [px] and ``blur_over_width`` the contrast
+  fit's blur over the width of the profiles it read (how well the frames pin the blur).
 
 Options change the case: ``--frames`` the frames before the slip (default 20), ``--sensor-noise`` each
 frame's fresh pixel noise (grey levels; default 3), ``--base-diameter-m`` the drawn base diameter (default
@@ -59,6 +61,10 @@ def one(stem: str, seed: int, frames: int | None, sensor_noise: float | None, d0
         "rel_base": float(np.median(rel[lo])) if lo.any() else float("nan"),
         "shared_scale_sd": dp.shared_scale_sd,
         "base_width_px": dp.base_width_px,
+        # the thin end of the measured stations [px] and the blur's share of the profiles' width: how well the
+        # frames pin the blur (issue 22, the twig near 3 px)
+        "thin_width_px": float(np.percentile(dp.d_m[ok], 5) / px) if ok.any() else float("nan"),
+        "blur_over_width": dp.blur_over_width,
         "warned": "warning" in ex.doc.get("diameters", {}),
         "frames": int(np.median(dp.n_frames[ok])) if ok.any() else 0,
         "seconds": round(time.perf_counter() - t0, 1),
