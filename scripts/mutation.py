@@ -408,6 +408,47 @@ TARGETS["width_combine"] = (
     ["tests/test_width.py", "tests/test_width_frame.py"],
     ["bayesrod.vision.width.x_combine_profiles__mutmut_*", "bayesrod.vision.width.x_thin_scale_sd__mutmut_*"],
 )
+# the colour model, the contrast fit and the profile's records, everything of width.py the two above leave out
+# (session 51; session 41's whole-file run left 33 + 18 + 14 + 28 survivors in the colour model's four functions,
+# 13 + 15 + 16 in the contrast fit's three, on test_width.py alone)
+TARGETS["width_colour"] = (
+    "bayesrod/vision/width.py",
+    ["tests/test_width.py", "tests/test_width_frame.py"],
+    [
+        f"bayesrod.vision.width.{f}__mutmut_*"
+        for f in (
+            *(
+                f"x_{g}"
+                for g in (
+                    "choose_colour_model",
+                    "colour_verdict",
+                    "_cosine",
+                    "_wide_colours",
+                    "_purest_pixel",
+                    "contrast_scale",
+                    "contrast_fit",
+                    "_box_fit",
+                    "_blurred_box",
+                    "_coverage_integrals",
+                    "_clean_profiles",
+                    "_robust_poly",
+                    "_on",
+                    "_touches",
+                    "_sample",
+                    "blur_scale_sd",
+                    "lens_scale_sd",
+                    "contrast_fit_scale_sd",
+                    "_off_profile",
+                    "_median_sd",
+                    "_independent_frames",
+                )
+            ),
+            "xǁColourChoiceǁto_dict",
+            "xǁDiameterProfileǁto_diameters",
+            "xǁDiameterProfileǁcolumns",
+        )
+    ],
+)
 TARGETS["moves"] = ("bayesrod/inference/moves.py", ["tests/test_moves.py"], None)
 
 STATUSES = ("killed", "timeout", "survived", "no tests", "suspicious", "skipped", "segfault")
