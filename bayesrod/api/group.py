@@ -275,8 +275,9 @@ def fit_group(
         unknown centre, so conditions whose correlations agree read them from each other's pushes
         (docs/inference.md, "One stem, many conditions"). ``"auto"`` (default): the correlation is pooled with
         AR(1) noise unless ``shared`` names it. summary.json's ``pooled`` holds the spread and the conditions'
-        common correlation tanh(mean z). ``()`` gives each condition its own correlation under its own prior
-        (the default before session 47).
+        common correlation tanh(mean z), and how far apart the conditions' own came out (the sd of their
+        posterior-median z; above the spread a warning says the pool may not suit them). ``()`` gives each
+        condition its own correlation under its own prior (the default before session 47).
     pool_spread : float
         The population's sd on Fisher's z (default 0.25).
     sharing : bool
