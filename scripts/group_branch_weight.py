@@ -69,7 +69,7 @@ def use_jump_move(dss, reach: float) -> None:
 
 
 for rep in args.replicates:
-    dss, EI0, _, _ = G.replicate_data(rep, "base", heights)
+    dss, EI0, _, _ = G.replicate_data(rep, "base", heights, stride=1)  # the replicates as session 36 read them
     if args.jump > 0:
         use_jump_move(dss, args.jump)
     g = bayesrod.fit_group(

@@ -5,8 +5,10 @@
 
 Replicate ``--rep`` of scripts/group_study.py (two heights, 0.45 and 0.65 m; intact and three cuts; AR(1)
 force noise, rho 0.9) with its stem and anchorage held, simulated again under ``--draws`` fresh noise draws
-(``simulate_group`` seeds 5000, 5001, ...), each fitted as the study fits (``fit_group``, prior ``woody``,
-5000 steps at most, target ESS 200; no sharing check). Appends one JSON line per draw to ``--out``
+(``simulate_group`` seeds 5000, 5004, 5008, ...: draw s from 5000 + 4 s, so no two draws share a
+condition's noise; ``--seed-stride 1`` gives the overlapping seeds 5000, 5001, ... of the runs before session
+51), each fitted as the study fits (``fit_group``, prior ``woody``, 5000 steps at most, target ESS 200; no
+sharing check). Appends one JSON line per draw to ``--out``
 (resumable: draws already there are skipped): the shared EI0 and p and each cut's base compliance
 ``{median, q05, q95}``, each condition's noise medians, R-hat and the truth. Then prints, per quantity, the
 sd of the posterior medians over the draws, the mean posterior sd (90% half-width / 1.645), their ratio
@@ -22,7 +24,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from group_study import RATIOS, stem
+from group_study import RATIOS, SEED_STRIDE, stem
 
 import bayesrod
 
@@ -34,6 +36,7 @@ def main(argv=None) -> None:
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--shared", default="EI0,p", help="fit_group's shared (comma list)")
     ap.add_argument("--pooled", default="auto", help="fit_group's pooled (comma list, '' for none; default auto)")
+    ap.add_argument("--seed-stride", type=int, default=SEED_STRIDE, help="draw s from seed 5000 + stride x s")
     a = ap.parse_args(argv)
     shared = tuple(x for x in a.shared.split(",") if x)
     pooled = "auto" if a.pooled == "auto" else tuple(x for x in a.pooled.split(",") if x)
@@ -47,7 +50,7 @@ def main(argv=None) -> None:
         dss = bayesrod.simulate_group(
             "twig",
             conditions=conds,
-            seed=5000 + s,
+            seed=5000 + a.seed_stride * s,
             heights_m=(0.45, 0.65),
             noise_rho=0.9,
             config_overrides={"n_frames_engaged": 2, "EI0": EI0, "p": p},

@@ -61,15 +61,22 @@ def stem(rep: int, kind: str = "base") -> tuple[float, float, dict, dict]:
     return EI0, p, conds, truth_C
 
 
-def replicate_data(rep: int, kind: str, heights, rho=0.9) -> tuple:
+#: simulate_group seeds condition i with seed + i: replicate r's data come from seed r x SEED_STRIDE, so no two
+#: replicates share a condition's noise (before session 51 the stride was 1: replicates r and r + 1 shared three
+#: of their four conditions' noise draws; ``--seed-stride 1`` reproduces those runs)
+SEED_STRIDE = len(CONDITIONS)
+
+
+def replicate_data(rep: int, kind: str, heights, rho=0.9, stride: int = SEED_STRIDE) -> tuple:
     """The datasets of replicate ``rep`` (``kind`` base: the anchorage changes; stem: the stem softens;
-    ``rho`` the noise correlation, one or per condition), its EI0 and p, and each cut's true base compliance."""
+    ``rho`` the noise correlation, one or per condition; ``stride``: simulate_group's seed is ``rep x stride``),
+    its EI0 and p, and each cut's true base compliance."""
     EI0, p, conds, truth_C = stem(rep, kind)
     change = {"cut2": 0.7, "cut3": 0.7} if kind == "stem" else None
     dss = bayesrod.simulate_group(
         "twig",
         conditions=conds,
-        seed=rep,
+        seed=rep * stride,
         heights_m=heights,
         noise_rho=rho,
         stem_change=change,
@@ -79,9 +86,9 @@ def replicate_data(rep: int, kind: str, heights, rho=0.9) -> tuple:
 
 
 def one(job) -> dict:
-    rep, kind, heights, ess, options, rho = job
+    rep, kind, heights, ess, options, rho, stride = job
     t0 = time.perf_counter()
-    dss, EI0, p, truth_C = replicate_data(rep, kind, heights, rho)
+    dss, EI0, p, truth_C = replicate_data(rep, kind, heights, rho, stride)
     g = bayesrod.fit_group(
         list(dss), prior="woody", progress=False, target_ess=ess, max_steps=5000, seed=rep, **options
     )
@@ -205,6 +212,13 @@ def main() -> None:
     ap.add_argument("--shared", default="EI0,p", help="fit_group's shared (comma list)")
     ap.add_argument("--pooled", default="auto", help="fit_group's pooled (comma list, '' for none; default auto)")
     ap.add_argument("--rho", default="0.9", help="the noise's AR(1) correlation: one, or condition=rho,... for each")
+    ap.add_argument(
+        "--seed-stride",
+        type=int,
+        default=SEED_STRIDE,
+        help=f"replicate r is simulated from seed r x stride (default {SEED_STRIDE}: no shared noise; 1: as before "
+        "session 51)",
+    )
     args = ap.parse_args()
     if "=" in args.rho:
         rho = {k: float(v) for k, v in (x.split("=") for x in args.rho.split(","))}
@@ -221,7 +235,15 @@ def main() -> None:
     done = {int(r["rep"]) for r in read_rows(csv)}
     heights = [float(h) for h in args.heights.split(",")]
     jobs = [
-        (r, "stem" if (r + 1) % args.stem_change_every == 0 else "base", heights, args.target_ess, options, rho)
+        (
+            r,
+            "stem" if (r + 1) % args.stem_change_every == 0 else "base",
+            heights,
+            args.target_ess,
+            options,
+            rho,
+            args.seed_stride,
+        )
         for r in range(args.replicates)
         if r not in done
     ]

@@ -224,7 +224,8 @@ def simulate_group(
     stem_id : str
         Written to every dataset's specimen.json with its ``condition``.
     seed : int
-        Condition i is simulated with seed ``seed + i``.
+        Condition i is simulated with seed ``seed + i``: replicates of a study take seeds at least
+        ``len(conditions)`` apart (seeds s and s + 1 share all but one condition's noise draws).
     heights_m : sequence of float or None
         Contact heights of every condition; default the preset's.
     noise_rho : float or mapping of str to float
