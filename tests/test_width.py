@@ -171,6 +171,44 @@ def test_colour_verdict_keeps_projection_only_where_the_models_agree():
     assert colour_verdict((big + 0.1 * z)[:9], 0.9).model == "projection"
 
 
+def test_colour_verdict_records_each_branch_as_the_extract_report_writes_it():
+    """Every branch's record, whole (extract_report.json carries ``ColourChoice.to_dict()``: NaN as null), and
+    the rule's exact bounds: ``min_stations`` (default 10) stations are enough, a median difference exactly at
+    SHADING_PX is agreement, a cosine exactly at UNMIX_MAX_COS can still be unmixed."""
+    from bayesrod.vision.width import SHADING_PX, UNMIX_MAX_COS, colour_verdict
+
+    few = colour_verdict(np.full(9, 0.3), 0.9)
+    assert few.to_dict() == {
+        "model": "projection",
+        "shading_px": None,
+        "se_px": None,
+        "stations": 9,
+        "reason": "too few stations read by both models",
+    }
+    assert np.isnan(few.shading_px) and np.isnan(few.se_px)
+    d = 0.3 + 0.01 * np.arange(-5, 5)  # 10 stations: median 0.295, MAD 0.025
+    se = float(np.sqrt(np.pi / 2) * 1.4826 * 0.025 / np.sqrt(10))
+    for got in (colour_verdict(d, 0.9), colour_verdict(d, 0.9, min_stations=10)):
+        assert got.to_dict() == {
+            "model": "unmixing",
+            "shading_px": pytest.approx(0.295, abs=1e-12),
+            "se_px": pytest.approx(se, rel=1e-12),
+            "stations": 10,
+            "reason": "shaded stem: projection reads +0.295 px wider than unmixing",
+        }
+    assert colour_verdict(d, 0.9, min_stations=11).reason == "too few stations read by both models"
+    agree = colour_verdict(np.full(10, SHADING_PX), 0.9)  # exactly at the bound: agreement
+    assert (agree.model, agree.shading_px, agree.se_px, agree.stations) == ("projection", SHADING_PX, 0.0, 10)
+    assert agree.reason == "the models agree (+0.150 px): a stem of one colour"
+    grey = colour_verdict(d, 0.999)
+    assert (grey.model, grey.shading_px, grey.stations) == ("projection", pytest.approx(0.295), 10)
+    assert grey.se_px == pytest.approx(se, rel=1e-12) and grey.reason.endswith("(cos 0.9990): cannot unmix")
+    assert colour_verdict(d, UNMIX_MAX_COS).model == "unmixing"  # exactly at the bound: still unmixed
+    noisy = colour_verdict(0.3 + 0.2 * np.arange(-5, 5), 0.9)  # median 0.2, se 0.294: short of SHADING_Z se
+    assert (noisy.model, noisy.stations) == ("unmixing", 10) and noisy.shading_px == pytest.approx(0.2)
+    assert noisy.to_dict()["reason"] == "the models differ by +0.200 +- 0.294 px, not clearly: unmixing reads either"
+
+
 def test_shaded_render_darkens_the_limbs_and_keeps_the_coverage():
     """render_style "shaded": the stem's colour falls towards its limbs (a row projects to more than the
     stem's width against the core colour), the coverage drawn is the same; "flat" keeps one colour."""
