@@ -72,7 +72,9 @@ def probed_box_fit(profiles, trend, use, loss, f_scale, n_wide=None):
 
 
 def always_thin_contrast_fit(profiles, s, n_max=W.AREA_N_MAX, *, loss="soft_l1", f_scale=0.1):
-    """``contrast_fit`` with the thin profiles added whatever the blur."""
+    """``contrast_fit`` with the thin profiles added whatever the blur. A copy without its gate, not the shipped
+    function under a lowered ``BLUR_RATIO_OK``: that would run the wide-only fit first, and the probe would count
+    it among the fits it reads."""
     clean, trend = W._clean_profiles(profiles, s)
     order = np.argsort(trend)[::-1]
     wide = [i for i in order if clean[i] and trend[i] >= W.MIN_AREA_PX][:n_max]

@@ -416,37 +416,33 @@ TARGETS["width_colour"] = (
     ["tests/test_width.py", "tests/test_width_frame.py"],
     [
         f"bayesrod.vision.width.{f}__mutmut_*"
-        for f in (
-            *(
-                f"x_{g}"
-                for g in (
-                    "choose_colour_model",
-                    "colour_verdict",
-                    "_cosine",
-                    "_wide_colours",
-                    "_purest_pixel",
-                    "contrast_scale",
-                    "contrast_fit",
-                    "_box_fit",
-                    "_blurred_box",
-                    "_coverage_integrals",
-                    "_clean_profiles",
-                    "_robust_poly",
-                    "_on",
-                    "_touches",
-                    "_sample",
-                    "blur_scale_sd",
-                    "lens_scale_sd",
-                    "contrast_fit_scale_sd",
-                    "_off_profile",
-                    "_median_sd",
-                    "_independent_frames",
-                )
-            ),
-            "xǁColourChoiceǁto_dict",
-            "xǁDiameterProfileǁto_diameters",
-            "xǁDiameterProfileǁcolumns",
-        )
+        for f in [
+            f"x_{g}"
+            for g in (
+                "choose_colour_model",
+                "colour_verdict",
+                "_cosine",
+                "_wide_colours",
+                "_purest_pixel",
+                "contrast_scale",
+                "contrast_fit",
+                "_box_fit",
+                "_blurred_box",
+                "_coverage_integrals",
+                "_clean_profiles",
+                "_robust_poly",
+                "_on",
+                "_touches",
+                "_sample",
+                "blur_scale_sd",
+                "lens_scale_sd",
+                "contrast_fit_scale_sd",
+                "_off_profile",
+                "_median_sd",
+                "_independent_frames",
+            )
+        ]
+        + ["xǁColourChoiceǁto_dict", "xǁDiameterProfileǁto_diameters", "xǁDiameterProfileǁcolumns"]
     ],
 )
 TARGETS["moves"] = ("bayesrod/inference/moves.py", ["tests/test_moves.py"], None)

@@ -20,14 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from bayesrod.inference.group import POOL_SPREAD
+from bayesrod.inference.group import POOL_SPREAD, correlation_spread
 
 RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
-
-
-def spread(rhos) -> float:
-    """The sd (ddof 1) of the correlations' Fisher z."""
-    return float(np.std(np.arctanh(np.asarray(rhos, float)), ddof=1))
 
 
 def main() -> None:
@@ -35,13 +30,13 @@ def main() -> None:
     for l in (RESULTS / "group_noise_draws_rep1_pooled_rho.jsonl").read_text().splitlines():
         r = json.loads(l)
         rhos = [r[k]["rho_force"] for k in sorted(r) if k.startswith("noise_")]
-        x = spread(rhos) / POOL_SPREAD
+        x = correlation_spread(rhos) / POOL_SPREAD
         warned.setdefault("equal rho 0.9", []).append(x > 1)
         print(f"equal    draw {r['draw']:2d}  rho {np.round(rhos, 3)}  spread / pool {x:.2f}")
-    for r in csv.DictReader(open(RESULTS / "group_study_rho_by_condition_pooled_session50.csv")):
+    for r in csv.DictReader((RESULTS / "group_study_rho_by_condition_pooled_session50.csv").read_text().splitlines()):
         conds = [k[4:-4] for k in r if k.startswith("rho_") and k.endswith("_med")]
         rhos = [float(r[f"rho_{c}_med"]) for c in conds]
-        x = spread(rhos) / POOL_SPREAD
+        x = correlation_spread(rhos) / POOL_SPREAD
         warned.setdefault("rho 0.3/0.6/0.9/0.97", []).append(x > 1)
         print(f"differ   rep  {int(r['rep']):2d}  rho {np.round(rhos, 3)}  spread / pool {x:.2f}")
     for k, v in warned.items():

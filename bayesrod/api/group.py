@@ -28,6 +28,7 @@ from ..inference.group import (
     GroupPosterior,
     base_compliance,
     clamp_or_u,
+    correlation_spread,
     refit_start,
     sharing_check,
     start_point,
@@ -429,15 +430,16 @@ def _summary(sid, lik: GroupLikelihood, nat, per, samples, res, pr, check, secon
         )
     pooled = {}
     for n in lik.pooled:
-        z = np.arctanh([np.median(nat[lik.local[c][n]]) for c in conds])
-        apart = float(np.std(z, ddof=1))
+        draws = [nat[lik.local[c][n]] for c in conds]  # each condition's correlation, per draw
+        medians = [float(np.median(r)) for r in draws]
+        apart = correlation_spread(medians)
         pooled[n] = {
             "spread_fisher_z": lik.pool_spread,
-            "centre": credible_interval(np.tanh(np.mean([np.arctanh(nat[lik.local[c][n]]) for c in conds], axis=0))),
+            "centre": credible_interval(np.tanh(np.mean(np.arctanh(draws), axis=0))),
             "conditions_spread_fisher_z": apart,
         }
         if apart > lik.pool_spread:
-            each = ", ".join(f"{c} {np.tanh(v):.2f}" for c, v in zip(conds, z, strict=True))
+            each = ", ".join(f"{c} {r:.2f}" for c, r in zip(conds, medians, strict=True))
             warnings.append(
                 f"the conditions' {n} ({each}) spread further than the pool allows (sd of their Fisher z "
                 f"{apart:.2f}, the pool's {lik.pool_spread:g}): pooling pulls them together, which narrows or "

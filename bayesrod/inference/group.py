@@ -41,7 +41,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import minimize
 from scipy.special import logsumexp
 
@@ -74,6 +74,12 @@ POOLABLE_PARAMETERS = ("rho_force",)
 POOL_SPREAD = 0.25
 #: Gauss-Hermite nodes of the pooled correlations' centre integral (:meth:`GroupLikelihood.pool_log_prior`)
 POOL_QUADRATURE = 16
+
+
+def correlation_spread(rho: ArrayLike) -> float:
+    """How far apart the conditions' correlations ``rho`` (C,) came out: the sd (ddof 1) of their Fisher
+    z = atanh(rho), on the scale of the pool's spread (:data:`POOL_SPREAD`; fit-group warns above it)."""
+    return float(np.std(np.arctanh(np.asarray(rho, float)), ddof=1))
 
 
 def condition_name(param: str, condition: str) -> str:
