@@ -209,6 +209,118 @@ def test_colour_verdict_records_each_branch_as_the_extract_report_writes_it():
     assert noisy.to_dict()["reason"] == "the models differ by +0.200 +- 0.294 px, not clearly: unmixing reads either"
 
 
+def test_purest_pixel_reads_its_3x3_patch_and_background_inside_the_image_only():
+    """The stem colour of a wide station: the pixel of the 3 x 3 patch round (u, v) farthest from the
+    background, read ``half`` + MARGIN_PX + 1.5 px out along the normal (nu, nv) on each side; None when the
+    patch comes within 4 px of the image's edge or a background pixel, rounded, falls off the image (a point
+    in [W - 0.5, W) rounds to W: before session 52 that raised IndexError for a stem near the frame's edge)."""
+    from bayesrod.vision.width import MARGIN_PX, _purest_pixel
+
+    H, W = 40, 50
+    img = np.zeros((H, W, 3))
+    img[:, :25] = (10.0, 20.0, 30.0)  # the background: left half and right half differ
+    img[:, 25:] = (30.0, 20.0, 10.0)
+    img[20, 31] = (200.0, 0.0, 0.0)  # inside the patch round (30, 20): the purest
+    img[18, 30] = (255.0, 255.0, 255.0)  # two rows up: outside the patch
+    half = 2.0
+    far = half + MARGIN_PX + 1.5  # 6.5
+    colour, bg = _purest_pixel(img, 30.2, 19.8, 0.6, 0.8, half)  # the normal's two sides: (26.3, 14.6), (34.1, 25.0)
+    np.testing.assert_array_equal(colour, (200.0, 0.0, 0.0))
+    np.testing.assert_allclose(bg, (30.0, 20.0, 10.0))
+    colour, bg = _purest_pixel(img, 24.0, 20.0, 1.0, 0.0, half)  # background at u 17.5 -> 18 and 30.5 -> 30
+    np.testing.assert_allclose(bg, (20.0, 20.0, 20.0))
+    # the patch's bounds: 4 <= round(u) < W - 4 and 4 <= round(v) < H - 4 (the normal along the other axis)
+    for u, expect in ((4.0, True), (3.0, False), (W - 5.0, True), (W - 4.0, False)):
+        assert (_purest_pixel(img, u, 20.0, 0.0, 1.0, half) is not None) == expect, u
+    for v, expect in ((4.0, True), (3.0, False), (H - 5.0, True), (H - 4.0, False)):
+        assert (_purest_pixel(img, 25.0, v, 1.0, 0.0, half) is not None) == expect, v
+    # the background's bounds, on its rounded pixel: 0 <= round(u -+ far) < W
+    for u, expect in ((far - 0.5, True), (far - 0.6, False), (W - 1.0 - far + 0.49, True), (W - 0.5 - far, False)):
+        assert (_purest_pixel(img, u, 20.0, 1.0, 0.0, half) is not None) == expect, u
+    for v, expect in ((far - 0.5, True), (far - 0.6, False), (H - 1.0 - far + 0.49, True), (H - 0.5 - far, False)):
+        assert (_purest_pixel(img, 25.0, v, 0.0, 1.0, half) is not None) == expect, v
+
+
+def test_wide_colours_reads_each_station_at_its_nearest_pixel_clipped_to_the_image():
+    """The stem's median colour at the stations' nearest pixels (a station off the image read at the edge),
+    and the whole image's median colour as the background's."""
+    from types import SimpleNamespace
+
+    from bayesrod.vision.width import _wide_colours
+
+    H, W = 6, 8
+    img = np.zeros((H, W, 3), np.uint8)
+    img[..., 0] = np.arange(W)[None, :] * 10  # red: the column
+    img[..., 1] = np.arange(H)[:, None] * 10  # green: the row
+    uv = np.array([[-3.0, -2.0], [9.6, 7.5], [2.6, 1.4]])  # two off the image (both corners), one inside
+    prof = SimpleNamespace(uv=uv)
+    stem, bg = _wide_colours(img, prof, np.array([True, True, False]))
+    # read at columns 0 and 7, rows 0 and 5: medians (of two: their mean) 3.5 x 10 and 2.5 x 10
+    np.testing.assert_allclose(stem, (35.0, 25.0, 0.0))
+    np.testing.assert_allclose(bg, (np.median(np.arange(W)) * 10, np.median(np.arange(H)) * 10, 0.0))
+    stem, _ = _wide_colours(img, prof, np.array([False, False, True]))
+    np.testing.assert_allclose(stem, (30.0, 10.0, 0.0))  # (2.6, 1.4) -> column 3, row 1
+
+
+def test_choose_colour_model_records_the_narrow_stems_branches_whole():
+    """A 3.45-px stem has fewer than ``min_stations`` stations 3 px wide (7 of 105): the record says so, with
+    how many it had (NaN shading, written as null); with fewer ok stations than ``min_stations`` in all it
+    keeps projection without reading colours; ``min_stations`` equal to either count is enough."""
+    from bayesrod.vision.width import WIDE_PX, choose_colour_model
+
+    img, line, _ = _synthetic(3.45, 1.6, 2.0)
+    proj = width_profile(img, None, line, CAM, colour_model="projection")
+    ok = proj.flag == "ok"
+    n_wide = int((ok & (proj.width_px >= WIDE_PX)).sum())
+    assert 0 < n_wide < 10 < ok.sum()
+    narrow = "fewer than 10 stations 3 px wide or wider: too narrow to show shading"
+    assert choose_colour_model(img, None, line, CAM).to_dict() == {
+        "model": "unmixing",
+        "shading_px": None,
+        "se_px": None,
+        "stations": n_wide,
+        "reason": f"{narrow}; unmixing reads either",
+    }
+    n_ok = int(ok.sum())
+    few = choose_colour_model(img, None, line, CAM, min_stations=n_ok + 1)
+    assert few.to_dict() == {
+        "model": "projection",
+        "shading_px": None,
+        "se_px": None,
+        "stations": n_wide,
+        "reason": f"fewer than {n_ok + 1} stations 3 px wide or wider: too narrow to show shading",
+    }
+    assert choose_colour_model(img, None, line, CAM, min_stations=n_ok).model == "unmixing"  # exactly enough
+    assert choose_colour_model(img, None, line, CAM, min_stations=n_wide).reason.startswith("the models")
+    grey = img.astype(float).mean(axis=2, keepdims=True).repeat(3, axis=2).astype(np.uint8)
+    g = choose_colour_model(grey, None, line, CAM).to_dict()
+    assert g.pop("reason").startswith(f"{narrow}; stem and background share their chromaticity (cos ")
+    assert g == {"model": "projection", "shading_px": None, "se_px": None, "stations": n_wide}
+
+
+@pytest.mark.parametrize("w0", [3.45, 8.0])
+def test_choose_colour_model_leaves_out_the_stations_the_depth_flags(w0):
+    """With a depth map, stations behind an occluder (a block nearer than the stem's plane) are not read by
+    either model: the record counts the stations left (the narrow stem's 3-px ones, the wide stem's compared)."""
+    from bayesrod.vision.width import WIDE_PX, choose_colour_model
+
+    img, line, _ = _synthetic(w0, 1.6 if w0 < 3.5 else 0.43, 2.0)
+    depth = np.full(img.shape[:2], round(SYNTHETIC_DEPTH_M * 1000), np.uint16)
+    proj = width_profile(img, None, line, CAM, colour_model="projection")
+    wide = np.flatnonzero((proj.flag == "ok") & (proj.width_px >= WIDE_PX))
+    u, v = np.round(proj.uv[wide[len(wide) // 2]]).astype(int)
+    depth[v - 6 : v + 7, u - 30 : u + 31] = round(SYNTHETIC_DEPTH_M * 1000) - 200  # an occluder over the stem
+    got = {}
+    for name, d in (("without", None), ("with", depth)):
+        p = width_profile(img, d, line, CAM, colour_model="projection")
+        w = (p.flag == "ok") & (p.width_px >= WIDE_PX)
+        if w0 > 3.5:
+            w &= width_profile(img, d, line, CAM, colour_model="unmixing").flag == "ok"
+        got[name] = (int(w.sum()), choose_colour_model(img, d, line, CAM).stations)
+    assert got["with"][0] < got["without"][0], got
+    assert got["with"][0] == got["with"][1] and got["without"][0] == got["without"][1], got
+
+
 def test_shaded_render_darkens_the_limbs_and_keeps_the_coverage():
     """render_style "shaded": the stem's colour falls towards its limbs (a row projects to more than the
     stem's width against the core colour), the coverage drawn is the same; "flat" keeps one colour."""

@@ -657,10 +657,11 @@ def _purest_pixel(img: NDArray, u: float, v: float, nu: float, nv: float, half: 
     if not (4 <= ui < W - 4 and 4 <= vi < H - 4):
         return None
     far = half + MARGIN_PX + 1.5
-    bg_pts = [(u + sgn * far * nu, v + sgn * far * nv) for sgn in (-1, 1)]
-    if any(not (0 <= a < W and 0 <= b < H) for a, b in bg_pts):
+    # the background's pixels, rounded before the bounds check (a point in [W - 0.5, W) rounds to W)
+    bg_px = [(int(round(u + sgn * far * nu)), int(round(v + sgn * far * nv))) for sgn in (-1, 1)]
+    if any(not (0 <= a < W and 0 <= b < H) for a, b in bg_px):
         return None
-    bg = np.mean([img[int(round(b)), int(round(a))] for a, b in bg_pts], axis=0)
+    bg = np.mean([img[b, a] for a, b in bg_px], axis=0)
     patch = img[vi - 1 : vi + 2, ui - 1 : ui + 2].reshape(-1, 3)
     return patch[int(np.argmax(np.sum((patch - bg) ** 2, axis=1)))], bg
 
