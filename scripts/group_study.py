@@ -31,6 +31,7 @@ import bayesrod
 from bayesrod.dataset.io import append_rows, read_rows
 from bayesrod.inference.group import GroupLikelihood, GroupPosterior, start_point
 from bayesrod.inference.priors import load_prior
+from bayesrod.inference.summary import SENSITIVITY_WARN
 from bayesrod.physics import k_x
 
 L, H_REF = 0.80, 0.55
@@ -41,6 +42,9 @@ FIELDS += [f"D_{c}_{k}" for c in RATIOS for k in ("med", "q05", "q95", "cover")]
 FIELDS += ["prob_cut3_softer", "sharing", "rmse_joint", "rmse_separate", "apparent_drop_cut3", "rhat", "seconds"]
 CONDITIONS = ("intact", *RATIOS)
 FIELDS += [f"rho_{c}_{k}" for c in CONDITIONS for k in ("true", "med", "q05", "q95", "cover")]
+#: since session 52: each condition's rho prior sensitivity and the largest of the compliances'
+#: (summary.json's identifiability.correlation_prior_sensitivity)
+FIELDS += [f"rho_{c}_prior_sens" for c in CONDITIONS] + ["C_prior_sens_max"]
 
 
 def stem(rep: int, kind: str = "base") -> tuple[float, float, dict, dict]:
@@ -135,6 +139,10 @@ def one(job) -> dict:
         if qr is not None:
             row.update({f"rho_{c}_true": r_true, f"rho_{c}_med": qr["median"], f"rho_{c}_q05": qr["q05"]})
             row.update({f"rho_{c}_q95": qr["q95"], f"rho_{c}_cover": int(qr["q05"] <= r_true <= qr["q95"])})
+    sens = d["identifiability"].get("correlation_prior_sensitivity")
+    if sens is not None:
+        row.update({f"rho_{c}_prior_sens": sens["rho_force"][c]["prior"] for c in CONDITIONS})
+        row["C_prior_sens_max"] = max(v["prior"] for v in sens["base_compliance_rad_per_Nm"].values())
     row["seconds"] = round(time.perf_counter() - t0, 1)
     return row
 
@@ -192,6 +200,19 @@ def table(rows) -> str:
                     f"| noise rho of {c} (true {float(got[0][f'rho_{c}_true']):g}): 90% interval covers, median"
                     f" of the medians | {np.mean(rc):.0%} ({sum(rc)}/{len(rc)}), {mid:.3f} |"
                 )
+        sens = [r for r in rs if r.get("rho_intact_prior_sens") not in (None, "")]
+        if sens:
+            x = [max(float(r[f"rho_{c}_prior_sens"]) for c in CONDITIONS) for r in sens]
+            warned = sum(v > SENSITIVITY_WARN for v in x)
+            cs = [float(r["C_prior_sens_max"]) for r in sens]
+            out.append(
+                f"| rho prior sensitivity, the stem's largest: median [min, max]; stems warned (> "
+                f"{SENSITIVITY_WARN:g}) | {np.median(x):.2f} [{min(x):.2f}, {max(x):.2f}]; {warned}/{len(x)} |"
+            )
+            out.append(
+                f"| compliances' sensitivity to it, the stem's largest: median [max] | {np.median(cs):.2f} "
+                f"[{max(cs):.2f}] |"
+            )
         out.append(f"| median wall time per stem | {np.median([float(r['seconds']) for r in rs]):.0f} s |")
         out.append(
             f"| R-hat max: median [max] | {np.median([float(r['rhat']) for r in rs]):.3f} "

@@ -474,6 +474,7 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     fit = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False)
     s = fit.doc
     assert seen["post"].relative_bases  # the draws went through the one-height coordinates and back
+    post_s, natural_s = seen["post"], dict(natural)
 
     def band(x):
         q05, q50, q95 = np.quantile(x, [0.05, 0.5, 0.95])
@@ -583,6 +584,7 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     assert set(s["pooled"]) == {"rho_force"} and s["pooled"]["rho_force"]["spread_fisher_z"] == 0.25
     assert both["pooled"] == {}
     apart_doc = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False, pooled=()).doc
+    post_apart = seen["post"]
     assert apart_doc["pooled"] == {} and apart_doc["conditions"] == s["conditions"]
     iid = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False, force_noise="iid").doc
     assert iid["pooled"] == {} and "rho_force" not in iid["conditions"]["a"]
@@ -605,6 +607,55 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     assert not any("spread further than the pool" in w for w in both["warnings"] + apart_doc["warnings"])
     for c in "ab":
         same(pool["conditions"][c]["rho_force"], rho[c])
+    # how much of the answer is the correlations' prior's: the power-scaling sensitivity (prior_sensitivity) of
+    # each condition's rho, sigma and compliance and of EI0 to that prior alone (pooled: the population and its
+    # centre; apart: each condition's arcsine), against the likelihood log_prob - log_prior (here -log_prior)
+    from bayesrod.inference.summary import SENSITIVITY_WARN, prior_sensitivity
+
+    theta = post_s.to_sample({k: natural_s[k] for k in post_s.names})
+    drawn = {f"{q}__{c}": x[c] for c in "ab" for q, x in (("rho_force", rho), ("sigma_force_N", sig))}
+    drawn |= {f"base_compliance_rad_per_Nm__{c}": C[c] for c in "ab"} | {"EI0": EI}
+    for doc, pooled in ((s, True), (apart_doc, False)):
+        lp_rho = (
+            post_s.likelihood.pool_log_prior(natural_s)
+            if pooled
+            else sum(post_s.likelihood.priors[f"rho_force__{c}"].logpdf_sample(rho[c]) for c in "ab")
+        )
+        want = prior_sensitivity(drawn, lp_rho, -(post_s if pooled else post_apart).log_prior(theta))
+        sens = doc["identifiability"]["correlation_prior_sensitivity"]
+        assert sens["scaled"] == "the noise correlations' prior" and sens["warn_above"] == SENSITIVITY_WARN
+        assert sens["EI0"] == pytest.approx(want["EI0"], rel=1e-9)
+        for q in ("rho_force", "sigma_force_N", "base_compliance_rad_per_Nm"):
+            assert set(sens[q]) == {"a", "b"}
+            for c in "ab":
+                assert sens[q][c] == pytest.approx(want[f"{q}__{c}"], rel=1e-9), (q, c)
+        assert max(v["prior"] for v in sens["rho_force"].values()) < SENSITIVITY_WARN  # pinned to 0.01: no warning
+        assert not any("leans on its prior" in w for w in doc["warnings"])
+    assert s["identifiability"]["correlation_prior_sensitivity"] != apart_doc["identifiability"][
+        "correlation_prior_sensitivity"
+    ]
+    assert "correlation_prior_sensitivity" not in iid["identifiability"]
+    # correlations spread along the (rho, sigma) ridge toward 1, as one push per condition leaves them (session
+    # 51's one-height replicate 5: 0.976 [0.91, 0.993] each), lean on the pooled prior: warned, naming them
+    zc = rng.standard_normal(n)
+    for c in "ab":
+        natural[f"rho_force__{c}"] = np.minimum(np.tanh(2.2 + 0.45 * zc + 0.05 * rng.standard_normal(n)), 0.99)
+    lean = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False).doc
+    sens = lean["identifiability"]["correlation_prior_sensitivity"]["rho_force"]
+    assert min(sens["a"]["prior"], sens["b"]["prior"]) > SENSITIVITY_WARN, sens
+    (told,) = [w for w in lean["warnings"] if "leans on its prior" in w]
+    a, b = (f"{sens[c]['prior']:.2f}" for c in "ab")
+    assert told.startswith(f"the noise correlation of a ({a}), b ({b}) leans on its prior (power-scaling"), told
+    # the rule: the prior's sensitivity strictly above SENSITIVITY_WARN, whatever the likelihood's
+    given = {"rho_force__a": (SENSITIVITY_WARN + 1e-9, 0.0), "rho_force__b": (SENSITIVITY_WARN, 0.9)}
+    monkeypatch.setattr(
+        api_group,
+        "prior_sensitivity",
+        lambda d, lp, ll: {k: dict(zip(("prior", "likelihood"), given.get(k, (0.01, 0.5)), strict=True)) for k in d},
+    )
+    ruled = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False).doc
+    (told,) = [w for w in ruled["warnings"] if "leans on its prior" in w]
+    assert told.startswith("the noise correlation of a (0.30) leans") and "at most 0.01, EI0's 0.01" in told, told
 
 
 def test_a_conditions_force_offset_is_integrated_out_exactly(cut_pair):

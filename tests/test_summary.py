@@ -281,3 +281,29 @@ def test_inference_data_holds_the_chains_in_natural_units():
     np.testing.assert_array_equal(idata.sample_stats["lp"].values, lp)
     attrs = idata.posterior.attrs
     assert attrs["specimen"] == "s1" and attrs["n"] == 3 and attrs["heights"] == "[0.3, 0.5]"
+
+
+def test_prior_sensitivity_tells_a_prior_that_decides_from_one_the_data_override():
+    """Power-scaling sensitivity (arviz.psens) on a normal mean with a N(0, 1) prior: data ten times sharper
+    than the prior leave the prior's sensitivity under 0.05 (Kallioinen et al.'s flag) and the likelihood's
+    over it; data ten times vaguer, the reverse; a component constant over the draws changes nothing (0).
+    The other direction of each: the prior and the likelihood swapped give the swapped numbers."""
+    from bayesrod.inference.summary import prior_sensitivity
+
+    rng = np.random.default_rng(1)
+    n = 4000
+    z = rng.standard_normal(n)
+    got = {}
+    for s_lik in (0.1, 10.0):
+        prec = 1.0 + 1.0 / s_lik**2  # posterior precision with y = 0.5
+        mu = 0.5 / s_lik**2 / prec + z / np.sqrt(prec)
+        lp, ll = -0.5 * mu**2, -0.5 * ((0.5 - mu) / s_lik) ** 2
+        got[s_lik] = prior_sensitivity({"mu": mu}, lp, ll)["mu"]
+        swapped = prior_sensitivity({"mu": mu}, ll, lp)["mu"]
+        assert swapped == pytest.approx({"prior": got[s_lik]["likelihood"], "likelihood": got[s_lik]["prior"]})
+        flat = prior_sensitivity({"mu": mu}, np.zeros(n), ll)["mu"]
+        assert flat["prior"] < 1e-4 and flat["likelihood"] == pytest.approx(got[s_lik]["likelihood"])
+    assert got[0.1]["prior"] < 0.05 < got[0.1]["likelihood"], got
+    assert got[10.0]["likelihood"] < 0.05 < got[10.0]["prior"], got
+    with pytest.raises(ValueError, match="expected finite values at every draw"):
+        prior_sensitivity({"mu": z}, np.where(z > 2, -np.inf, 0.0), -0.5 * z**2)

@@ -35,7 +35,7 @@ from ..inference.group import (
 )
 from ..inference.priors import load_prior
 from ..inference.sampler import convergence_message, run_ensembles
-from ..inference.summary import LEVEL, credible_interval
+from ..inference.summary import LEVEL, SENSITIVITY_WARN, credible_interval, prior_sensitivity
 from ..physics import k_theta
 from ._common import as_dataset, plain_json, progress_enabled, readonly
 
@@ -343,6 +343,7 @@ def fit_group(
     check = sharing_check(lik, refit_start(post, theta0, res.chain, res.log_prob)) if sharing else None
     offsets = offset_draws(lik, nat, np.random.default_rng(seed))
     doc = _summary(sid, lik, nat, per, samples, res, pr, check, time.perf_counter() - t0, offsets)
+    _correlation_sensitivity(doc, post, res)
     not_converged = convergence_message(res, max_steps, target_ess)
     doc["convergence"]["converged"] = not_converged is None
     if not_converged:
@@ -370,6 +371,68 @@ def offset_draws(lik: GroupLikelihood, nat: dict, rng: np.random.Generator) -> d
             mean, sd = one.offset_posterior(lik.condition_params(thin, c))
             out[c] = mean + sd * rng.standard_normal(mean.size)
     return out
+
+
+#: evenly thinned draws behind summary.json's identifiability.correlation_prior_sensitivity
+SENSITIVITY_DRAWS = 4000
+
+
+def correlation_sensitivity(post: GroupPosterior, chain: NDArray, log_prob: NDArray) -> dict | None:
+    """How much the noise correlations' prior (:meth:`GroupLikelihood.correlation_log_prior`) shapes the
+    answer: the power-scaling sensitivity (:func:`~bayesrod.inference.summary.prior_sensitivity`) of each
+    condition's ``rho_force``, ``sigma_force_N`` and base compliance, and of the shared EI0, to that prior
+    and to the likelihood, from up to SENSITIVITY_DRAWS draws of ``chain`` (..., ndim) with their
+    ``log_prob``. None without AR(1) noise."""
+    lik = post.likelihood
+    conds = lik.conditions
+    if not all("rho_force" in lik.local[c] for c in conds):
+        return None
+    theta, lp = chain.reshape(-1, post.ndim), np.asarray(log_prob, float).reshape(-1)
+    idx = np.unique(np.linspace(0, lp.size - 1, min(lp.size, SENSITIVITY_DRAWS)).round().astype(int))
+    theta, lp = theta[idx], lp[idx]
+    ll = lp - post.log_prior(theta)
+    keep = np.isfinite(ll)
+    theta, ll = theta[keep], ll[keep]
+    nat = post.to_natural(theta)
+    draws = {}
+    for c in conds:
+        one = lik.condition_params(nat, c)
+        u = clamp_or_u(nat[lik.local[c]["z_base"]])
+        draws[("rho_force", c)] = one["rho_force"]
+        draws[("sigma_force_N", c)] = one["sigma_force_N"]
+        draws[("base_compliance_rad_per_Nm", c)] = base_compliance(u, one["EI0"], lik.liks[c].L)
+    if "EI0" in lik.shared:
+        draws[("EI0", None)] = nat["EI0"]
+    names = {k: f"{k[0]}__{k[1]}" if k[1] else k[0] for k in draws}
+    sens = prior_sensitivity({names[k]: v for k, v in draws.items()}, lik.correlation_log_prior(nat), ll)
+    out: dict = {"scaled": "the noise correlations' prior", "warn_above": SENSITIVITY_WARN}
+    for (q, c), n in names.items():
+        if c is None:
+            out[q] = sens[n]
+        else:
+            out.setdefault(q, {})[c] = sens[n]
+    return out
+
+
+def _correlation_sensitivity(doc: dict, post: GroupPosterior, res) -> None:
+    """summary.json's ``identifiability.correlation_prior_sensitivity`` and, where a condition's correlation
+    leans on its prior, a warning saying what that leaves to the prior."""
+    sens = correlation_sensitivity(post, res.chain, res.log_prob)
+    if sens is None:
+        return
+    doc["identifiability"]["correlation_prior_sensitivity"] = sens
+    lean = {c: v["prior"] for c, v in sens["rho_force"].items() if v["prior"] > SENSITIVITY_WARN}
+    if lean:
+        comp = max(v["prior"] for v in sens["base_compliance_rad_per_Nm"].values())
+        stem = f", EI0's {sens['EI0']['prior']:.2f}" if "EI0" in sens else ""
+        doc["warnings"].append(
+            "the noise correlation of "
+            + ", ".join(f"{c} ({v:.2f})" for c, v in lean.items())
+            + f" leans on its prior (power-scaling sensitivity above {SENSITIVITY_WARN:g}; "
+            "identifiability.correlation_prior_sensitivity): its pushes pin the noise's innovations, "
+            "sigma sqrt(1 - rho^2), not rho and sigma apart, so read rho_force and sigma_force_N as partly the "
+            f"prior's; the compliances' sensitivity to that prior is at most {comp:.2f}{stem}"
+        )
 
 
 def _summary(sid, lik: GroupLikelihood, nat, per, samples, res, pr, check, seconds, offsets) -> dict:

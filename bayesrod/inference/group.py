@@ -271,6 +271,16 @@ class GroupLikelihood:
             out = out + np.where(inside, lp, -np.inf)
         return out
 
+    def correlation_log_prior(self, params: dict) -> NDArray | float:
+        """The log prior density, per draw, of the noise correlations alone (natural units): the pooled ones'
+        joint prior (:meth:`pool_log_prior`: the population about its centre and the centre's prior), else
+        each distinct correlation's own prior; 0 without AR(1) noise. The component whose power-scaling
+        sensitivity summary.json reports (``identifiability.rho_force_prior_sensitivity``)."""
+        if "rho_force" in self.pooled:
+            return self.pool_log_prior(params)
+        names = sorted({self.local[c]["rho_force"] for c in self.conditions if "rho_force" in self.local[c]})
+        return sum((self.priors[n].logpdf_sample(params[n]) for n in names), 0.0)
+
 
 def clamp_or_u(z: NDArray) -> NDArray:
     """The table coordinate u of a sampled ``z_base``: 0 (a rigid clamp) for z <= 0, else U_SCALE z."""
