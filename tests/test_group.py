@@ -631,9 +631,10 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
                 assert sens[q][c] == pytest.approx(want[f"{q}__{c}"], rel=1e-9), (q, c)
         assert max(v["prior"] for v in sens["rho_force"].values()) < SENSITIVITY_WARN  # pinned to 0.01: no warning
         assert not any("leans on its prior" in w for w in doc["warnings"])
-    assert s["identifiability"]["correlation_prior_sensitivity"] != apart_doc["identifiability"][
-        "correlation_prior_sensitivity"
-    ]
+    assert (
+        s["identifiability"]["correlation_prior_sensitivity"]
+        != apart_doc["identifiability"]["correlation_prior_sensitivity"]
+    )
     assert "correlation_prior_sensitivity" not in iid["identifiability"]
     # correlations spread along the (rho, sigma) ridge toward 1, as one push per condition leaves them (session
     # 51's one-height replicate 5: 0.976 [0.91, 0.993] each), lean on the pooled prior: warned, naming them
