@@ -321,6 +321,71 @@ def test_choose_colour_model_leaves_out_the_stations_the_depth_flags(w0):
     assert got["with"][0] == got["with"][1] and got["without"][0] == got["without"][1], got
 
 
+def test_independent_frames_weighs_each_pair_by_a_gaussian_of_its_distance():
+    """n^2 / sum_jl exp(-d_jl^2 / (2 SAME_PIXELS_PX^2)) by hand: frames 1 and 2 px apart share part of their
+    background; one frame alone is one; a station no frame saw counts none."""
+    from bayesrod.vision.width import SAME_PIXELS_PX, _independent_frames
+
+    uv = np.full((3, 4, 2), np.nan)
+    uv[:, 0] = (10.0, 10.0)  # still: 1
+    uv[:, 1] = [(0.0, 0.0), (1.0, 0.0), (0.0, 2.0)]  # squared distances 1, 4, 5
+    uv[0, 2] = (3.0, 3.0)  # one frame
+    c = np.exp(-0.5 * np.array([1.0, 4.0, 5.0]) / SAME_PIXELS_PX**2)
+    assert SAME_PIXELS_PX == 1.0
+    np.testing.assert_allclose(_independent_frames(uv), [1.0, 9.0 / (3.0 + 2.0 * c.sum()), 1.0, 0.0], rtol=1e-12)
+
+
+def test_off_profile_flags_what_leaves_the_taper_by_the_profiles_own_noise():
+    """A station is off the profile when it leaves the robust cubic by more than OFF_PROFILE_Z times the larger
+    of its sd and the profile's noise (second differences) and by more than OFF_PROFILE_REL of the width:
+    on a 5-px taper with noise 0.1 px, +0.7 px is off, +0.35 px is not (within 5 x the noise, though its own sd
+    is 0.01); fewer than 20 ok stations are never judged."""
+    from bayesrod.vision.width import _off_profile
+
+    rng = np.random.default_rng(3)
+    k = 40
+    s = np.linspace(0.0, 0.3, k)
+    d = 5.0 - 4.0 * s + 0.1 * rng.standard_normal(k)
+    d[10] += 0.7
+    d[25] += 0.35
+    sd = np.full(k, 0.01)
+    ok = np.ones(k, bool)
+    off = _off_profile(s, d, sd, ok)
+    assert off[10] and not off[25] and off.sum() == 1, np.flatnonzero(off)
+    few = ok.copy()
+    few[20:] = False  # 20 ok stations: judged
+    assert _off_profile(s, d, sd, few)[10]
+    few[19] = False  # 19: not
+    assert not _off_profile(s, d, sd, few).any()
+
+
+def test_the_small_pixel_helpers_at_the_image_edges():
+    """``_on`` reads a mask at each point's nearest pixel, clipped to the image; ``_sample`` samples
+    bilinearly with the edge pixel extended beyond the image, keeping the points' leading shape; ``_cosine``
+    of two faint colours is still their cosine; ``lens_scale_sd`` scales LENS_SCALE_SD by the borrowed share
+    clipped to 0-1 (0 where it is not a number)."""
+    from bayesrod.vision.width import LENS_SCALE_SD, _cosine, _on, _sample, lens_scale_sd
+
+    mask = np.zeros((4, 5), bool)
+    mask[0, 0] = mask[3, 4] = True
+    q = np.array([[-2.0, -3.0], [7.0, 9.0], [0.4, 0.4], [1.0, 0.0], [4.0, 0.0], [0.0, 3.0]])
+    np.testing.assert_array_equal(_on(mask, q), [True, True, True, False, False, False])
+    mask2 = np.zeros((4, 5), bool)
+    mask2[3, 0] = mask2[0, 4] = True  # the other corners: each coordinate clipped on its own axis
+    np.testing.assert_array_equal(_on(mask2, np.array([[-1.0, 5.0], [6.0, -1.0], [1.0, 1.0]])), [True, True, False])
+    img = np.arange(4 * 5 * 2, dtype=float).reshape(4, 5, 2)
+    pts = np.array([[[-1.0, -1.0], [0.5, 0.0]], [[4.0, 3.0], [9.0, 1.0]]])  # (2, 2, 2) as (u, v)
+    got = _sample(img, pts)
+    assert got.shape == (2, 2, 2)
+    np.testing.assert_allclose(got[0, 0], img[0, 0])
+    np.testing.assert_allclose(got[0, 1], (img[0, 0] + img[0, 1]) / 2)
+    np.testing.assert_allclose(got[1, 0], img[3, 4])
+    np.testing.assert_allclose(got[1, 1], img[1, 4])
+    assert _cosine(np.array([0.1, 0.0, 0.0]), np.array([0.1, 0.1, 0.0])) == pytest.approx(np.sqrt(0.5))
+    assert lens_scale_sd(0.5) == pytest.approx(0.5 * LENS_SCALE_SD)
+    assert lens_scale_sd(1.7) == LENS_SCALE_SD and lens_scale_sd(-0.2) == 0.0 and lens_scale_sd(np.nan) == 0.0
+
+
 def test_shaded_render_darkens_the_limbs_and_keeps_the_coverage():
     """render_style "shaded": the stem's colour falls towards its limbs (a row projects to more than the
     stem's width against the core colour), the coverage drawn is the same; "flat" keeps one colour."""
