@@ -783,6 +783,35 @@ def _box_profiles(w, contrast, blur, noise, rng):
     )
 
 
+def test_contrast_scale_is_the_fits_scale_with_the_options_it_was_given():
+    """``contrast_scale`` hands ``n_max``, ``loss`` and ``f_scale`` to ``contrast_fit`` (each changes the scale
+    on these noisy profiles), and the fit needs five clean profiles MIN_AREA_PX or wider: with five it reads
+    the contrast (0.8), with four it returns scale 1 and no blur."""
+    from bayesrod.vision.width import MIN_AREA_PX, contrast_fit, contrast_scale
+
+    rng = np.random.default_rng(4)
+    w = np.sort(rng.uniform(1.5, 5.0, 30))[::-1]
+    _, _, profiles = _box_profiles(w, 0.8, 1.1, 0.05, rng)
+    s = np.arange(w.size)
+    base = contrast_fit(profiles, s).scale
+    for args, kw in (((7,), {}), ((), {"loss": "cauchy"}), ((), {"f_scale": 0.02})):
+        got = contrast_scale(profiles, s, *args, **kw)
+        assert got == contrast_fit(profiles, s, *args, **kw).scale and got != base, (args, kw)
+    assert MIN_AREA_PX == 2.0
+    for first, n_wide in ((3.45, 5), (3.25, 4)):  # coverage integrals 0.8 w: 2.76, 2.60, ... with 0.16 steps
+        w = first - 0.2 * np.arange(15)
+        _, _, profiles = _box_profiles(w, 0.8, 0.6, 0.005, np.random.default_rng(5))
+        assert int(np.sum(0.8 * w >= MIN_AREA_PX)) == n_wide
+        fit = contrast_fit(profiles, np.arange(w.size))
+        if n_wide == 5:
+            assert fit.scale == pytest.approx(0.8, abs=0.02) and np.isfinite(fit.blur_px), fit
+        else:
+            assert fit.scale == 1.0 and np.isnan(fit.blur_px) and np.isnan(fit.width_px), fit
+    w = 3.45 - 0.2 * np.arange(5)  # five profiles in all, each wide: enough to judge and to fit
+    _, _, profiles = _box_profiles(w, 0.8, 0.6, 0.005, np.random.default_rng(5))
+    assert contrast_fit(profiles, np.arange(5)).scale == pytest.approx(0.8, abs=0.02)
+
+
 def test_contrast_scale_recovers_the_contrast_of_blurred_profiles():
     """Coverage profiles of boxes 1.5-5 px wide, blurred (sd 1.1 px), at 0.8 of the assumed contrast."""
     from bayesrod.vision.width import contrast_scale
