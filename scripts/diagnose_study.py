@@ -43,6 +43,9 @@ EFFECTS = {
 FIELDS = ["case", "effect", "value", "seed", "added", "fitted", "force_before", "force_after"]
 FIELDS += ["heldout_before", "heldout_after", "shape_before", "shape_after", "unexplained", "top_statistic"]
 FIELDS += ["noise_rho", "rho_fitted", "seconds", "alternatives", "cpu_seconds"]
+#: since session 52: per held-out push of the final model, its height, force RMSE and the refit's parameters
+#: (diagnose.json's after.per_push): which height's refit drifts when the held-out error scatters
+FIELDS += ["heldout_after_per_push"]
 
 
 def one(job) -> dict:
@@ -86,6 +89,16 @@ def one(job) -> dict:
         "alternatives": json.dumps(r.get("alternatives", {})),
         # CPU time of the case's process: unlike the wall time, not inflated by a paused or shared machine
         "cpu_seconds": round(cpu, 1),
+        "heldout_after_per_push": json.dumps(
+            [
+                {
+                    "height_m": u["height_m"],
+                    "force_rmse_N": round(u["force_rmse_N"], 5),
+                    "refit": {k: np.round(v, 5).tolist() for k, v in u["refit"].items()},
+                }
+                for u in a.get("per_push") or []
+            ]
+        ),
     }
 
 
