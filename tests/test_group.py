@@ -641,7 +641,9 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     zc = rng.standard_normal(n)
     for c in "ab":
         natural[f"rho_force__{c}"] = np.minimum(np.tanh(2.2 + 0.45 * zc + 0.05 * rng.standard_normal(n)), 0.99)
+    natural["z_base__a"] = np.where(np.arange(n) < n - 199, -0.5, z(C_a))  # 199 soft draws: too few to read
     lean = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False).doc
+    assert lean["identifiability"]["correlation_prior_sensitivity"]["base_compliance_rad_per_Nm"]["a"] is None
     sens = lean["identifiability"]["correlation_prior_sensitivity"]["rho_force"]
     assert min(sens["a"]["prior"], sens["b"]["prior"]) > SENSITIVITY_WARN, sens
     (told,) = [w for w in lean["warnings"] if "leans on its prior" in w]
@@ -656,7 +658,11 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     )
     ruled = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False).doc
     (told,) = [w for w in ruled["warnings"] if "leans on its prior" in w]
-    assert told.startswith("the noise correlation of a (0.30) leans") and "at most 0.01, EI0's 0.01" in told, told
+    assert told.startswith("the noise correlation of a (0.30) leans") and "is at most 0.01, EI0's 0.01" in told, told
+    natural["z_base__b"] = np.where(np.arange(n) < n - 199, -0.5, z(C_b))  # both nearly clamps
+    clamps = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False).doc
+    (told,) = [w for w in clamps["warnings"] if "leans on its prior" in w]
+    assert "prior is not measured (every base nearly a clamp), EI0's 0.01" in told, told
 
 
 def test_a_conditions_force_offset_is_integrated_out_exactly(cut_pair):

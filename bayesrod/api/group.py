@@ -373,8 +373,12 @@ def offset_draws(lik: GroupLikelihood, nat: dict, rng: np.random.Generator) -> d
     return out
 
 
-#: evenly thinned draws behind summary.json's identifiability.correlation_prior_sensitivity
-SENSITIVITY_DRAWS = 4000
+#: evenly thinned draws behind summary.json's identifiability.correlation_prior_sensitivity (0.7 s for 13
+#: quantities; at 4000 a compliance whose posterior is nearly all clamp read 0.05-0.49 by the thinning's offset)
+SENSITIVITY_DRAWS = 20000
+#: a base compliance with fewer soft (non-clamp) draws among those is reported null: the sensitivity of a
+#: posterior that is nearly all clamp rests on a handful of draws
+SENSITIVITY_MIN_SOFT = 200
 
 
 def correlation_sensitivity(post: GroupPosterior, chain: NDArray, log_prob: NDArray) -> dict | None:
@@ -382,7 +386,7 @@ def correlation_sensitivity(post: GroupPosterior, chain: NDArray, log_prob: NDAr
     answer: the power-scaling sensitivity (:func:`~bayesrod.inference.summary.prior_sensitivity`) of each
     condition's ``rho_force``, ``sigma_force_N`` and base compliance, and of the shared EI0, to that prior
     and to the likelihood, from up to SENSITIVITY_DRAWS draws of ``chain`` (..., ndim) with their
-    ``log_prob``. None without AR(1) noise."""
+    ``log_prob``. None without AR(1) noise; a compliance with fewer than SENSITIVITY_MIN_SOFT soft draws: None."""
     lik = post.likelihood
     conds = lik.conditions
     if not all("rho_force" in lik.local[c] for c in conds):
@@ -400,12 +404,15 @@ def correlation_sensitivity(post: GroupPosterior, chain: NDArray, log_prob: NDAr
         u = clamp_or_u(nat[lik.local[c]["z_base"]])
         draws[("rho_force", c)] = one["rho_force"]
         draws[("sigma_force_N", c)] = one["sigma_force_N"]
-        draws[("base_compliance_rad_per_Nm", c)] = base_compliance(u, one["EI0"], lik.liks[c].L)
+        C = base_compliance(u, one["EI0"], lik.liks[c].L)
+        if np.count_nonzero(C > 0) >= SENSITIVITY_MIN_SOFT:
+            draws[("base_compliance_rad_per_Nm", c)] = C
     if "EI0" in lik.shared:
         draws[("EI0", None)] = nat["EI0"]
     names = {k: f"{k[0]}__{k[1]}" if k[1] else k[0] for k in draws}
     sens = prior_sensitivity({names[k]: v for k, v in draws.items()}, lik.correlation_log_prior(nat), ll)
     out: dict = {"scaled": "the noise correlations' prior", "warn_above": SENSITIVITY_WARN}
+    out["base_compliance_rad_per_Nm"] = dict.fromkeys(conds)
     for (q, c), n in names.items():
         if c is None:
             out[q] = sens[n]
@@ -423,7 +430,8 @@ def _correlation_sensitivity(doc: dict, post: GroupPosterior, res) -> None:
     doc["identifiability"]["correlation_prior_sensitivity"] = sens
     lean = {c: v["prior"] for c, v in sens["rho_force"].items() if v["prior"] > SENSITIVITY_WARN}
     if lean:
-        comp = max(v["prior"] for v in sens["base_compliance_rad_per_Nm"].values())
+        soft = [v["prior"] for v in sens["base_compliance_rad_per_Nm"].values() if v is not None]
+        comp = f"is at most {max(soft):.2f}" if soft else "is not measured (every base nearly a clamp)"
         stem = f", EI0's {sens['EI0']['prior']:.2f}" if "EI0" in sens else ""
         doc["warnings"].append(
             "the noise correlation of "
@@ -431,7 +439,7 @@ def _correlation_sensitivity(doc: dict, post: GroupPosterior, res) -> None:
             + f" leans on its prior (power-scaling sensitivity above {SENSITIVITY_WARN:g}; "
             "identifiability.correlation_prior_sensitivity): its pushes pin the noise's innovations, "
             "sigma sqrt(1 - rho^2), not rho and sigma apart, so read rho_force and sigma_force_N as partly the "
-            f"prior's; the compliances' sensitivity to that prior is at most {comp:.2f}{stem}"
+            f"prior's; the compliances' sensitivity to that prior {comp}{stem}"
         )
 
 
