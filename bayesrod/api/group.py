@@ -394,10 +394,10 @@ def correlation_sensitivity(post: GroupPosterior, chain: NDArray, log_prob: NDAr
     theta, lp = chain.reshape(-1, post.ndim), np.asarray(log_prob, float).reshape(-1)
     idx = np.unique(np.linspace(0, lp.size - 1, min(lp.size, SENSITIVITY_DRAWS)).round().astype(int))
     theta, lp = theta[idx], lp[idx]
-    ll = lp - post.log_prior(theta)
-    keep = np.isfinite(ll)
-    theta, ll = theta[keep], ll[keep]
     nat = post.to_natural(theta)
+    ll, lp_rho = lp - post.log_prior(theta), np.broadcast_to(lik.correlation_log_prior(nat), lp.shape)
+    keep = np.isfinite(ll) & np.isfinite(lp_rho)  # every posterior draw is; a walker stuck outside would not be
+    nat, ll, lp_rho = {k: v[keep] for k, v in nat.items()}, ll[keep], lp_rho[keep]
     draws = {}
     for c in conds:
         one = lik.condition_params(nat, c)
@@ -410,7 +410,7 @@ def correlation_sensitivity(post: GroupPosterior, chain: NDArray, log_prob: NDAr
     if "EI0" in lik.shared:
         draws[("EI0", None)] = nat["EI0"]
     names = {k: f"{k[0]}__{k[1]}" if k[1] else k[0] for k in draws}
-    sens = prior_sensitivity({names[k]: v for k, v in draws.items()}, lik.correlation_log_prior(nat), ll)
+    sens = prior_sensitivity({names[k]: v for k, v in draws.items()}, lp_rho, ll)
     out: dict = {"scaled": "the noise correlations' prior", "warn_above": SENSITIVITY_WARN}
     out["base_compliance_rad_per_Nm"] = dict.fromkeys(conds)
     for (q, c), n in names.items():

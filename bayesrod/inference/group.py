@@ -275,7 +275,7 @@ class GroupLikelihood:
         """The log prior density, per draw, of the noise correlations alone (natural units): the pooled ones'
         joint prior (:meth:`pool_log_prior`: the population about its centre and the centre's prior), else
         each distinct correlation's own prior; 0 without AR(1) noise. The component whose power-scaling
-        sensitivity summary.json reports (``identifiability.rho_force_prior_sensitivity``)."""
+        sensitivity summary.json reports (``identifiability.correlation_prior_sensitivity``)."""
         if "rho_force" in self.pooled:
             return self.pool_log_prior(params)
         names = sorted({self.local[c]["rho_force"] for c in self.conditions if "rho_force" in self.local[c]})
