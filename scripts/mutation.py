@@ -246,7 +246,13 @@ TARGETS["group"] = ("bayesrod/inference/group.py", ["tests/test_group.py"], None
 TARGETS["group_summary"] = (
     "bayesrod/api/group.py",
     ["tests/test_group.py", "tests/test_compare_groups.py"],
-    ["*.x__summary__mutmut_*", "*.x_fit_group__mutmut_*"],
+    # session 52: the correlations' prior sensitivity and its warning
+    [
+        "*.x__summary__mutmut_*",
+        "*.x_fit_group__mutmut_*",
+        "*.x_correlation_sensitivity__mutmut_*",
+        "*.x__correlation_sensitivity__mutmut_*",
+    ],
 )
 
 # added in session 38: the force likelihood itself (the tables' interpolation, the residuals, the Gaussian and
