@@ -142,7 +142,8 @@ def one(job) -> dict:
     sens = d["identifiability"].get("correlation_prior_sensitivity")
     if sens is not None:
         row.update({f"rho_{c}_prior_sens": sens["rho_force"][c]["prior"] for c in CONDITIONS})
-        row["C_prior_sens_max"] = max(v["prior"] for v in sens["base_compliance_rad_per_Nm"].values())
+        soft = [v["prior"] for v in sens["base_compliance_rad_per_Nm"].values() if v is not None]  # None: a clamp
+        row["C_prior_sens_max"] = max(soft) if soft else float("nan")
     row["seconds"] = round(time.perf_counter() - t0, 1)
     return row
 
@@ -204,15 +205,16 @@ def table(rows) -> str:
         if sens:
             x = [max(float(r[f"rho_{c}_prior_sens"]) for c in CONDITIONS) for r in sens]
             warned = sum(v > SENSITIVITY_WARN for v in x)
-            cs = [float(r["C_prior_sens_max"]) for r in sens]
+            cs = [float(r["C_prior_sens_max"]) for r in sens if r["C_prior_sens_max"] not in ("", "nan")]
             out.append(
                 f"| rho prior sensitivity, the stem's largest: median [min, max]; stems warned (> "
                 f"{SENSITIVITY_WARN:g}) | {np.median(x):.2f} [{min(x):.2f}, {max(x):.2f}]; {warned}/{len(x)} |"
             )
-            out.append(
-                f"| compliances' sensitivity to it, the stem's largest: median [max] | {np.median(cs):.2f} "
-                f"[{max(cs):.2f}] |"
-            )
+            if cs:
+                out.append(
+                    f"| compliances' sensitivity to it, the stem's largest: median [max] | {np.median(cs):.2f} "
+                    f"[{max(cs):.2f}] |"
+                )
         out.append(f"| median wall time per stem | {np.median([float(r['seconds']) for r in rs]):.0f} s |")
         out.append(
             f"| R-hat max: median [max] | {np.median([float(r['rhat']) for r in rs]):.3f} "
