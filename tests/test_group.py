@@ -642,8 +642,10 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     for c in "ab":
         natural[f"rho_force__{c}"] = np.minimum(np.tanh(2.2 + 0.45 * zc + 0.05 * rng.standard_normal(n)), 0.99)
     natural["z_base__a"] = np.where(np.arange(n) < n - 199, -0.5, z(C_a))  # 199 soft draws: too few to read
+    natural["z_base__b"] = np.where(np.arange(n) < n - 200, -0.5, z(C_b))  # 200: enough
     lean = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False).doc
-    assert lean["identifiability"]["correlation_prior_sensitivity"]["base_compliance_rad_per_Nm"]["a"] is None
+    soft = lean["identifiability"]["correlation_prior_sensitivity"]["base_compliance_rad_per_Nm"]
+    assert soft["a"] is None and set(soft["b"]) == {"prior", "likelihood"}, soft
     sens = lean["identifiability"]["correlation_prior_sensitivity"]["rho_force"]
     assert min(sens["a"]["prior"], sens["b"]["prior"]) > SENSITIVITY_WARN, sens
     (told,) = [w for w in lean["warnings"] if "leans on its prior" in w]
