@@ -42,8 +42,8 @@ def credible_interval(x) -> dict:
 
 #: power-scaling sensitivity (:func:`prior_sensitivity`) above which fit-group says a quantity leans on the
 #: prior component scaled. Kallioinen et al. flag 0.05; a pooled correlation reads 0.02-0.16 where the
-#: pushes pin it (two heights) and 0.6 where one push's ridge leaves it to the prior (docs/validation.md,
-#: "How much of the noise correlation is the prior's")
+#: pushes pin it (two heights) and 0.42-1.02 where one push per condition leaves it on its ridge (every stem of
+#: the one-height group study; docs/validation.md, "How much of the noise correlation is the prior's")
 SENSITIVITY_WARN = 0.3
 
 
