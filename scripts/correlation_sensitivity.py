@@ -19,7 +19,7 @@ import argparse
 import numpy as np
 from group_study import replicate_data
 
-from bayesrod.api.group import SENSITIVITY_DRAWS, correlation_sensitivity
+from bayesrod.api.group import correlation_sensitivity, sensitivity_draws
 from bayesrod.inference.group import POOL_SPREAD, GroupLikelihood, GroupPosterior, start_point
 from bayesrod.inference.priors import load_prior
 from bayesrod.inference.sampler import run_ensembles
@@ -34,11 +34,7 @@ def one(rep: int, heights: list[float], stride: int) -> None:
     res = run_ensembles(post, theta0, seed=rep, progress=False, max_steps=5000, target_ess=400)
     sens = correlation_sensitivity(post, res.chain, res.log_prob)
     print(f"replicate {rep}, heights {heights}, seed stride {stride}:")
-    theta = res.chain.reshape(-1, post.ndim)
-    idx = np.unique(np.linspace(0, len(theta) - 1, min(len(theta), SENSITIVITY_DRAWS)).round().astype(int))
-    theta, lp = theta[idx], res.log_prob.reshape(-1)[idx]
-    nat = post.to_natural(theta)
-    ll = lp - post.log_prior(theta)
+    nat, ll, lp_rho = sensitivity_draws(post, res.chain, res.log_prob)  # the draws the numbers above read
     names = [lik.local[c]["rho_force"] for c in lik.conditions]
     rho = np.stack([nat[n] for n in names])
     for c, r in zip(lik.conditions, rho, strict=True):
@@ -54,7 +50,7 @@ def one(rep: int, heights: list[float], stride: int) -> None:
     parts = {
         "1/(1 - rho^2)": jac,
         "population (z)": pop,
-        "centre (z)": lik.pool_log_prior(nat) - jac - pop,
+        "centre (z)": lp_rho - jac - pop,
         "own arcsine": sum(lik.priors[n].logpdf_sample(nat[n]) for n in names),
     }
     for part, comp in parts.items():

@@ -1062,3 +1062,13 @@ def test_at_one_height_the_stiffest_condition_starts_as_a_clamp_not_on_the_ridge
     nat = post.to_natural(t)
     assert clamp_or_u(nat["z_base__intact"])[0] == 0.0 and 30.0 < nat["EI0"][0] < 50.0  # truth 37.5
     assert all(clamp_or_u(nat[f"z_base__{c}"])[0] > 0 for c in ("cut1", "cut2", "cut3"))
+
+
+def test_summaries_read_evenly_spaced_draws_up_to_their_count():
+    """The offsets' and the correlation sensitivity's draws: up to k of n, evenly spaced, first and last kept,
+    all of them when there are fewer (SENSITIVITY_DRAWS 20000, OFFSET_DRAWS 4000)."""
+    from bayesrod.api.group import OFFSET_DRAWS, SENSITIVITY_DRAWS, _evenly
+
+    np.testing.assert_array_equal(_evenly(10, 4), [0, 3, 6, 9])
+    np.testing.assert_array_equal(_evenly(3, 5), [0, 1, 2])
+    assert _evenly(746816, SENSITIVITY_DRAWS).size == 20000 and _evenly(746816, OFFSET_DRAWS).size == 4000

@@ -362,7 +362,7 @@ def offset_draws(lik: GroupLikelihood, nat: dict, rng: np.random.Generator) -> d
     """Per condition with an integrated-out load-cell offset, draws [N] of it: at up to OFFSET_DRAWS posterior
     draws (evenly thinned), one from its Gaussian conditional given the draw's other parameters."""
     n = next(iter(nat.values())).size
-    idx = np.unique(np.linspace(0, n - 1, min(n, OFFSET_DRAWS)).round().astype(int))
+    idx = _evenly(n, OFFSET_DRAWS)
     thin = {k: v[idx] for k, v in nat.items()}
     out = {}
     for c in lik.conditions:
@@ -373,51 +373,63 @@ def offset_draws(lik: GroupLikelihood, nat: dict, rng: np.random.Generator) -> d
     return out
 
 
+def _evenly(n: int, k: int) -> NDArray:
+    """Indices of up to ``k`` of ``n`` draws, evenly spaced (deterministic, the first and the last kept)."""
+    return np.unique(np.linspace(0, n - 1, min(n, k)).round().astype(int))
+
+
 #: evenly thinned draws behind summary.json's identifiability.correlation_prior_sensitivity (0.7 s for 13
-#: quantities; at 4000 a compliance whose posterior is nearly all clamp read 0.05-0.49 by the thinning's offset)
+#: quantities; with 3000-7500 draws a compliance whose posterior was nearly all clamp read 0.12-0.49 by the
+#: thinning's offset, against 0.05 from all 750000)
 SENSITIVITY_DRAWS = 20000
 #: a base compliance with fewer soft (non-clamp) draws among those is reported null: the sensitivity of a
 #: posterior that is nearly all clamp rests on a handful of draws
 SENSITIVITY_MIN_SOFT = 200
 
 
+def sensitivity_draws(post: GroupPosterior, chain: NDArray, log_prob: NDArray) -> tuple[dict, NDArray, NDArray]:
+    """Up to SENSITIVITY_DRAWS evenly thinned draws of ``chain`` (..., ndim) in natural units, with their log
+    likelihood (``log_prob`` less the log prior) and the correlations' log prior
+    (:meth:`GroupLikelihood.correlation_log_prior`), each (n,); draws where either is not finite are left out."""
+    lp = np.asarray(log_prob, float).reshape(-1)
+    idx = _evenly(lp.size, SENSITIVITY_DRAWS)
+    theta, lp = chain.reshape(-1, post.ndim)[idx], lp[idx]
+    nat = post.to_natural(theta)
+    ll = lp - post.log_prior(theta)
+    lp_rho = np.broadcast_to(post.likelihood.correlation_log_prior(nat), lp.shape)
+    keep = np.isfinite(ll) & np.isfinite(lp_rho)  # every posterior draw is; a walker stuck outside would not be
+    return {k: v[keep] for k, v in nat.items()}, ll[keep], lp_rho[keep]
+
+
 def correlation_sensitivity(post: GroupPosterior, chain: NDArray, log_prob: NDArray) -> dict | None:
     """How much the noise correlations' prior (:meth:`GroupLikelihood.correlation_log_prior`) shapes the
     answer: the power-scaling sensitivity (:func:`~bayesrod.inference.summary.prior_sensitivity`) of each
     condition's ``rho_force``, ``sigma_force_N`` and base compliance, and of the shared EI0, to that prior
-    and to the likelihood, from up to SENSITIVITY_DRAWS draws of ``chain`` (..., ndim) with their
-    ``log_prob``. None without AR(1) noise; a compliance with fewer than SENSITIVITY_MIN_SOFT soft draws: None."""
+    and to the likelihood, on :func:`sensitivity_draws`. None without AR(1) noise; a compliance with fewer
+    than SENSITIVITY_MIN_SOFT soft draws: None."""
     lik = post.likelihood
     conds = lik.conditions
     if not all("rho_force" in lik.local[c] for c in conds):
         return None
-    theta, lp = chain.reshape(-1, post.ndim), np.asarray(log_prob, float).reshape(-1)
-    idx = np.unique(np.linspace(0, lp.size - 1, min(lp.size, SENSITIVITY_DRAWS)).round().astype(int))
-    theta, lp = theta[idx], lp[idx]
-    nat = post.to_natural(theta)
-    ll, lp_rho = lp - post.log_prior(theta), np.broadcast_to(lik.correlation_log_prior(nat), lp.shape)
-    keep = np.isfinite(ll) & np.isfinite(lp_rho)  # every posterior draw is; a walker stuck outside would not be
-    nat, ll, lp_rho = {k: v[keep] for k, v in nat.items()}, ll[keep], lp_rho[keep]
-    draws = {}
+    nat, ll, lp_rho = sensitivity_draws(post, chain, log_prob)
+    draws, where = {}, {}  # quantity name -> draws; -> (summary key, condition or None)
     for c in conds:
         one = lik.condition_params(nat, c)
-        u = clamp_or_u(nat[lik.local[c]["z_base"]])
-        draws[("rho_force", c)] = one["rho_force"]
-        draws[("sigma_force_N", c)] = one["sigma_force_N"]
-        C = base_compliance(u, one["EI0"], lik.liks[c].L)
+        C = base_compliance(clamp_or_u(nat[lik.local[c]["z_base"]]), one["EI0"], lik.liks[c].L)
+        for q, x in (("rho_force", one["rho_force"]), ("sigma_force_N", one["sigma_force_N"])):
+            draws[f"{q}__{c}"], where[f"{q}__{c}"] = x, (q, c)
         if np.count_nonzero(C > 0) >= SENSITIVITY_MIN_SOFT:
-            draws[("base_compliance_rad_per_Nm", c)] = C
+            draws[f"C__{c}"], where[f"C__{c}"] = C, ("base_compliance_rad_per_Nm", c)
     if "EI0" in lik.shared:
-        draws[("EI0", None)] = nat["EI0"]
-    names = {k: f"{k[0]}__{k[1]}" if k[1] else k[0] for k in draws}
-    sens = prior_sensitivity({names[k]: v for k, v in draws.items()}, lp_rho, ll)
+        draws["EI0"], where["EI0"] = nat["EI0"], ("EI0", None)
+    sens = prior_sensitivity(draws, lp_rho, ll)
     out: dict = {"scaled": "the noise correlations' prior", "warn_above": SENSITIVITY_WARN}
-    out["base_compliance_rad_per_Nm"] = dict.fromkeys(conds)
-    for (q, c), n in names.items():
+    out |= {"rho_force": {}, "sigma_force_N": {}, "base_compliance_rad_per_Nm": dict.fromkeys(conds)}
+    for n, (q, c) in where.items():
         if c is None:
             out[q] = sens[n]
         else:
-            out.setdefault(q, {})[c] = sens[n]
+            out[q][c] = sens[n]
     return out
 
 
