@@ -41,7 +41,7 @@ from _study import calibration_stats, run_pending  # noqa: E402
 import bayesrod  # noqa: E402
 from bayesrod.dataset.simulate import NoiseModel  # noqa: E402
 from bayesrod.inference.group import POOL_SPREAD, U_MAX  # noqa: E402
-from bayesrod.inference.priors import NUISANCE_DEFAULTS, load_prior  # noqa: E402
+from bayesrod.inference.priors import NUISANCE_DEFAULTS, load_prior, marginal_force_sd  # noqa: E402
 
 PRIOR = str(Path(__file__).with_name("sbc_prior.json"))
 L = 0.8
@@ -70,7 +70,8 @@ def draw(seed: int) -> dict:
         u = float(rng.uniform(0.0, U_MAX))
         cc = u / (1.0 - u)  # c = EI0 C / L
         t[f"C__{c}"] = 0.0 if clamp else cc * L / EI0
-        t[f"sigma__{c}"] = float(pr.get("sigma_force_N").draw(rng, 1)[0])
+        # the sd prior is the innovation sd's under AR(1) (since session 53; runs before drew the marginal sd)
+        t[f"sigma__{c}"] = float(marginal_force_sd(pr.get("sigma_force_N").draw(rng, 1)[0], rho[i]))
         t[f"rho__{c}"] = float(rho[i])
     return t
 

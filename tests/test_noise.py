@@ -152,9 +152,11 @@ def test_table_log_likelihood_is_the_explicit_gaussian_density_of_its_residuals(
         assert got[w] == pytest.approx(want, rel=1e-12, abs=1e-8)
 
 
-def test_ar1_noise_is_sampled_by_its_innovation_sd_with_the_prior_kept_on_the_marginal_sd():
-    """The sampling coordinate of an AR(1) noise is log(sigma sqrt(1 - rho^2)); the density emcee sees is
-    the prior on (sigma, rho) times the likelihood times sigma, the Jacobian of sigma in that coordinate."""
+def test_ar1_noise_is_sampled_by_its_innovation_sd_with_the_sd_prior_on_the_innovation_sd():
+    """The sampling coordinate of an AR(1) noise is log s_e, s_e = sigma sqrt(1 - rho^2) the innovation sd; the
+    density emcee sees is the sd prior at s_e times rho's prior, times the likelihood, times s_e (the Jacobian
+    of s_e in its log). Before session 53 the sd prior was the marginal sd's (the factor sigma, not s_e, and the
+    half-normal at sigma): along the ridge one push pins (s_e fixed) that leaned rho toward 1."""
     from scipy.stats import halfnorm
 
     from bayesrod.inference.likelihood import LogPosterior, build_likelihood
@@ -173,11 +175,12 @@ def test_ar1_noise_is_sampled_by_its_innovation_sd_with_the_prior_kept_on_the_ma
         np.testing.assert_allclose(back[k], v, rtol=1e-12)
     scale = pr.get("sigma_force_N").args[0]
     lo, hi = pr.get("rho_force").args
+    s_e = nat["sigma_force_N"] * np.sqrt(1 - nat["rho_force"] ** 2)
     want = (
         pr.get("EI0").logpdf_sample(np.log(nat["EI0"]))
         + pr.get("p").logpdf_sample(nat["p"])
-        + halfnorm.logpdf(nat["sigma_force_N"], scale=scale)
-        + np.log(nat["sigma_force_N"])
+        + halfnorm.logpdf(s_e, scale=scale)
+        + np.log(s_e)
         - 0.5 * np.log1p(-(nat["rho_force"] ** 2))
         - np.log(np.arcsin(hi) - np.arcsin(lo))
         + post.likelihood.log_likelihood(nat)

@@ -17,7 +17,7 @@ from scipy import stats
 
 import bayesrod
 from bayesrod.inference.likelihood import LogPosterior, build_likelihood
-from bayesrod.inference.priors import load_prior
+from bayesrod.inference.priors import load_prior, marginal_force_sd
 from bayesrod.inference.sampler import find_start, run_ensembles
 
 #: KS distance allowed between 1 in 20 of the chain's draws and 20000 prior draws (about 0.01 on a correct sampler;
@@ -27,6 +27,8 @@ KS_MAX = 0.035
 
 def _prior_draws(post, prior, lik, n, rng):
     draws = {k: prior.get(k).draw(rng, n) for k in post.names}
+    if "rho_force" in draws:  # under AR(1) the sd's prior is the innovation sd's (docs/priors.md)
+        draws["sigma_force_N"] = marginal_force_sd(draws["sigma_force_N"], draws["rho_force"])
     inside = lik.in_table(draws)
     return {k: v[inside] for k, v in draws.items()}
 

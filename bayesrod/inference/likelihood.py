@@ -1426,10 +1426,18 @@ class PosteriorBase(ParameterSpace):
     _p_bounds: tuple
 
     def log_prior(self, theta) -> NDArray:
+        """The log prior density in the sampling space at ``theta`` (W, ndim) or (ndim,); shape (W,).
+
+        Each parameter's prior at its prior coordinate, but an AR(1) force noise's sd prior at the log of its
+        innovation sd sigma sqrt(1 - rho^2) (the sampled coordinate, :meth:`noise_pairs`) rather than at the
+        marginal sd: the innovation sd is what a push pins, and a nearly flat prior on the marginal sd leans
+        rho toward 1 along that ridge (docs/priors.md, "The force noise's sd under AR(1)")."""
         theta = np.atleast_2d(theta)
         jac = self.log_jacobian(theta)  # ParameterSpace: 0 but for a base spring sampled by its u
-        theta = self.prior_coordinates(theta)
-        lp = sum(pr.logpdf_sample(theta[:, i]) for i, pr in enumerate(self.priors)) + jac
+        pc = self.prior_coordinates(theta)
+        for s, _ in self.noise_pairs():
+            pc[:, s] = theta[:, s]  # log innovation sd: only the shear moves this column
+        lp = sum(pr.logpdf_sample(pc[:, i]) for i, pr in enumerate(self.priors)) + jac
         return np.where(np.isfinite(jac), lp, -np.inf)  # nan coordinates outside u's (0, 1)
 
     def _in_support(self, natural: dict) -> NDArray:

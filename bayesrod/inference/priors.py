@@ -14,7 +14,7 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy import special, stats
 
 from ..physics.effects import EFFECT_NAMES
@@ -373,6 +373,15 @@ REQUIRED = ("EI0", "p", "sigma_force_N", "sigma_shape_m", "shape_sd_scale")
 #: Real pushes measured 0.82-0.98; the upper bound keeps the noise stationary and away from a random
 #: walk, which would absorb any misfit.
 NUISANCE_DEFAULTS = {"rho_force": ParamPrior("rho_force", "arcsine", (-0.5, 0.995), "1")}
+
+
+def marginal_force_sd(innovation_sd: ArrayLike, rho: ArrayLike) -> NDArray:
+    """The marginal sd [N] of AR(1) force noise whose innovations have sd ``innovation_sd`` [N] and whose lag-1
+    correlation is ``rho``: sigma = innovation_sd / sqrt(1 - rho^2) (any broadcastable shapes).
+
+    Under AR(1) noise the file's ``sigma_force_N`` prior is the innovation sd's (docs/priors.md): a draw from
+    the prior is an innovation sd from that prior and rho from its own, mapped to sigma_force_N by this."""
+    return np.asarray(innovation_sd, float) / np.sqrt(1.0 - np.asarray(rho, float) ** 2)
 
 
 def _priors_dir():
