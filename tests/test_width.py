@@ -298,6 +298,24 @@ def test_choose_colour_model_records_the_narrow_stems_branches_whole():
     assert g == {"model": "projection", "shading_px": None, "se_px": None, "stations": n_wide}
 
 
+def test_choose_colour_model_reads_a_mirrored_frame_pushed_the_other_way_alike():
+    """A frame mirrored left-right, its camera's base pixel mirrored with it and the push direction -1, is the
+    same stem: both models' widths (their projection - unmixing difference, the stations compared) come out as
+    on the original. Either model read without the direction (+1) would look for the stem on the wrong side."""
+    from bayesrod.vision.width import choose_colour_model
+
+    img, line, _ = _synthetic(8.0, 0.43, 2.0, shaded=True)
+    mirrored = np.ascontiguousarray(img[:, ::-1])
+    cam = dict(CAM, base_px=[img.shape[1] - 1 - CAM["base_px"][0], CAM["base_px"][1]])
+    W = img.shape[1]
+    path = np.column_stack([W - 1 - line.path_uv[:, 0], line.path_uv[:, 1]])
+    seen = dataclasses.replace(line, mask=line.mask[:, ::-1], skeleton=line.skeleton[:, ::-1], path_uv=path)
+    a = choose_colour_model(img, None, line, CAM)
+    b = choose_colour_model(mirrored, None, seen, cam, direction=-1)
+    assert a.model == b.model == "unmixing" and a.stations == b.stations >= 10, (a, b)
+    assert b.shading_px == pytest.approx(a.shading_px, abs=1e-3) and b.shading_px > 0.25  # sampling: 3e-5 apart
+
+
 @pytest.mark.parametrize("w0", [3.45, 8.0])
 def test_choose_colour_model_leaves_out_the_stations_the_depth_flags(w0):
     """With a depth map, stations behind an occluder (a block nearer than the stem's plane) are not read by
