@@ -447,6 +447,26 @@ def test_a_checkpoint_of_an_ar1_run_in_the_old_noise_coordinates_is_refused(tmp_
     _check_checkpoint(path, iid)  # an iid run's checkpoint still resumes
 
 
+def test_a_checkpoint_of_an_ar1_run_with_the_sd_prior_on_the_marginal_sd_is_refused(tmp_path):
+    """Before session 53 an AR(1) noise's sd prior was the marginal sd's: another target, not resumed; an iid
+    run's checkpoint (its sd prior unchanged) still resumes."""
+    import h5py
+
+    from bayesrod.api.fitting import _RESUME_KEYS, _check_checkpoint, sampling_coordinates
+
+    assert sampling_coordinates("iid", ())["noise_sd_prior"] == "marginal_sd"
+    config = {k: None for k in _RESUME_KEYS} | {"force_noise": "ar1"} | sampling_coordinates("ar1", ())
+    path = tmp_path / "chains.h5"
+    with h5py.File(path, "w") as f:
+        f.attrs["bayesrod_config"] = json.dumps({k: v for k, v in config.items() if k != "noise_sd_prior"})
+    with pytest.raises(ValueError, match="noise_sd_prior"):
+        _check_checkpoint(path, config)
+    iid = config | {"force_noise": "iid"} | sampling_coordinates("iid", ())
+    with h5py.File(path, "w") as f:
+        f.attrs["bayesrod_config"] = json.dumps({k: v for k, v in iid.items() if k != "noise_sd_prior"})
+    _check_checkpoint(path, iid)
+
+
 def test_a_checkpoint_of_a_base_spring_run_in_log_k_is_refused_and_other_runs_still_resume(tmp_path):
     """Before 2026-11-27 a base spring was sampled in log k: such chains cannot be resumed in u."""
     import h5py
@@ -459,6 +479,7 @@ def test_a_checkpoint_of_a_base_spring_run_in_log_k_is_refused_and_other_runs_st
     )
     assert sampling_coordinates("ar1", ("rest_curvature",)) == {
         "noise_coordinates": "innovation_sd",
+        "noise_sd_prior": "innovation_sd",
         "base_coordinates": "log_k",
         "stiffness_coordinates": "log_EI0",
     }

@@ -68,6 +68,7 @@ _RESUME_KEYS = (
     "height_sd_m",
     "force_offsets",
     "noise_coordinates",
+    "noise_sd_prior",
     "base_coordinates",
     "stiffness_coordinates",
     "slip",
@@ -81,6 +82,8 @@ _RESUME_DEFAULTS = {
     "force_offsets": False,
     # before 2026-11-26 an AR(1) noise was sampled by its marginal sd; its chains cannot be resumed
     "noise_coordinates": "marginal_sd",
+    # before session 53 (2026-11-29) an AR(1) noise's sd prior was the marginal sd's (another target)
+    "noise_sd_prior": "marginal_sd",
     # before 2026-11-27 a base spring was sampled in log k; its chains cannot be resumed
     "base_coordinates": "log_k",
     # before 2026-11-27 (session 34) EI0 was sampled as log EI0 also at one height; such chains cannot be resumed
@@ -683,9 +686,12 @@ def sampling_coordinates(force_noise: str, effects, one_height: bool = False) ->
     noise by its innovation sd (since 2026-11-26), a base spring on forces alone by its table coordinate u
     where the start's spring is stiff (since 2026-11-27; ``ParameterSpace.settle_base_coordinates``), EI0 by the
     log stiffness at the pushes' height when they are all at one (``one_height``: ``ParameterSpace.stiffness_at``,
-    since session 34). A checkpoint records them; chains in others cannot be resumed."""
+    since session 34); and where an AR(1) noise's sd prior sits (``noise_sd_prior``: on the innovation sd since
+    session 53, a different target from the marginal sd's before). A checkpoint records them; chains in others
+    cannot be resumed."""
     return {
         "noise_coordinates": "innovation_sd" if force_noise == "ar1" else "marginal_sd",
+        "noise_sd_prior": "innovation_sd" if force_noise == "ar1" else "marginal_sd",
         "base_coordinates": "u_forces_only_stiff_start" if "base_compliance" in effects else "log_k",
         "stiffness_coordinates": "log_k_at_height" if one_height else "log_EI0",
     }

@@ -162,8 +162,10 @@ class ParameterSpace:
     copies) is sampled as the log of its innovation sd, log(sigma sqrt(1 - rho^2)), beside rho. The
     marginal sd sigma is poorly determined as rho nears 1 while the innovation sd is not, so in
     (log sigma, rho) the posterior is a curved ridge the ensemble moves cross slowly. The map
-    (log innovation sd, rho) -> (log sigma, rho) is a shear of unit Jacobian: the prior stays on sigma,
-    the target is unchanged (docs/inference.md, "Correlated force noise").
+    (log innovation sd, rho) -> (log sigma, rho) is a shear of unit Jacobian. The sd's prior is the
+    innovation sd's (since session 53: :meth:`PosteriorBase.log_prior` evaluates it at the sampled
+    coordinate; docs/priors.md, "The force noise's sd under AR(1)"); to_natural still returns the
+    marginal sd (docs/inference.md, "Correlated force noise").
 
     A second exception when ``base_length_m`` is set (a single fit with ``base_compliance`` on forces
     alone, both it and EI0 with log-space priors, its start a stiff spring:
