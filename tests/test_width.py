@@ -298,6 +298,26 @@ def test_choose_colour_model_records_the_narrow_stems_branches_whole():
     assert g == {"model": "projection", "shading_px": None, "se_px": None, "stations": n_wide}
 
 
+@pytest.mark.parametrize("chromatic", [0.22, 0.27])
+def test_a_narrow_stem_is_unmixed_by_the_colour_of_its_widest_third(chromatic):
+    """A narrow stem's colours are judged at its widest third: here only the widest 22-27% of its stations keep
+    the stem's own colour and the rest are drawn in the background's chromaticity. The widest third, mostly
+    coloured, unmixes; read at all its stations (or its widest half) it would keep projection."""
+    from bayesrod.vision.width import choose_colour_model
+
+    img, line, _ = _synthetic(3.45, 1.6, 2.0)
+    proj = width_profile(img, None, line, CAM, colour_model="projection")
+    ok = proj.flag == "ok"
+    coloured = ok & (proj.width_px >= np.quantile(proj.width_px[ok], 1 - chromatic))
+    above = np.arange(img.shape[0])[:, None] < proj.uv[coloured, 1].min() - 0.5  # rows above the coloured base
+    out = img.astype(float)
+    stem = above & (np.abs(out - BG).sum(axis=2) > 12)
+    out[stem] = (out.mean(axis=2, keepdims=True) / BG.mean() * BG)[stem]  # grey stem: the background's hue
+    out = np.clip(out, 0, 255).astype(np.uint8)
+    c = choose_colour_model(out, None, line, CAM)
+    assert c.model == "unmixing" and "too narrow" in c.reason, c
+
+
 def test_choose_colour_model_reads_a_mirrored_frame_pushed_the_other_way_alike():
     """A frame mirrored left-right, its camera's base pixel mirrored with it and the push direction -1, is the
     same stem: both models' widths (their projection - unmixing difference, the stations compared) come out as
