@@ -1151,3 +1151,30 @@ def test_combine_profiles_edges_by_hand():
     assert two.shared_scale_sd == pytest.approx(np.std([1.0, 1.04]) / np.sqrt(2), rel=1e-12)
     flagged = [dataclasses.replace(p, flag=np.full(p.flag.size, "occluded")) for p in profs]
     assert combine_profiles(flagged, s).shared_offset_sd_m == 0.0
+
+
+def test_clean_profiles_trend_has_one_coefficient_per_eight_stations_up_to_a_cubic():
+    """The integrals' trend is a polynomial in s with one coefficient per 8 profiles, up to 4 (a cubic from 24
+    profiles): it follows an exact polynomial of that degree along the stem and not one a degree higher; a
+    profile with no samples (off the image) has no peak to judge and is never clean."""
+    from bayesrod.vision.width import STEP_PX, _clean_profiles
+
+    def profiles(area):
+        return [(np.arange(4.0), np.full(4, a / (4 * STEP_PX))) for a in area]
+
+    for n, coefs in ((8, 2), (16, 3), (24, 4), (40, 4)):
+        s = np.linspace(0.0, 0.3, n)
+        x = (s - s.mean()) / s.std()
+        for degree in (coefs - 1, coefs):
+            area = 0.9 + 0.05 * x**degree + 0.02 * x
+            clean, trend = _clean_profiles(profiles(area), s)
+            if degree < coefs:
+                np.testing.assert_allclose(trend, area, atol=1e-8, err_msg=f"{n} profiles, degree {degree}")
+                assert clean.all()
+            else:
+                assert np.max(np.abs(trend - area)) > 1e-3, f"{n} profiles follow degree {degree}"
+    s = np.linspace(0.0, 0.3, 10)
+    pr = profiles(np.full(10, 0.9))
+    pr[4] = (np.zeros(0), np.zeros(0))
+    clean, _ = _clean_profiles(pr, s)
+    assert not clean[4] and clean[np.arange(10) != 4].sum() >= 8
