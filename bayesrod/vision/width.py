@@ -621,10 +621,10 @@ def _clean_profiles(profiles: list, s: NDArray) -> tuple[NDArray, NDArray]:
 
     Returns ``clean`` (n,) bool and ``trend`` (n,) [px]: a polynomial in s fitted to the coverage integrals
     with a robust (Cauchy) loss, the stem's smooth width, with one coefficient per 8 profiles up to a cubic
-    (from 24 profiles; fewer than 5: no fit, the integrals themselves, none clean). Clean: a coverage peak of at most ``PEAK_MAX``
-    and an integral within ``AREA_REL`` of the trend. Clutter crossing a window, or a mask merged with it,
-    reads as more than full coverage or as a sudden wide stem; on the grass such profiles came in runs of
-    several stations, which a running median of neighbours (before 2026-11-26) let through.
+    (from 24 profiles; fewer than 5: no fit, the integrals themselves, none clean). Clean: a coverage peak of
+    at most ``PEAK_MAX`` and an integral within ``AREA_REL`` of the trend. Clutter crossing a window, or a mask
+    merged with it, reads as more than full coverage or as a sudden wide stem; on the grass such profiles came
+    in runs of several stations, which a running median of neighbours (before 2026-11-26) let through.
     """
     area = _coverage_integrals(profiles)
     peak = np.array([float(np.max(a)) if a.size else np.inf for _, a in profiles])
