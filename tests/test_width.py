@@ -1178,3 +1178,52 @@ def test_clean_profiles_trend_has_one_coefficient_per_eight_stations_up_to_a_cub
     pr[4] = (np.zeros(0), np.zeros(0))
     clean, _ = _clean_profiles(pr, s)
     assert not clean[4] and clean[np.arange(10) != 4].sum() >= 8
+
+
+@pytest.mark.parametrize("n_thin", [0, 12, 45])
+def test_contrast_fit_reads_the_wide_profiles_then_refits_with_evenly_spread_thin_ones(monkeypatch, n_thin):
+    """Which profiles the contrast fit reads, with the integrals' trend and the fits stubbed: the clean ones of
+    trend MIN_AREA_PX (2 px) or wider, widest first, up to n_max; where the fitted blur is more than
+    BLUR_RATIO_OK (0.3) of the width (not at exactly 0.3), a refit adding clean thin ones of trend 0.5 px (inclusive)
+    to 2 px (exclusive), every max(1, n // THIN_N)-th of them widest first, at most THIN_N, the wide ones still
+    the first n_wide; no refit without thin ones."""
+    from bayesrod.vision import width as wmod
+
+    wide_trend = [2.0, 3.0, 2.5, 4.0, 2.2, 3.5, 2.8]  # 2.0 exactly: wide
+    thin_trend = list(np.linspace(1.9, 0.55, n_thin)) + [0.5, 2.0 - 1e-9, 0.49]  # 0.5 in, just under 2 in, 0.49 out
+    trend = np.array(wide_trend + [5.0] + thin_trend)  # 5.0: not clean
+    clean = np.ones(trend.size, bool)
+    clean[len(wide_trend)] = False
+    monkeypatch.setattr(wmod, "_clean_profiles", lambda profiles, s: (clean, trend))
+    calls = []
+
+    def box_fit(profiles, tr, use, loss, f_scale, n_wide=None):
+        calls.append((list(use), n_wide))
+        return wmod.ContrastFit(1.1, blur, 2.0)
+
+    monkeypatch.setattr(wmod, "_box_fit", box_fit)
+    order = list(np.argsort(trend)[::-1])
+    wide = [i for i in order if i < len(wide_trend)]
+    thin_all = [i for i in order if i > len(wide_trend) and 0.5 <= trend[i] < 2.0]
+    profiles = [(np.zeros(1), np.zeros(1))] * trend.size
+    s = np.arange(trend.size, dtype=float)
+    blur = 0.6  # 0.6 / 2.0 == 0.3 exactly: no refit
+    assert wmod.contrast_fit(profiles, s).scale == 1.1 and calls == [(wide, None)]
+    calls.clear()
+    assert wmod.contrast_fit(profiles, s, n_max=5).scale == 1.1 and calls == [(wide[:5], None)]
+    calls.clear()
+    blur = 0.61
+    wmod.contrast_fit(profiles, s)
+    step = max(1, len(thin_all) // wmod.THIN_N)
+    assert calls == [(wide, None), (wide + thin_all[::step][: wmod.THIN_N], len(wide))]
+    assert len(calls[1][0]) - len(wide) == min(len(thin_all), wmod.THIN_N)
+    for n, refits in ((0, False), (1, True)):
+        monkeypatch.setattr(wmod, "THIN_N", n)
+        calls.clear()
+        wmod.contrast_fit(profiles, s)
+        assert len(calls) == 1 + refits and (not refits or calls[1][0] == wide + thin_all[:1])
+    monkeypatch.setattr(wmod, "THIN_N", 20)
+    clean[len(wide_trend) + 1 :] = False  # no clean thin profile: no refit
+    calls.clear()
+    wmod.contrast_fit(profiles, s)
+    assert calls == [(wide, None)]
