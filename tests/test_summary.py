@@ -307,3 +307,32 @@ def test_prior_sensitivity_tells_a_prior_that_decides_from_one_the_data_override
     assert got[10.0]["likelihood"] < 0.05 < got[10.0]["prior"], got
     with pytest.raises(ValueError, match="expected finite values at every draw"):
         prior_sensitivity({"mu": z}, np.where(z > 2, -np.inf, 0.0), -0.5 * z**2)
+
+
+def test_import_arviz_tries_again_once_when_its_daily_stamp_races_another_process(monkeypatch):
+    """ArviZ's import renames a daily stamp file; a second process doing the same at once can lose the rename
+    (FileNotFoundError, an OSError): the import is tried once more, and any other failure is the user's."""
+    import importlib
+
+    from bayesrod.inference.summary import import_arviz
+
+    calls = []
+
+    def flaky(name):
+        calls.append(name)
+        if len(calls) == 1:
+            raise FileNotFoundError("daily_warning.tmp -> daily_warning")
+        return "the module"
+
+    monkeypatch.setattr(importlib, "import_module", flaky)
+    assert import_arviz() == "the module" and calls == ["arviz", "arviz"]
+
+    def always(name):
+        calls.append(name)
+        raise FileNotFoundError("still racing")
+
+    monkeypatch.setattr(importlib, "import_module", always)
+    calls.clear()
+    with pytest.raises(FileNotFoundError):
+        import_arviz()
+    assert calls == ["arviz", "arviz"]

@@ -11,12 +11,20 @@ from ..physics import flexural_rigidity, k_theta, stem_diameter
 
 
 def import_arviz():
-    """ArviZ, imported without its refactor FutureWarning banner (noise for users)."""
+    """ArviZ, imported without its refactor FutureWarning banner (noise for users).
+
+    ArviZ 0.23 stamps the banner's day in a file of the user's cache on import, writing a temporary file and
+    renaming it: two processes importing it at once on a new day (fit-many's workers, a study's) race for
+    that rename and one fails with FileNotFoundError (seen at 00:04 in a two-worker group study). The stamp
+    is then written by the other, so the import is tried again once."""
+    import importlib
+
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FutureWarning)
-        import arviz
-
-    return arviz
+        try:
+            return importlib.import_module("arviz")
+        except OSError:  # the daily stamp's rename lost to another process's: written now
+            return importlib.import_module("arviz")
 
 
 #: The credible level of every interval bayesrod writes to a file (summary.json, compare.json,
