@@ -13,9 +13,11 @@ right:
 * EI0 and p of the stem (the twig's L = 0.8 m, pushed at ``--heights``);
 * per condition (intact, cut1, cut2, cut3 by name only): the base is a rigid clamp with probability 1/2,
   else u = c / (1 + c) uniform on (0, 0.9], c = EI0 C / L (the group prior: docs/inference.md);
-* per condition the force noise's sd (the prior's half-normal) and its AR(1) correlation from the pooled
-  population: a centre m with tanh m from the correlation prior (arcsine on (-0.5, 0.995)), each condition's
-  atanh(rho) ~ N(m, 0.25); a draw with a correlation outside the prior's support is drawn again.
+* per condition the force noise's AR(1) correlation from the pooled population: a centre m with tanh m from
+  the correlation prior (arcsine on (-0.5, 0.995)), each condition's atanh(rho) ~ N(m, 0.25); a draw with a
+  correlation outside the prior's support is drawn again; and its sd: an innovation sd from the prior's
+  half-normal, the marginal sd innovation / sqrt(1 - rho^2) (the sd prior is the innovation sd's since session
+  53; runs before drew the marginal sd from the half-normal).
 
 The data are bayesrod's simulator's (the fast forward solve at every sample, not the fit's tables), forces
 only. For EI0, p and each condition's base compliance, noise sd and correlation: the rank of the truth among
