@@ -569,3 +569,16 @@ def test_a_walker_far_out_in_log_space_maps_to_inf_without_a_warning():
         x = pr.from_sample(np.array([0.0, 1000.0]))
     assert x[0] == 1.0 and np.isinf(x[1])
     assert pr.logpdf_sample(np.array([1000.0]))[0] < -1e5  # the prior's weight there is nil
+
+
+def test_a_half_normal_far_out_in_log_space_has_zero_density_without_a_warning():
+    """A walker's proposal of log sd 400 (or inf) is beyond any force: density 0 (log -inf, not nan), and no
+    overflow warning reaches the user (fit-group's SBC printed one per worker)."""
+    import warnings
+
+    pr = ParamPrior("sigma_force_N", "halfnormal", (0.5,), "N")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got = pr.logpdf_sample(np.array([400.0, 800.0, np.inf, math.log(0.3)]))
+    assert got[0] == got[1] == got[2] == -np.inf
+    assert got[3] == pytest.approx(stats.halfnorm.logpdf(0.3, scale=0.5) + math.log(0.3), rel=1e-12)

@@ -56,8 +56,10 @@ class ParamPrior:
         if self.dist == "lognormal":  # u = log x ~ N(log median, sigma)
             return -0.5 * ((u - math.log(a[0])) / a[1]) ** 2 - math.log(a[1] * math.sqrt(2 * math.pi))
         if self.dist == "halfnormal":  # x = e^u, p(u) = p(x) x
-            x = np.exp(u)
-            return math.log(2) - 0.5 * (x / a[0]) ** 2 - math.log(a[0] * math.sqrt(2 * math.pi)) + u
+            with np.errstate(over="ignore", invalid="ignore"):  # a proposal far out (x above 1e154 N): density 0
+                x = np.exp(u)
+                out = math.log(2) - 0.5 * (x / a[0]) ** 2 - math.log(a[0] * math.sqrt(2 * math.pi)) + u
+            return np.where(np.isinf(x), -np.inf, out)
         if self.dist == "normal":
             return -0.5 * ((u - a[0]) / a[1]) ** 2 - math.log(a[1] * math.sqrt(2 * math.pi))
         if self.dist == "truncnormal":
