@@ -1072,3 +1072,19 @@ def test_summaries_read_evenly_spaced_draws_up_to_their_count():
     np.testing.assert_array_equal(_evenly(10, 4), [0, 3, 6, 9])
     np.testing.assert_array_equal(_evenly(3, 5), [0, 1, 2])
     assert _evenly(746816, SENSITIVITY_DRAWS).size == 20000 and _evenly(746816, OFFSET_DRAWS).size == 4000
+
+
+def test_start_point_keeps_a_correlation_inside_a_prior_file_that_leaves_out_one_half(cut_pair, tmp_path):
+    """The start's noise correlation is 0.5, or the prior's median where a prior file's rho_force leaves 0.5 out
+    (a rig known to sit near 0.9): before, fit-group found no start with a finite density there."""
+    doc = json.loads(json.dumps(load_prior("woody").doc))
+    doc["parameters"]["rho_force"] = {"dist": "truncnormal", "mean": 0.9, "sd": 0.003, "low": 0.85, "high": 0.95}
+    path = tmp_path / "rig.json"
+    path.write_text(json.dumps(doc))
+    lik = GroupLikelihood({d.extra["condition"]: d for d in cut_pair}, load_prior(str(path)), pooled=())
+    post = GroupPosterior(lik)
+    theta = start_point(post)  # the maximum a posteriori fit from the start: inside the prior's support
+    assert np.isfinite(post.log_prob(theta))
+    nat = post.to_natural(theta[None])
+    for c in lik.conditions:
+        assert 0.85 < float(nat[lik.local[c]["rho_force"]][0]) < 0.95
