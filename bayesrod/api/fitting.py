@@ -689,9 +689,10 @@ def sampling_coordinates(force_noise: str, effects, one_height: bool = False) ->
     since session 34); and where an AR(1) noise's sd prior sits (``noise_sd_prior``: on the innovation sd since
     session 53, a different target from the marginal sd's before). A checkpoint records them; chains in others
     cannot be resumed."""
+    noise_sd = "innovation_sd" if force_noise == "ar1" else "marginal_sd"  # sampled by it; its prior on it
     return {
-        "noise_coordinates": "innovation_sd" if force_noise == "ar1" else "marginal_sd",
-        "noise_sd_prior": "innovation_sd" if force_noise == "ar1" else "marginal_sd",
+        "noise_coordinates": noise_sd,
+        "noise_sd_prior": noise_sd,
         "base_coordinates": "u_forces_only_stiff_start" if "base_compliance" in effects else "log_k",
         "stiffness_coordinates": "log_k_at_height" if one_height else "log_EI0",
     }

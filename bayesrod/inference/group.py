@@ -453,8 +453,9 @@ def start_point(post: GroupPosterior) -> NDArray:
             loc = lik.local[c]
             nat[loc["sigma_force_N"]] = max(rms, 1e-4)
             if "rho_force" in loc:  # 0.5, or the prior's median where a prior file leaves 0.5 out
-                lo, hi = lik.priors[loc["rho_force"]].bounds()
-                nat[loc["rho_force"]] = 0.5 if lo < 0.5 < hi else lik.priors[loc["rho_force"]].quantile(0.5)
+                pr = lik.priors[loc["rho_force"]]
+                lo, hi = pr.bounds()
+                nat[loc["rho_force"]] = 0.5 if lo < 0.5 < hi else pr.quantile(0.5)
         top = max(scales.values())
         for c in lik.conditions:
             loc = lik.local[c]
