@@ -250,9 +250,22 @@ TARGETS["group_summary"] = (
     [
         "*.x__summary__mutmut_*",
         "*.x_fit_group__mutmut_*",
+        "*.x__evenly__mutmut_*",
+        "*.x_sensitivity_draws__mutmut_*",
         "*.x_correlation_sensitivity__mutmut_*",
         "*.x__correlation_sensitivity__mutmut_*",
     ],
+)
+# session 54: the correlations' prior sensitivity (session 52) against the tests that call it on draws set by the
+# test, without fit_group (whose MAP and sharing refits make group_summary's run take hours); the warning it
+# composes (_correlation_sensitivity) is read only through fit_group: group_summary's
+TARGETS["group_sensitivity"] = (
+    "bayesrod/api/group.py",
+    [
+        "tests/test_group.py::test_correlation_sensitivity_thins_drops_non_finite_draws_and_reads_each_quantity",
+        "tests/test_group.py::test_summaries_read_evenly_spaced_draws_up_to_their_count",
+    ],
+    ["*.x__evenly__mutmut_*", "*.x_sensitivity_draws__mutmut_*", "*.x_correlation_sensitivity__mutmut_*"],
 )
 
 # added in session 38: the force likelihood itself (the tables' interpolation, the residuals, the Gaussian and

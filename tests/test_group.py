@@ -1088,3 +1088,88 @@ def test_start_point_keeps_a_correlation_inside_a_prior_file_that_leaves_out_one
     nat = post.to_natural(theta[None])
     for c in lik.conditions:
         assert 0.85 < float(nat[lik.local[c]["rho_force"]][0]) < 0.95
+
+
+def test_correlation_sensitivity_thins_drops_non_finite_draws_and_reads_each_quantity(cut_pair, monkeypatch):
+    """correlation_sensitivity on a chain set here, no fit: it reads up to SENSITIVITY_DRAWS evenly thinned draws
+    (here 250 of 600), leaves out those whose log probability is not finite, scales the correlations' own log
+    prior (pooled: the population with its centre; apart: each condition's prior) against the likelihood
+    log_prob - log_prior, and reports each condition's rho, sigma and (with SENSITIVITY_MIN_SOFT soft draws among
+    those read) base compliance, and the shared EI0 -- the numbers of summary.json's
+    identifiability.correlation_prior_sensitivity, each against prior_sensitivity called here on the same draws."""
+    import bayesrod.api.group as api_group
+    from bayesrod.inference.group import U_SCALE
+    from bayesrod.inference.summary import SENSITIVITY_WARN, prior_sensitivity
+
+    specs = {d.extra["condition"]: d for d in cut_pair}
+    rng = np.random.default_rng(11)
+    n, k = 600, 250
+    monkeypatch.setattr(api_group, "SENSITIVITY_DRAWS", k)
+    monkeypatch.setattr(api_group, "SENSITIVITY_MIN_SOFT", 60)
+    EI = EI0 * np.exp(0.05 * rng.standard_normal(n))
+    C = {"a": np.where(np.arange(n) < n - 150, 0.0, 0.004 + 0.0005 * rng.random(n)), "b": 0.05 + 0.01 * rng.random(n)}
+    natural = {"EI0": EI, "p": P + 0.02 * rng.standard_normal(n)}
+    for c, r in (("a", 0.7), ("b", 0.93)):
+        cc = EI * C[c] / L
+        natural[f"z_base__{c}"] = np.where(C[c] > 0, cc / (1.0 + cc) / U_SCALE, -0.5)
+        natural[f"sigma_force_N__{c}"] = 0.03 * np.exp(0.2 * rng.standard_normal(n))
+        natural[f"rho_force__{c}"] = np.tanh(np.arctanh(r) + 0.3 * rng.standard_normal(n))
+    # a likelihood that depends on the correlations and EI0, so that each quantity's sensitivity differs
+    ll = -0.5 * ((natural["rho_force__b"] - 0.9) / 0.05) ** 2 - 0.5 * ((np.log(EI / EI0) - 0.01) / 0.04) ** 2
+    ll = ll + natural["rho_force__a"] * np.log(EI)
+    liks = GroupLikelihood(specs, load_prior("woody")).liks  # the tables built once, the variants below reuse them
+    bad = np.array([0, 16, 17, 240, 241, 599])  # thinned in: 0, 17, 241, 599 (the first and last kept); not: 16, 240
+    for pooled in (("rho_force",), ()):
+        post = GroupPosterior(GroupLikelihood(specs, load_prior("woody"), pooled=pooled, _liks=liks))
+        theta = post.to_sample({nm: natural[nm] for nm in post.names})
+        lp = ll + post.log_prior(theta)
+        lp[bad] = -np.inf
+        chain, log_prob = theta.reshape(3, n // 3, post.ndim), lp.reshape(3, n // 3)
+        sens = api_group.correlation_sensitivity(post, chain, log_prob)
+        idx = np.unique(np.linspace(0, n - 1, k).round().astype(int))
+        idx = idx[np.isfinite(lp[idx])]
+        assert idx.size == k - 4
+        nat = {nm: v[idx] for nm, v in natural.items()}
+        lp_rho = post.likelihood.correlation_log_prior(nat)
+        if pooled:
+            assert np.allclose(lp_rho, post.likelihood.pool_log_prior(nat))
+        else:
+            want_rho = sum(
+                post.likelihood.priors[f"rho_force__{c}"].logpdf_sample(nat[f"rho_force__{c}"]) for c in "ab"
+            )
+            np.testing.assert_allclose(lp_rho, want_rho, rtol=1e-12)
+        drawn = {"EI0": nat["EI0"]}
+        for c in "ab":
+            drawn[f"rho_force__{c}"], drawn[f"sigma_force_N__{c}"] = nat[f"rho_force__{c}"], nat[f"sigma_force_N__{c}"]
+        drawn["C__b"] = C["b"][idx]
+        want = prior_sensitivity(drawn, lp_rho, ll[idx])
+        assert sens["scaled"] == "the noise correlations' prior" and sens["warn_above"] == SENSITIVITY_WARN
+        assert sens["EI0"] == pytest.approx(want["EI0"], rel=1e-9)
+        for c in "ab":
+            assert sens["rho_force"][c] == pytest.approx(want[f"rho_force__{c}"], rel=1e-9), c
+            assert sens["sigma_force_N"][c] == pytest.approx(want[f"sigma_force_N__{c}"], rel=1e-9), c
+        assert sens["base_compliance_rad_per_Nm"]["b"] == pytest.approx(want["C__b"], rel=1e-9)
+        # condition a has 150 soft draws of 600, about 62 among those read: one above the floor of 60 ...
+        soft_a = np.count_nonzero(C["a"][idx] > 0)
+        assert soft_a >= 60
+        # ... and reported null when the floor is one above what it has
+        monkeypatch.setattr(api_group, "SENSITIVITY_MIN_SOFT", soft_a + 1)
+        assert api_group.correlation_sensitivity(post, chain, log_prob)["base_compliance_rad_per_Nm"]["a"] is None
+        monkeypatch.setattr(api_group, "SENSITIVITY_MIN_SOFT", soft_a)
+        got_a = api_group.correlation_sensitivity(post, chain, log_prob)["base_compliance_rad_per_Nm"]["a"]
+        want_a = prior_sensitivity({"C": C["a"][idx]}, lp_rho, ll[idx])["C"]
+        assert got_a == pytest.approx(want_a, rel=1e-9)
+        monkeypatch.setattr(api_group, "SENSITIVITY_MIN_SOFT", 60)
+        # the differing numbers are not one quantity's copied: every pair of reported values differs
+        vals = [sens["EI0"]["prior"]] + [sens[q][c]["prior"] for q in ("rho_force", "sigma_force_N") for c in "ab"]
+        assert len(set(np.round(vals, 12))) == len(vals), vals
+    # EI0 not shared: no EI0 entry; iid noise: nothing to report
+    post = GroupPosterior(GroupLikelihood(specs, load_prior("woody"), shared=("p",), _liks=liks))
+    nat2 = dict(natural) | {"EI0__a": EI, "EI0__b": 1.1 * EI}
+    theta = post.to_sample({nm: nat2[nm] for nm in post.names})
+    lp = ll + post.log_prior(theta)
+    sens = api_group.correlation_sensitivity(post, theta.reshape(3, n // 3, post.ndim), lp.reshape(3, n // 3))
+    assert "EI0" not in sens and set(sens["rho_force"]) == {"a", "b"}
+    post = GroupPosterior(GroupLikelihood(specs, load_prior("woody"), force_noise="iid", _liks=liks))
+    theta = post.to_sample({nm: natural[nm] for nm in post.names})
+    assert api_group.correlation_sensitivity(post, theta[None], np.zeros((1, n))) is None
