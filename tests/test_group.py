@@ -665,6 +665,12 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     (told,) = [w for w in ruled["warnings"] if "leans on its prior" in w]
     assert told.startswith("the noise correlation of a (0.30) leans"), told
     assert "prior is not measured (every base nearly a clamp), EI0's 0.01" in told, told
+    # both bases soft: the warning names the larger of their sensitivities (0.2 of a, not 0.1 of b)
+    given |= {"C__a": (0.2, 0.4), "C__b": (0.1, 0.4)}
+    natural["z_base__a"], natural["z_base__b"] = z(C_a), z(C_b)
+    ruled = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False).doc
+    (told,) = [w for w in ruled["warnings"] if "leans on its prior" in w]
+    assert "the compliances' sensitivity to that prior is at most 0.20, EI0's 0.01" in told, told
 
 
 def test_a_conditions_force_offset_is_integrated_out_exactly(cut_pair):
