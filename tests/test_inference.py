@@ -219,7 +219,11 @@ def test_a_base_spring_sampled_by_its_table_coordinate_is_the_same_posterior_and
         progress=False,
         use_shapes=False,
         target_ess=400,
-        max_steps=3000,
+        # the run stops once converged: 3000 steps sufficed from session 30 to 53 and left R-hat 1.011 (target
+        # 1.01) on session 54's machine with the same code and packages (no AVX-512 there: numpy and OpenBLAS
+        # take other kernels, whose last bits differ); in log k it was 1.12 after 8000, so 5000 still tells the
+        # coordinates apart
+        max_steps=5000,
     )
     assert fitted.doc["convergence"]["converged"], fitted.doc["convergence"]["message"]
     check = fitted.doc["table_check"]  # the force tables at the posterior median against exact solves
