@@ -42,6 +42,13 @@ def _kb(ratio: float) -> float:
     return kx * H_REF**2 * ratio / (1.0 - ratio)
 
 
+def _z_base(C, EI):
+    """The sampled base coordinate of compliances ``C`` [rad/(N m)] on a stem of stiffnesses ``EI`` (the draws'):
+    u = c / (1 + c), c = EI C / L, as z (:func:`z_of_u`); -0.5 (a clamp) where C is 0."""
+    c = EI * C / L
+    return np.where(C > 0, z_of_u(c / (1.0 + c)), -0.5)
+
+
 def test_compliance_coordinate_round_trips_and_a_clamp_is_zero():
     u = np.array([0.0, 0.1, 0.5, 0.85])
     kb = base_stiffness(u, 2.0, 0.8)
@@ -437,7 +444,6 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     k_theta at the pushed height with the base spring 1/C in series, the noise, and each ordered contrast's
     difference (b minus a) and P(b softer), against the same quantities computed here from the draws."""
     import bayesrod.api.group as api_group
-    from bayesrod.inference.group import U_SCALE
     from bayesrod.inference.sampler import SamplingResult
     from bayesrod.physics import k_theta
 
@@ -451,8 +457,7 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     rho = {"a": 0.8 + 0.01 * rng.standard_normal(n), "b": 0.9 + 0.01 * rng.standard_normal(n)}
 
     def z(C):
-        c = EI * C / L
-        return np.where(C > 0, c / (1.0 + c) / U_SCALE, -0.5)
+        return _z_base(C, EI)
 
     natural = {"EI0": EI, "p": p, "z_base__a": z(C_a), "z_base__b": z(C_b)}
     for c in "ab":
@@ -1104,7 +1109,6 @@ def test_correlation_sensitivity_thins_drops_non_finite_draws_and_reads_each_qua
     those read) base compliance, and the shared EI0 -- the numbers of summary.json's
     identifiability.correlation_prior_sensitivity, each against prior_sensitivity called here on the same draws."""
     import bayesrod.api.group as api_group
-    from bayesrod.inference.group import U_SCALE
     from bayesrod.inference.summary import SENSITIVITY_WARN, prior_sensitivity
 
     specs = {d.extra["condition"]: d for d in cut_pair}
@@ -1116,8 +1120,7 @@ def test_correlation_sensitivity_thins_drops_non_finite_draws_and_reads_each_qua
     C = {"a": np.where(np.arange(n) < n - 150, 0.0, 0.004 + 0.0005 * rng.random(n)), "b": 0.05 + 0.01 * rng.random(n)}
     natural = {"EI0": EI, "p": P + 0.02 * rng.standard_normal(n)}
     for c, r in (("a", 0.7), ("b", 0.93)):
-        cc = EI * C[c] / L
-        natural[f"z_base__{c}"] = np.where(C[c] > 0, cc / (1.0 + cc) / U_SCALE, -0.5)
+        natural[f"z_base__{c}"] = _z_base(C[c], EI)
         natural[f"sigma_force_N__{c}"] = 0.03 * np.exp(0.2 * rng.standard_normal(n))
         natural[f"rho_force__{c}"] = np.tanh(np.arctanh(r) + 0.3 * rng.standard_normal(n))
     # a likelihood that depends on the correlations and EI0, so that each quantity's sensitivity differs
@@ -1155,7 +1158,7 @@ def test_correlation_sensitivity_thins_drops_non_finite_draws_and_reads_each_qua
             assert sens["rho_force"][c] == pytest.approx(want[f"rho_force__{c}"], rel=1e-9), c
             assert sens["sigma_force_N"][c] == pytest.approx(want[f"sigma_force_N__{c}"], rel=1e-9), c
         assert sens["base_compliance_rad_per_Nm"]["b"] == pytest.approx(want["C__b"], rel=1e-9)
-        # condition a has 150 soft draws of 600, about 62 among those read: one above the floor of 60 ...
+        # condition a has 150 soft draws of 600, 62 among those read: above the floor of 60 ...
         soft_a = np.count_nonzero(C["a"][idx] > 0)
         assert soft_a >= 60
         # ... and reported null when the floor is one above what it has
