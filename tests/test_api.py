@@ -21,7 +21,7 @@ PKG = REPO / "bayesrod"
 @pytest.fixture(scope="module")
 def post(twig_noisy):
     # the same arguments as the CLI run of test_api_and_cli_give_identical_summaries, which compares with it
-    return bayesrod.fit(twig_noisy, use_shapes=False, progress=False, seed=5, max_steps=1200, target_ess=200)
+    return bayesrod.fit(twig_noisy, use_shapes=False, progress=False, seed=5, max_steps=600, target_ess=100)
 
 
 def test_public_names_resolve_and_are_documented():
@@ -113,7 +113,7 @@ def test_save_load_round_trip_is_identical(post, tmp_path):
 
 def test_api_and_cli_give_identical_summaries(post, twig_noisy, tmp_path):
     run = tmp_path / "cli"
-    budget = ["--max-steps", "1200", "--target-ess", "200"]
+    budget = ["--max-steps", "600", "--target-ess", "100"]
     assert main(["fit", str(twig_noisy), "--out", str(run), "--forces-only", "--seed", "5", "--quiet", *budget]) == 0
     cli = json.loads((run / "summary.json").read_text())
     assert post.config["seed"] == 5 and not post.config["use_shapes"]  # the fixture is the API side

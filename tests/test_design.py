@@ -589,6 +589,43 @@ def test_a_varying_tabled_effect_is_an_axis_however_small_its_spread_and_only_on
     assert np.isfinite(lin["candidates"][0]["expected_information_gain_nats"])
 
 
+def test_design_reads_an_effect_table_as_the_likelihood_reads_it(monkeypatch):
+    """The predictor and the likelihood on one table (synthetic force curves in place of the solves: exponential
+    along a friction axis, as friction forces grow near the branch end; the same along a rest-curvature axis,
+    read linearly there): the same forces at off-node (p, u), so a design plans with the reading the fit will use.
+    The exact-solve version with friction is slow (next test)."""
+    from types import SimpleNamespace
+
+    from bayesrod.inference import design
+    from bayesrod.inference.likelihood import EffectAxis, RodLikelihood
+
+    def curve(d, u, p):  # f = d exp(6 u d + p): convex in u; log f is linear in u and p
+        return d * np.exp(6.0 * np.asarray(u)[..., None] * d + np.asarray(p)[..., None])
+
+    def fake_batch(etas, p_grid, effects_nd=None):
+        u_nd = next(iter(effects_nd.values()))
+        return [SimpleNamespace(force=lambda d, u=u: curve(d, u, p_grid), d_end=np.ones(p_grid.size),
+                                d_early=np.ones(p_grid.size)) for u in u_nd]  # fmt: skip
+
+    monkeypatch.setattr(design.ForceCurves, "batch", fake_batch)
+    u_nodes = np.linspace(-0.8482, 0.8482, 25)
+    L, h, EI0 = 0.8, 0.45, 2.63
+    D = np.linspace(0.1, 1.0, 12) * L
+    pt, ut = np.array([0.43, 0.412, 0.445]), np.array([0.3, 0.05, -0.61])
+    for name in ("contact_friction", "rest_curvature"):
+        axis = EffectAxis(name, u_nodes)
+        pred = HeightPredictor(h, L, D, (0.40, 0.46), effect_axis=axis)
+        got = pred.forces(np.full(3, np.log(EI0)), pt, u=ut)
+        lik = RodLikelihood.__new__(RodLikelihood)
+        lik.p_grid, lik.axis, lik.f_table = pred.p_grid, axis, pred.f_table
+        np.testing.assert_allclose(got, EI0 / L**2 * lik.interp_force(pt, ut), rtol=1e-12, err_msg=name)
+        exact = EI0 / L**2 * curve(D / L, ut, pt)
+        err = np.abs(got - exact).max() / exact.max()
+        # log space reads log f exactly (linear in u and p): 7e-14 measured; linearly along u: 6e-4
+        assert (err < 1e-9) if name == "contact_friction" else (err > 1e-4), (name, err)
+
+
+@pytest.mark.slow  # 34 s: 32 friction curves (docs/validation.md, "The slow tier")
 def test_design_reads_friction_forces_in_log_space_as_the_likelihood_does():
     """A planned push at the twig's lowest height with a contact-friction axis (the fit's nodes around mu 0.3),
     to its branch end (0.745 L): the predictor's forces at p 0.43, mu 0.3 against an exact curve over the last half.

@@ -123,6 +123,37 @@ def test_yield_plateau_at_My_over_h():
     assert list(sol.yielded) == list(~below)
 
 
+#: The reference solver's forces [N] (L 0.8 m, EI0 2.63 N m^2, p 0.43) for the cases with self weight, whose
+#: shooting under solve_ivp takes 8-10 s each: stored to full precision, and recomputed against these by the slow
+#: test_stored_reference_forces_are_the_reference_solvers (docs/validation.md, "The slow tier").
+STORED_REFERENCE_N = {
+    (("self_weight", 1.5),): (1.2532789350764622, 5.989552170751329, 12.076507906729619),
+    (("base_compliance", 6.0), ("self_weight", 1.5)): (0.2334651185236375, 1.1455223491486555, 2.1645734952937317),
+    (("base_tilt", -0.05), ("self_weight", 1.5)): (0.6218793920085921, 3.0561074288139656, 5.631955552610355),
+}
+
+
+def _solve_reference(mapping: dict, h: float, d: np.ndarray) -> np.ndarray:
+    """The reference solver's sensor forces [N] at contact displacements ``d`` [m], height ``h`` [m]."""
+    nd = {k: float(v) for k, v in Effects.from_mapping(mapping).nondim(L, EI0).items()}
+    return np.array([R.solve_displacement(x / L, h / L, P, nd)["f"] for x in d]) * EI0 / L**2
+
+
+def _reference_forces(mapping: dict, h: float, d: np.ndarray) -> np.ndarray:
+    """:func:`_solve_reference`, read from :data:`STORED_REFERENCE_N` where it is stored."""
+    key = tuple(sorted(mapping.items()))
+    return np.array(STORED_REFERENCE_N[key]) if key in STORED_REFERENCE_N else _solve_reference(mapping, h, d)
+
+
+@pytest.mark.slow  # 27 s: three reference solves under self weight
+def test_stored_reference_forces_are_the_reference_solvers():
+    """The stored values are what the reference solver gives now (at the tests' heights and displacements)."""
+    cases = {(("self_weight", 1.5),): (H, [0.02, 0.1, 0.25])}
+    for key, want in STORED_REFERENCE_N.items():
+        h, d = cases.get(key, (0.55, [0.02, 0.1, 0.2]))
+        np.testing.assert_allclose(_solve_reference(dict(key), h, np.array(d)), want, rtol=1e-12, atol=0)
+
+
 @pytest.mark.parametrize(
     "name,value",
     [
@@ -135,10 +166,9 @@ def test_yield_plateau_at_My_over_h():
 )
 def test_effects_agree_with_reference(name, value):
     eff = Effects.from_mapping({name: value})
-    nd = {k: float(v) for k, v in eff.nondim(L, EI0).items()}
     d = np.array([0.02, 0.1, 0.25])
     fast = force_from_displacement(d, H, EI0, P, L, eff)
-    ref = np.array([R.solve_displacement(x / L, H / L, P, nd)["f"] for x in d]) * EI0 / L**2
+    ref = _reference_forces({name: value}, H, d)
     # they agree to 2e-10 (self weight; 3e-12 or better for the others): 1e-8 catches a base-moment secant
     # stopped at 1e-6 instead of 1e-12 (self weight: 1.4e-7), which 1e-6 let through; NaN where both slipped
     np.testing.assert_allclose(fast.true_force_N, ref, rtol=1e-8)
@@ -229,9 +259,8 @@ def test_two_effects_at_once_agree_with_reference(mapping):
     weight or friction (the base rotation inside its secant), a rest curvature with friction; against the
     reference solver at 1e-8 (they agree to 3e-10)."""
     eff = Effects.from_mapping(mapping)
-    nd = {k: float(v) for k, v in eff.nondim(L, EI0).items()}
     d = np.array([0.02, 0.1, 0.2])
     fast = force_from_displacement(d, 0.55, EI0, P, L, eff)
-    ref = np.array([R.solve_displacement(x / L, 0.55 / L, P, nd)["f"] for x in d]) * EI0 / L**2
+    ref = _reference_forces(mapping, 0.55, d)
     assert np.isfinite(ref[:2]).all()
     np.testing.assert_allclose(fast.true_force_N, ref, rtol=1e-8)

@@ -185,6 +185,7 @@ def _stiff_base_push():
     return ds, str(Path(__file__).resolve().parents[1] / "scripts" / "sbc_prior.json")
 
 
+@pytest.mark.slow  # 29 s: two 5000-step fits; u's Jacobian is also checked by test_prior_sampling (docs/validation.md, "The slow tier")
 def test_a_base_spring_sampled_by_its_table_coordinate_is_the_same_posterior_and_mixes(monkeypatch):
     """The spring is sampled by u = c / (1 + c) (ParameterSpace): at every point the density in u is the
     density in log k times |d log k / du|, and on one push, where forces alone pin a curve along which
@@ -309,7 +310,7 @@ def test_fit_recovers_truth(tmp_path, preset, seed):
 
 def test_predict_posterior_json(tmp_path, capsys, twig_noisy):
     run = tmp_path / "run"
-    budget = ["--max-steps", "1500", "--target-ess", "300"]
+    budget = ["--max-steps", "600", "--target-ess", "100"]
     assert main(["fit", str(twig_noisy), "--out", str(run), "--quiet", "--forces-only", *budget]) == 0
     capsys.readouterr()
     assert main(["predict", "--posterior", str(run), "--height", "0.5", "--displacement", "0.02,0.1", "--json"]) == 0
@@ -548,7 +549,7 @@ def test_shape_offsets_past_a_nodes_slip_go_on_along_the_secant_of_its_last_step
     "effect, value, nodes, shapes",
     [
         (None, 0.0, None, False),
-        ("rest_curvature", 0.3, 5, False),
+        pytest.param("rest_curvature", 0.3, 5, False, marks=pytest.mark.slow),  # 10 s; with shapes below: default
         (None, 0.0, None, True),
         ("rest_curvature", 0.3, 5, True),
     ],

@@ -31,6 +31,7 @@ def _same(a: ForceCurves, b: ForceCurves) -> None:
     np.testing.assert_array_equal(a.force(D), b.force(D))
 
 
+@pytest.mark.slow  # 29 s: five friction curves, two in worker processes (docs/validation.md, "The slow tier")
 def test_friction_curves_are_their_own_whatever_the_batch_and_the_workers(monkeypatch):
     _fresh_cache(monkeypatch)
     serial = ForceCurves.batch(ETAS, P_GRID, N_F, {"mu": MUS})
