@@ -41,7 +41,9 @@ def test_the_tables_move_the_plain_rods_estimate_by_under_a_twentieth_of_its_sd(
     assert 5e-4 < out["laplace_sd"][0] < 5e-3 and 5e-4 < out["laplace_sd"][1] < 5e-3, out
 
 
-@pytest.mark.slow  # 34 s: 29 friction curves; the end tangent is also checked by test_likelihood_core (docs/validation.md, "The slow tier")
+# slow (34 s: 29 friction curves); the end tangent is also checked by test_likelihood_core (docs/validation.md,
+# "The slow tier")
+@pytest.mark.slow
 def test_force_tables_stay_smooth_past_a_branch_that_ends_rising():
     """With contact friction the stem slides off while the force still rises (the plain rod ends in a
     fold), so a node whose branch ended before d must not hold its end force: the 2-D table (4-point
@@ -68,7 +70,9 @@ def test_force_tables_stay_smooth_past_a_branch_that_ends_rising():
     assert np.abs(f - f_exact).max() < 1e-4 * f_exact.max()
 
 
-@pytest.mark.slow  # 29 s: 17 friction curves; the reading itself: test_design_reads_an_effect_table_as_the_likelihood_reads_it (docs/validation.md, "The slow tier")
+# slow (29 s: 17 friction curves); the reading itself is tested on a synthetic table by test_design.py's
+# test_design_reads_an_effect_table_as_the_likelihood_reads_it (docs/validation.md, "The slow tier")
+@pytest.mark.slow
 def test_the_likelihood_reads_friction_forces_in_log_space_to_the_branch_end():
     """The twig's lowest push (eta 0.5625) with friction 0.3 runs to its branch end (0.745 L), where the force grows
     nearly exponentially along mu (f at 0.738 L: 6.7, 8.7, 11.8, 17.1 on the fit's nodes 0.21-0.42). The

@@ -185,7 +185,9 @@ def _stiff_base_push():
     return ds, str(Path(__file__).resolve().parents[1] / "scripts" / "sbc_prior.json")
 
 
-@pytest.mark.slow  # 29 s: two 5000-step fits; u's Jacobian is also checked by test_prior_sampling (docs/validation.md, "The slow tier")
+# slow (29 s: two 5000-step fits); u's Jacobian is also checked by test_prior_sampling (docs/validation.md,
+# "The slow tier")
+@pytest.mark.slow
 def test_a_base_spring_sampled_by_its_table_coordinate_is_the_same_posterior_and_mixes(monkeypatch):
     """The spring is sampled by u = c / (1 + c) (ParameterSpace): at every point the density in u is the
     density in log k times |d log k / du|, and on one push, where forces alone pin a curve along which
