@@ -49,8 +49,8 @@ def _geometry(spec, L, dh):
 
 def test_geometry_tables_match_tables_built_at_that_geometry(monkeypatch):
     """Length and height axes (off every node) against plain tables built directly at the same L and heights."""
-    # the axes' plumbing on pushes short of their branch ends: 13 length nodes suffice to 1e-4 here (the shipped 37
-    # for pushes to the branch end: the next test), at a third of the build
+    # the axes' plumbing on pushes short of their branch ends: 13 length nodes suffice to 1e-4 here (the shipped 49
+    # are for pushes to the branch end: the next test), at about a quarter of the build
     monkeypatch.setattr("bayesrod.inference.likelihood.LENGTH_NODES", 13)
     spec = _dataset(0.8)
     grid = {"p_range": (0.0, 1.2), "n_p": 13, "use_shapes": False}  # a coarse p grid: the geometry axes are tested
