@@ -377,10 +377,8 @@ def test_ar1_forces_and_the_slip_term_add(demo):
     np.testing.assert_allclose(lik.log_likelihood(params), force + lik.slip_loglik(params["p"], None), rtol=1e-12)
 
 
-def test_a_yield_caps_the_force_at_the_yield_moment_over_the_contact_height_and_an_offset_adds(monkeypatch):
+def test_a_yield_caps_the_force_at_the_yield_moment_over_the_contact_height_and_an_offset_adds(coarse_length_axis):
     """F = min(EI0 / L^2 f, M_y / h) plus a load-cell offset; with height errors h is the walker's own h + dh."""
-    # how the yield reads the walker's geometry, not the length axis's accuracy (tests/test_nuisances.py): 13 nodes
-    monkeypatch.setattr("bayesrod.inference.likelihood.LENGTH_NODES", 13)
 
     spec = _dataset(0.8)
     grid = {"p_range": (0.0, 1.2), "n_p": 13, "use_shapes": False}

@@ -11,6 +11,7 @@ import pytest
 
 import bayesrod
 from bayesrod.inference.likelihood import (
+    ForceCurves,
     RodLikelihood,
     build_likelihood,
     default_length_prior,
@@ -47,11 +48,8 @@ def _geometry(spec, L, dh):
     return dataclasses.replace(spec, length_m=L, pushes=pushes)
 
 
-def test_geometry_tables_match_tables_built_at_that_geometry(monkeypatch):
+def test_geometry_tables_match_tables_built_at_that_geometry(coarse_length_axis):
     """Length and height axes (off every node) against plain tables built directly at the same L and heights."""
-    # the axes' plumbing on pushes short of their branch ends: 13 length nodes suffice to 1e-4 here (the shipped 49
-    # are for pushes to the branch end: the next test), at about a quarter of the build
-    monkeypatch.setattr("bayesrod.inference.likelihood.LENGTH_NODES", 13)
     spec = _dataset(0.8)
     grid = {"p_range": (0.0, 1.2), "n_p": 13, "use_shapes": False}  # a coarse p grid: the geometry axes are tested
     lik = RodLikelihood(spec, length_prior=default_length_prior(spec), height_sd_m=0.003, **grid)
@@ -78,13 +76,14 @@ def test_the_length_axis_reads_a_push_to_its_branch_end_between_nodes():
     """A push taken to 99% of its branch end (the twig at 0.65 m; rigs push until the stem slips): on shorter stems
     the branch ends before the last samples, and the nodes there continue their curves along the end tangent, so
     the table's length axis crosses that kink (continued C1, so the error falls as the square of the node step).
-    Here the largest error over L 0.8-0.81 is 6.2e-4 of the peak force with 25 nodes, 4.7e-4 with 31, 7.7e-5 with
-    37 and 1.6e-4 with the 49 shipped (where the nodes fall against the kinks matters as much as their number).
+    Here the largest error over L 0.8-0.81 is 3.0e-3 of the peak force with 13 nodes, 6.3e-4 with 25, 5.0e-4 with
+    31, 2.4e-4 with 37 and 1.3e-4 with the 49 shipped.
     On the simulated twig's three pushes, noise-free, the maximum-likelihood estimate moved by up to 0.48 sd with
     13 nodes (the shipped number before session 56), 0.10 with 25, 0.058 with 37 and 0.037 with 49
     (scripts/table_length_shift.py; docs/validation.md, "Session 56")."""
     h = 0.65
-    D = np.linspace(0.0, 0.99 * 0.371, 60)  # the branch end at L 0.8, p 0.43: 0.371 m
+    (curve,) = ForceCurves.batch(np.array([h / L_TRUE]), np.array([P]))
+    D = np.linspace(0.0, 0.99 * curve.d_end[0] * L_TRUE, 60)  # the branch end at L 0.8, p 0.43: 0.376 m
     F = force_from_displacement(D, h, EI0, P, L_TRUE).force_N
     assert np.isfinite(F).all()  # not slipped
     spec = bayesrod.Dataset.from_arrays(length_m=L_TRUE, height_m=[h], displacement_m=[D], force_N=[F])

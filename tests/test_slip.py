@@ -193,11 +193,8 @@ def test_fit_with_slip_writes_the_window_and_the_model_slip_and_only_then(one_he
     assert "Intervals likely too narrow" not in post.report_html(pngs={})
 
 
-def test_the_calibration_caution_is_for_one_height_forces_only_and_a_slip_seen(one_height, monkeypatch):
+def test_the_calibration_caution_is_for_one_height_forces_only_and_a_slip_seen(one_height, coarse_length_axis):
     from bayesrod.api.fitting import one_height_slip_caution
-
-    # which caution a fit gets, not what its length table reads: 13 length nodes (the fit's 49 took most of the test)
-    monkeypatch.setattr("bayesrod.inference.likelihood.LENGTH_NODES", 13)
 
     pr = load_prior("default")
 
