@@ -83,9 +83,9 @@ def main() -> None:
         post, theta0, seed=a.seed, progress=False, max_steps=a.steps, min_steps=a.steps, target_ess=1e12
     )
     print(f"{a.offsets}: {res.n_steps} steps, {time.process_time() - t0:.0f} s of CPU")
-    d = diagnostics(res.chain, post.names)
+    d = diagnostics(res.chain, post.names, n_ensembles=res.n_ensembles)
     for n in post.names:
-        print(f"{n:28s} R-hat {d['rhat'][n]:.3f}  bulk ESS {d['ess_bulk'][n]:.0f}")
+        print(f"{n:28s} R-hat {d['rhat'][n]:.4f} (walkers {d['rhat_walkers'][n]:.3f})  bulk ESS {d['ess_bulk'][n]:.0f}")
     nat = post.to_natural(res.chain.reshape(-1, post.ndim))
     for n in ("EI0", "p"):
         print(n, np.round(np.quantile(nat[n], [0.05, 0.5, 0.95]), 4))

@@ -100,7 +100,9 @@ def test_run_ensembles_returns_every_walker_after_burn_in_with_its_log_density()
     assert 0.2 < res.acceptance < 0.95
     assert res.walkers_restarted == (0, 0, 0)  # a healthy run moves nobody
     assert abs(np.std(res.chain) - 1.0) < 0.1 and abs(np.mean(res.chain)) < 0.1
-    assert set(res.diagnostics) == {"rhat", "ess_bulk"} and set(res.diagnostics["rhat"]) == set(post.names)
+    assert set(res.diagnostics) == {"rhat", "rhat_walkers", "ess_bulk"}
+    assert all(set(v) == set(post.names) for v in res.diagnostics.values())
+    assert res.diagnostics == sampler.diagnostics(res.chain, post.names, n_ensembles=3)  # each ensemble a chain
     # the ensembles are independent (their own seeds) and the whole run reproducible from its seed
     first = [res.chain[16 * k : 16 * (k + 1), 0] for k in range(3)]
     assert not np.allclose(first[0], first[1]) and not np.allclose(first[1], first[2])
@@ -148,7 +150,7 @@ def test_run_ensembles_stops_when_every_target_is_met_and_says_when_not(monkeypa
     seen = []
 
     def fake(ess, rhat):
-        def diagnostics(chain, names):
+        def diagnostics(chain, names, **kw):
             seen.append(chain.shape[1])
             return {"rhat": dict.fromkeys(names, rhat), "ess_bulk": {**dict.fromkeys(names, ess), names[-1]: 1.0}}
 
@@ -237,7 +239,7 @@ def test_run_ensembles_ignores_numpys_global_random_state():
 
 
 def test_run_ensembles_never_steps_past_its_budget(monkeypatch):
-    def never(chain, names):
+    def never(chain, names, **kw):
         return {"rhat": dict.fromkeys(names, 2.0), "ess_bulk": dict.fromkeys(names, 1.0)}
 
     monkeypatch.setattr(sampler, "diagnostics", never)
@@ -295,7 +297,7 @@ def test_a_run_exactly_fifty_autocorrelation_times_long_is_long_enough(monkeypat
     monkeypatch.setattr(
         sampler,
         "diagnostics",
-        lambda chain, names: {"rhat": dict.fromkeys(names, 1.0), "ess_bulk": dict.fromkeys(names, 1e4)},
+        lambda chain, names, **kw: {"rhat": dict.fromkeys(names, 1.0), "ess_bulk": dict.fromkeys(names, 1e4)},
     )
     kw = dict(n_ensembles=1, n_walkers=16, chunk=100, min_steps=200, max_steps=400, progress=False)
     res = run_ensembles(_Gauss(2), np.zeros(2), seed=0, **kw)
@@ -312,7 +314,7 @@ def test_rhat_over_walkers_is_what_their_autocorrelation_time_gives():
     n, tau = 2000, 60.0
     rho = (tau - 1) / (tau + 1)
     x = lfilter([1.0], [1.0, -rho], rng.standard_normal((224, n + 600)), axis=1)[:, 600:] * np.sqrt(1 - rho**2)
-    rhat = sampler.diagnostics(x[:, :, None], ["a"])["rhat"]["a"]
+    rhat = sampler.diagnostics(x[:, :, None], ["a"])["rhat_walkers"]["a"]
     assert rhat == pytest.approx(np.sqrt(1 + 2 * (tau - 1) / n), abs=0.004), rhat  # 1.0292
     # so many more steps: R-hat 1.07 after 6000 steps asks for (1.07^2 - 1) / (1.01^2 - 1) = 7.2 times as many
     assert sampler.steps_needed(6000, 1.07, 5000.0, 100.0) == 44000
@@ -359,3 +361,53 @@ def test_a_stuck_walker_nudged_outside_the_support_stays_on_its_donor():
     assert any(any(np.array_equal(out[w], chain[-1, g]) for g in good) for w in stuck)
     blind = replace_stuck_walkers(chain, lp, np.random.default_rng(4))  # without the density: half land outside
     assert not np.isfinite(post.log_prob(blind)).all()
+
+
+def test_the_convergence_rhat_reads_each_ensemble_as_a_chain_and_the_walkers_guard_what_it_cannot():
+    """Four ensembles of 56 walkers, each walker an AR(1) of autocorrelation time 60 over 2000 kept steps
+    (as the two-height group fit of docs/validation.md "Convergence: the ensembles as chains"): over walkers
+    R-hat reads 1.03, their autocorrelation, with the ensembles as chains 1.000, and the run meets its targets
+    once 50 tau long. One ensemble whose walkers sit 0.5 sd off: the ensembles' R-hat misses its target.
+    Six walkers 5 sd apart: the ensembles' R-hat does not see them, the walkers' guard (1.1) does; a walker
+    whose log density stays 40 nats down is counted stuck."""
+    from scipy.signal import lfilter
+
+    rng = np.random.default_rng(0)
+    n, tau = 2000, 60.0
+    rho = (tau - 1) / (tau + 1)
+    x = lfilter([1.0], [1.0, -rho], rng.standard_normal((224, n + 600)), axis=1)[:, 600:] * np.sqrt(1 - rho**2)
+    d = sampler.diagnostics(x[:, :, None], ["a"], n_ensembles=4)
+    assert d["rhat"]["a"] < 1.002 and d["rhat_walkers"]["a"] == pytest.approx(1.029, abs=0.004), d
+    assert sampler.missed_targets(d, 3000, np.array([tau]), 400.0, 1.01, ["a"]) == []
+    assert sampler.missed_targets(d, 2999, np.array([tau]), 400.0, 1.01, ["a"]) != []  # 50 tau
+    assert sampler.missed_targets(d, 3000, np.array([tau]), 400.0, 1.01, ["a"], n_stuck=1) != []
+    assert sampler.missed_targets(d, 3000, np.array([tau]), d["ess_bulk"]["a"] + 1, 1.01, ["a"]) != []
+    off = x.copy()
+    off[:56] += 0.5
+    d = sampler.diagnostics(off[:, :, None], ["a"], n_ensembles=4)
+    assert d["rhat"]["a"] > 1.02 and d["rhat_walkers"]["a"] < 1.1, d
+    assert [m.split(" ")[0] for m in sampler.missed_targets(d, 3000, np.array([tau]), 400.0, 1.01, ["a"])] == ["R-hat"]
+    apart = x.copy()
+    apart[:6] += 5.0
+    d = sampler.diagnostics(apart[:, :, None], ["a"], n_ensembles=4)
+    assert d["rhat"]["a"] < 1.01 and d["rhat_walkers"]["a"] > 1.1, d
+    (m,) = sampler.missed_targets(d, 3000, np.array([tau]), 400.0, 1.01, ["a"])
+    assert "walkers disagree" in m
+    lp = -0.5 * x.T**2  # (steps, walkers)
+    lp[:, 3] -= 40.0
+    assert np.flatnonzero(sampler.stuck_walkers(lp, 1)).tolist() == [3]
+    with pytest.raises(ValueError, match="n_ensembles"):
+        sampler.diagnostics(x[:, :, None], ["a"], n_ensembles=5)
+
+
+def test_a_run_with_a_walker_stuck_at_its_end_has_not_converged(monkeypatch):
+    """The criterion counts stuck walkers over the kept steps of every ensemble (:func:`count_stuck`)."""
+    kw = dict(n_ensembles=2, n_walkers=16, chunk=100, min_steps=300, max_steps=400, progress=False, target_ess=1.0)
+    diag = {"rhat": {"x0": 1.0}, "ess_bulk": {"x0": 1e4}}
+    monkeypatch.setattr(sampler, "diagnostics", lambda chain, names, **k: diag)
+    assert run_ensembles(_Gauss(1), np.zeros(1), seed=0, **kw).converged is True
+    real = sampler.stuck_walkers
+    monkeypatch.setattr(sampler, "stuck_walkers", lambda lp, ndim, p_miss=1e-6: real(lp, ndim) | (np.arange(16) == 5))
+    res = run_ensembles(_Gauss(1), np.zeros(1), seed=0, **kw)
+    assert res.converged is False and res.n_steps == 400 and sampler.count_stuck(res) == 2
+    assert "2 walker(s) stuck" in sampler.convergence_message(res, 400, 1.0)

@@ -35,7 +35,7 @@ from ..inference.group import (
 )
 from ..inference.priors import load_prior
 from ..inference.sampler import convergence_message, run_ensembles
-from ..inference.summary import LEVEL, SENSITIVITY_WARN, credible_interval, prior_sensitivity
+from ..inference.summary import LEVEL, SENSITIVITY_WARN, credible_interval, prior_sensitivity, walker_rhat
 from ..physics import k_theta
 from ._common import as_dataset, plain_json, progress_enabled, readonly
 
@@ -546,6 +546,7 @@ def _summary(sid, lik: GroupLikelihood, nat, per, samples, res, pr, check, secon
         "convergence": {
             "rhat_max": float(max(diag["rhat"].values())),
             "ess_bulk_min": float(min(diag["ess_bulk"].values())),
+            **walker_rhat(diag),
             "walkers_restarted": int(sum(res.walkers_restarted)),
         },
         "sampler": {"steps": res.n_steps, "burn_in": res.burn, "seconds": round(seconds, 1)},

@@ -1,8 +1,8 @@
 """Sampling: start point, independent emcee ensembles with an HDF5 backend, diagnostics.
 
 emcee only ever sees ``log_prob`` (vectorised over walkers). Several ensembles
-are started independently so that R-hat and bulk ESS (ArviZ, with every walker
-of every ensemble as a chain) are meaningful; runs extend in chunks until the
+are started independently so that R-hat (ArviZ, each ensemble as a chain) is
+meaningful; runs extend in chunks until the
 targets are met or the step budget is spent, and resume from the HDF5 file
 after an interruption.
 """
@@ -178,41 +178,104 @@ class SamplingResult:
     walkers_restarted: tuple = ()
 
 
+#: R-hat over walkers (every walker a chain) above which walkers disagree: at emcee's 50 autocorrelation
+#: times walkers that mix alike read about 1.03 (:func:`diagnostics`); Gelman and Rubin's original 1.1
+WALKER_RHAT_MAX = 1.1
+
+
+def missed_targets(
+    diag: dict, n_steps: int, tau: NDArray, target_ess: float, target_rhat: float, targeted, n_stuck: int = 0
+) -> list[str]:
+    """The convergence targets a run has not met, one phrase each; empty when it has met them all.
+
+    The targets: R-hat <= ``target_rhat`` with each ensemble as a chain (independent ensembles agree and the
+    run's halves too), R-hat over walkers <= :data:`WALKER_RHAT_MAX` (no walker apart from the rest), bulk
+    ESS >= ``target_ess`` for each parameter in ``targeted``, the run at least 50 autocorrelation times
+    long (emcee's rule; ``tau`` the largest over ensembles per parameter), and no walker stuck in a far worse
+    region at the end (``n_stuck``, :func:`stuck_walkers` over the kept steps).
+    """
+    out = []
+    rhat = max(diag["rhat"].values())
+    if not rhat <= target_rhat:
+        out.append(f"R-hat max {rhat:.4f} with the ensembles as chains, target {target_rhat:g}")
+    rw = max(diag.get("rhat_walkers", {"": 1.0}).values())
+    if not rw <= WALKER_RHAT_MAX:
+        out.append(f"R-hat over walkers {rw:.3f}, above {WALKER_RHAT_MAX:g}: walkers disagree")
+    ess = min(diag["ess_bulk"][n] for n in targeted)
+    if not ess >= target_ess:
+        out.append(f"bulk ESS of {' and '.join(targeted)} {ess:.0f}, target {target_ess:g}")
+    t = float(np.nanmax(tau))
+    if not n_steps >= 50 * t:
+        out.append(f"{n_steps} steps, fewer than 50 autocorrelation times ({50 * t:.0f})")
+    if n_stuck:
+        out.append(f"{n_stuck} walker(s) stuck in a far worse region")
+    return out
+
+
 def convergence_message(
     res: SamplingResult, max_steps: int, target_ess: float, target_rhat: float = 1.01
 ) -> str | None:
-    """None when the run met its targets; else one line for the user: what was missed and what to do,
-    with the steps the targets need at this run's rate (:func:`steps_needed`)."""
+    """None when the run met its targets (:func:`missed_targets`); else one line for the user: what was missed
+    and what to do, with the steps the targets need at this run's rate (:func:`steps_needed`)."""
     if res.converged or res.diagnostics is None:
         return None
-    rhat = max(res.diagnostics["rhat"].values())
-    targeted = list(res.diagnostics["ess_bulk"])[:2]  # run_ensembles' ESS target: the first two parameters
-    ess = min(res.diagnostics["ess_bulk"][n] for n in targeted)
-    need = steps_needed(res.n_steps, rhat, ess, float(np.nanmax(res.tau)), target_rhat, target_ess)
+    diag = res.diagnostics
+    targeted = list(diag["ess_bulk"])[:2]  # run_ensembles' ESS target: the first two parameters
+    missed = missed_targets(diag, res.n_steps, res.tau, target_ess, target_rhat, targeted, count_stuck(res))
+    ess = min(diag["ess_bulk"][n] for n in targeted)
+    rhat, rw = max(diag["rhat"].values()), max(diag.get("rhat_walkers", {"": 1.0}).values())
+    need = steps_needed(res.n_steps, rhat, ess, float(np.nanmax(res.tau)), target_rhat, target_ess, rw)
+    unmet = f"R-hat target {target_rhat:g}, bulk ESS target {target_ess:g}"  # a run stopped short with none missed
     return (
-        f"not converged within {max_steps} steps (R-hat max {rhat:.3f}, target {target_rhat:g}; bulk ESS of "
-        f"{' and '.join(targeted)} {ess:.0f}, target {target_ess:g}): treat the intervals as provisional and "
-        f"rerun with more steps (at this run's rate, at least about {need} in all)"
+        f"not converged within {max_steps} steps ({'; '.join(missed) or unmet}): treat the intervals "
+        f"as provisional and rerun with more steps (at this run's rate, at least about {need} in all)"
     )
 
 
 def steps_needed(
-    n_steps: int, rhat: float, ess: float, tau: float, target_rhat: float = 1.01, target_ess: float = 1000.0
+    n_steps: int,
+    rhat: float,
+    ess: float,
+    tau: float,
+    target_rhat: float = 1.01,
+    target_ess: float = 1000.0,
+    rhat_walkers: float = 1.0,
 ) -> int:
     """Steps a run needs to meet its targets at the rate it mixed so far, rounded up to 1000: a lower bound.
 
-    With the walkers as chains, R-hat^2 - 1 is about 2 tau / (kept steps) for walkers that each mix with
-    autocorrelation time tau (224 simulated AR(1) walkers: 1.036 at tau 150 and 4000 kept steps, predicted
-    1.037; docs/validation.md, "What R-hat over walkers measures"), so it falls as 1 / steps; bulk ESS grows
-    as steps; emcee's own rule asks for 50 tau. Where tau itself was underestimated (a slow direction the
+    R-hat^2 - 1 falls as 1 / steps, both with the ensembles as chains (``rhat``: the variance of their means)
+    and with the walkers as chains (``rhat_walkers``: about 2 tau / kept steps for walkers that each mix with
+    autocorrelation time tau; 224 simulated AR(1) walkers: 1.036 at tau 150 and 4000 kept steps, predicted
+    1.037; docs/validation.md, "What R-hat over walkers measures"); bulk ESS grows as steps; emcee's own rule
+    asks for 50 tau. Where tau itself was underestimated (a slow direction the
     run has not yet crossed often) the run needs more than this.
     """
     need = [50.0 * tau if np.isfinite(tau) else 0.0]
-    if np.isfinite(rhat) and rhat > target_rhat:
-        need.append(n_steps * (rhat**2 - 1.0) / (target_rhat**2 - 1.0))
+    for r, target in ((rhat, target_rhat), (rhat_walkers, WALKER_RHAT_MAX)):
+        if np.isfinite(r) and r > target:
+            need.append(n_steps * (r**2 - 1.0) / (target**2 - 1.0))
     if np.isfinite(ess) and 0 < ess < target_ess:
         need.append(n_steps * target_ess / ess)
     return int(1000 * np.ceil(max(max(need), n_steps + 1) / 1000))
+
+
+def stuck_walkers(log_prob: NDArray, ndim: int, p_miss: float = 1e-6) -> NDArray:
+    """Which walkers sit in a far worse region: mean log density over the second half of the steps below the
+    walkers' median by more than half the ``1 - p_miss`` quantile of chi-square(ndim) (NaN counts as stuck).
+
+    Parameters
+    ----------
+    log_prob : ndarray, shape (n_steps, n_walkers)
+    ndim : int
+
+    Returns
+    -------
+    ndarray of bool, shape (n_walkers,)
+    """
+    from scipy.stats import chi2
+
+    mean_lp = np.mean(log_prob[log_prob.shape[0] // 2 :], axis=0)
+    return ~(mean_lp >= np.median(mean_lp) - 0.5 * chi2.ppf(1.0 - p_miss, ndim))
 
 
 def replace_stuck_walkers(
@@ -247,11 +310,8 @@ def replace_stuck_walkers(
         The last positions with every stuck walker replaced by another walker's (chosen at random
         among the rest, nudged by 1e-3 of the ensemble's spread); None when no walker is stuck.
     """
-    from scipy.stats import chi2
-
     n_steps, n_walkers, ndim = chain.shape
-    mean_lp = np.mean(log_prob[n_steps // 2 :], axis=0)
-    stuck = ~(mean_lp >= np.median(mean_lp) - 0.5 * chi2.ppf(1.0 - p_miss, ndim))  # NaN counts as stuck
+    stuck = stuck_walkers(log_prob, ndim, p_miss)
     if not stuck.any() or stuck.all():
         return None
     last = chain[-1].copy()
@@ -352,16 +412,20 @@ def run_ensembles(
                 s.backend.flush()
         res = _collect(samplers)
         res.walkers_restarted = tuple(replaced)
-        diag = diagnostics(post.prior_coordinates(res.chain), post.names)  # the marginal noise sd's R-hat
-        enough = (
-            min(diag["ess_bulk"][n] for n in post.names[:2]) >= target_ess
-            and max(diag["rhat"].values()) <= target_rhat
-            and res.n_steps >= 50 * np.nanmax(res.tau)
-        )
+        # the marginal noise sd's R-hat
+        diag = diagnostics(post.prior_coordinates(res.chain), post.names, n_ensembles=res.n_ensembles)
+        missed = missed_targets(diag, res.n_steps, res.tau, target_ess, target_rhat, post.names[:2], count_stuck(res))
+        enough = not missed
         if enough or todo <= 0 or res.n_steps >= max_steps:
             res.diagnostics = diag
             res.converged = bool(enough)
             return res
+
+
+def count_stuck(res: SamplingResult) -> int:
+    """Walkers of the kept steps that :func:`stuck_walkers` finds in a far worse region, over all ensembles."""
+    lp = res.log_prob.reshape(res.n_ensembles, -1, res.log_prob.shape[1])  # (ensembles, walkers, draws)
+    return int(sum(np.sum(stuck_walkers(e.T, res.chain.shape[2])) for e in lp))
 
 
 def _collect(samplers) -> SamplingResult:
@@ -379,12 +443,39 @@ def _collect(samplers) -> SamplingResult:
     return SamplingResult(chain, lp, n_steps, burn, tau, acc, n_ensembles=len(samplers))
 
 
-def diagnostics(chain: np.ndarray, names) -> dict:
-    """R-hat and bulk ESS per parameter (ArviZ), chains = walkers of all ensembles."""
+def diagnostics(chain: np.ndarray, names, n_ensembles: int = 1) -> dict:
+    """R-hat and bulk ESS per parameter (ArviZ's rank-normalised split R-hat and bulk ESS).
+
+    Parameters
+    ----------
+    chain : ndarray, shape (n_walkers_total, n_draws, ndim)
+        The kept draws, each ensemble's walkers contiguous (:func:`_collect`).
+    names : sequence of str, length ndim
+    n_ensembles : int
+        How many independent ensembles ``chain`` holds.
+
+    Returns
+    -------
+    dict
+        ``rhat``: each ensemble as one chain, its walkers pooled step by step (split R-hat then compares the
+        ensembles and the halves of the run): the convergence criterion, as R-hat over independent chains is
+        meant to be read. ``rhat_walkers``: every walker as a chain; R-hat^2 - 1 is about 2 tau / kept steps
+        for walkers that mix alike, so it reads 1.03 at emcee's 50 tau and far above only when walkers
+        disagree (one left apart from the rest). ``ess_bulk``: walkers as chains.
+    """
     from .summary import import_arviz
 
     az = import_arviz()
-    idata = az.from_dict(posterior={n: chain[:, :, i] for i, n in enumerate(names)})
-    rhat = az.rhat(idata)
-    ess = az.ess(idata, method="bulk")
-    return {"rhat": {n: float(rhat[n]) for n in names}, "ess_bulk": {n: float(ess[n]) for n in names}}
+    n_walkers, n_draws, ndim = chain.shape
+    if n_ensembles < 1 or n_walkers % n_ensembles:
+        raise ValueError(f"n_ensembles: expected a divisor of the {n_walkers} walkers, got {n_ensembles!r}")
+    walkers = az.from_dict(posterior={n: chain[:, :, i] for i, n in enumerate(names)})
+    per = n_walkers // n_ensembles  # (ensembles, steps x walkers in step order, ndim)
+    pooled = chain.reshape(n_ensembles, per, n_draws, ndim).transpose(0, 2, 1, 3).reshape(n_ensembles, -1, ndim)
+    ensembles = az.from_dict(posterior={n: pooled[:, :, i] for i, n in enumerate(names)})
+    rhat, rhat_w, ess = az.rhat(ensembles), az.rhat(walkers), az.ess(walkers, method="bulk")
+    return {
+        "rhat": {n: float(rhat[n]) for n in names},
+        "rhat_walkers": {n: float(rhat_w[n]) for n in names},
+        "ess_bulk": {n: float(ess[n]) for n in names},
+    }

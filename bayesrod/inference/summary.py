@@ -249,6 +249,7 @@ def build_summary(spec, post, samples: dict, diag: dict, fit_error: dict, effect
         "convergence": {
             "rhat_max": float(max(diag["rhat"].values())),
             "ess_bulk_min": float(min(diag["ess_bulk"].values())),
+            **walker_rhat(diag),
             "rhat": diag["rhat"],
             "ess_bulk": diag["ess_bulk"],
         },
@@ -259,3 +260,11 @@ def build_summary(spec, post, samples: dict, diag: dict, fit_error: dict, effect
         summary["youngs_modulus"] = youngs_modulus_summary(samples, L, dm.source if dm is not None else None)
     summary.update(extra)
     return summary
+
+
+def walker_rhat(diag: dict) -> dict:
+    """``{"rhat_walkers_max": ..}``, the largest R-hat with every walker as a chain (a mixing measure: about
+    sqrt(1 + 2 tau / kept steps); the criterion is ``rhat_max``, each ensemble as a chain), or ``{}`` where the
+    diagnostics do not hold it."""
+    rw = diag.get("rhat_walkers")
+    return {"rhat_walkers_max": float(max(rw.values()))} if rw else {}
