@@ -38,3 +38,21 @@ def test_report_renders_with_figures(run_dir, tmp_path):
     broken = tmp_path / "broken.html"
     broken.write_text(re.sub(r"base64,[A-Za-z0-9+/=]*", "base64,", (run_dir / "report.html").read_text()))
     assert not render.check(broken)["ok"]  # the check can fail
+
+
+def test_the_report_reads_the_fits_own_convergence_verdict(run_dir):
+    """The verdict is summary.json's ``converged`` (R-hat with the ensembles as chains, the walkers' guard, ESS,
+    50 tau, no walker stuck), with its message when not; R-hat and ESS alone only where a summary lacks it."""
+    import json
+
+    from bayesrod.report.html import fit_report
+
+    s = json.loads((run_dir / "summary.json").read_text())
+    conv = {**s["convergence"], "rhat_max": 1.002, "ess_bulk_min": 5000.0}
+    msg = "not converged within 3000 steps (2 walker(s) stuck in a far worse region): rerun"
+    told = fit_report({**s, "convergence": {**conv, "converged": False, "message": msg}}, {})
+    assert "Not converged" in told and "2 walker(s) stuck" in told and "Converged:" not in told
+    assert "Converged:" in fit_report({**s, "convergence": {**conv, "converged": True}}, {})
+    old = {k: v for k, v in conv.items() if k not in ("converged", "message")}
+    assert "Converged:" in fit_report({**s, "convergence": old}, {})
+    assert "Not converged" in fit_report({**s, "convergence": {**old, "rhat_max": 1.02}}, {})

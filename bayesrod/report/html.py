@@ -123,13 +123,15 @@ def fit_report(summary: dict, pngs: Mapping[str, bytes], provenance: dict | None
         f"<td>{conv['rhat'][k]:.4f}</td><td>{conv['ess_bulk'][k]:.0f}</td></tr>"
         for k, v in summary["parameters"].items()
     )
-    ok = conv["rhat_max"] <= 1.01 and conv["ess_bulk_min"] >= 400
+    # the fit's own verdict where summary.json holds it; a summary without it is judged by R-hat and ESS alone
+    ok = conv.get("converged", conv["rhat_max"] <= 1.01 and conv["ess_bulk_min"] >= 400)
     verdict = (
-        "Converged: independent ensembles agree (R-hat <= 1.01) and every parameter has at least 400 "
-        "effectively independent draws."
+        "Converged: the independent ensembles agree (R-hat <= 1.01, each ensemble a chain), the run is at least "
+        "50 autocorrelation times long and EI0 and p have the effective draws the fit asked for."
         if ok
-        else "Not converged: treat these numbers as provisional (R-hat > 1.01 or bulk ESS < 400); "
-        "run longer or check the data."
+        else "Not converged: treat these numbers as provisional ("
+        + esc(conv.get("message", "R-hat > 1.01 or bulk ESS < 400"))
+        + "); run longer or check the data."
     )
     kt = "".join(
         f"<tr><td>{r['height_m']:g}</td><td>{r['median']:.4g}</td><td>{r['q05']:.4g}</td><td>{r['q95']:.4g}</td></tr>"
