@@ -52,6 +52,7 @@ N_RANK = 99
 PARAMS = ["EI0", "p"] + [f"{k}__{c}" for k in ("C", "sigma", "rho") for c in CONDITIONS]
 FIELDS = ["seed", "heights", "rhat", "seconds", "error"]
 FIELDS += [f"{k}_{s}" for k in PARAMS for s in ("true", "q05", "median", "q95", "rank", "covered")]
+FIELDS += ["steps", "converged", "rhat_walkers"]  # since session 57 (rhat: the ensembles as chains from then)
 
 
 def draw(seed: int) -> dict:
@@ -137,6 +138,8 @@ def one(job) -> dict:
             f"{k}_covered": int(q05 <= truth[k] <= q95),
         }
     row["rhat"] = d["convergence"]["rhat_max"]
+    row["rhat_walkers"] = d["convergence"].get("rhat_walkers_max", "")
+    row["steps"], row["converged"] = d["sampler"]["steps"], int(d["convergence"]["converged"])
     row["seconds"] = round(time.perf_counter() - t0, 1)
     row["error"] = ""
     return row
@@ -171,6 +174,10 @@ def table(rows: list[dict]) -> str:
     rh = np.array([float(r["rhat"]) for r in ok]) if ok else np.array([])
     if rh.size:
         out.append(f"\nR-hat max: median {np.median(rh):.3f}, above 1.01 in {int(np.sum(rh > 1.01))} of {rh.size}")
+    conv = [int(r["converged"]) for r in ok if r.get("converged") not in (None, "")]
+    if conv:
+        steps = np.median([float(r["steps"]) for r in ok if r.get("converged") not in (None, "")])
+        out.append(f"converged (summary.json) in {sum(conv)} of {len(conv)}, median {steps:.0f} steps")
     return "\n".join(out) + "\n"
 
 
