@@ -88,7 +88,7 @@ def main():
     from tqdm import tqdm
 
     fields = ["seed", "rhat_max", "EI0_true", "EI0_median", "EI0_rank", "EI0_covered"]
-    fields += ["p_true", "p_median", "p_rank", "p_covered", "error"]
+    fields += ["p_true", "p_median", "p_rank", "p_covered", "error", "steps"]
     with ProcessPoolExecutor(a.jobs) as ex:
         done_rows = append_rows(path, fields, ex.map(_run, todo), new_file)
         rows += list(tqdm(done_rows, total=len(todo), desc="SBC replicates"))

@@ -79,6 +79,7 @@ def fit_for_calibration(
     n = post.samples["EI0"].size
     idx = rng.permutation(n)[:n_rank]  # random thinning: ranks need (nearly) independent draws
     out = {"rhat_max": float(post.doc["convergence"]["rhat_max"]), "names": list(post.doc["parameters"])}
+    out["steps"] = int(post.doc["sampler"]["steps"])
     for k, v in post.samples.items():
         out[k] = {"draws": np.asarray(v)[idx], "q": np.quantile(v, QUANTILES)}
     return out
@@ -88,7 +89,7 @@ def sbc_replicate(seed: int, prior_name: str = "woody", *, use_shapes: bool = Tr
     """One SBC replicate: rank of the truth among 99 draws, and 90% coverage, for EI0 and p."""
     ds, truth = simulate_from_prior(prior_name, seed, use_shapes=use_shapes)
     res = fit_for_calibration(ds, prior_name, seed=seed, use_shapes=use_shapes, target_ess=target_ess)
-    row = {"seed": seed, "rhat_max": res["rhat_max"]}
+    row = {"seed": seed, "rhat_max": res["rhat_max"], "steps": res["steps"]}
     for k in ("EI0", "p"):
         row |= rank_columns(res[k], truth[k], k)
     return row
