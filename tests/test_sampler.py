@@ -378,6 +378,11 @@ def test_the_convergence_rhat_reads_each_ensemble_as_a_chain_and_the_walkers_gua
     x = lfilter([1.0], [1.0, -rho], rng.standard_normal((224, n + 600)), axis=1)[:, 600:] * np.sqrt(1 - rho**2)
     d = sampler.diagnostics(x[:, :, None], ["a"], n_ensembles=4)
     assert d["rhat"]["a"] < 1.002 and d["rhat_walkers"]["a"] == pytest.approx(1.029, abs=0.004), d
+    # read on every second step (max_draws 1000): the same numbers as the whole chain, to within their noise
+    whole = sampler.diagnostics(x[:, :, None], ["a"], n_ensembles=4, max_draws=n)
+    assert d == sampler.diagnostics(x[:, ::2, None], ["a"], n_ensembles=4, max_draws=n) != whole
+    assert abs(whole["rhat_walkers"]["a"] - d["rhat_walkers"]["a"]) < 0.002
+    assert abs(whole["ess_bulk"]["a"] / d["ess_bulk"]["a"] - 1) < 0.05, (whole, d)
     assert sampler.missed_targets(d, 3000, np.array([tau]), 400.0, 1.01, ["a"]) == []
     assert sampler.missed_targets(d, 2999, np.array([tau]), 400.0, 1.01, ["a"]) != []  # 50 tau
     assert sampler.missed_targets(d, 3000, np.array([tau]), 400.0, 1.01, ["a"], n_stuck=1) != []

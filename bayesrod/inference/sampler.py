@@ -443,7 +443,7 @@ def _collect(samplers) -> SamplingResult:
     return SamplingResult(chain, lp, n_steps, burn, tau, acc, n_ensembles=len(samplers))
 
 
-def diagnostics(chain: np.ndarray, names, n_ensembles: int = 1) -> dict:
+def diagnostics(chain: np.ndarray, names, n_ensembles: int = 1, max_draws: int = 1000) -> dict:
     """R-hat and bulk ESS per parameter (ArviZ's rank-normalised split R-hat and bulk ESS).
 
     Parameters
@@ -453,6 +453,10 @@ def diagnostics(chain: np.ndarray, names, n_ensembles: int = 1) -> dict:
     names : sequence of str, length ndim
     n_ensembles : int
         How many independent ensembles ``chain`` holds.
+    max_draws : int
+        Draws per walker read: a longer chain is thinned to every k-th step (k = ceil(n_draws / max_draws)).
+        For k well below the autocorrelation time, R-hat and bulk ESS are unchanged in expectation, and a
+        group fit's check of 224 walkers x 4000 draws x 14 parameters costs a quarter of the time.
 
     Returns
     -------
@@ -469,6 +473,8 @@ def diagnostics(chain: np.ndarray, names, n_ensembles: int = 1) -> dict:
     n_walkers, n_draws, ndim = chain.shape
     if n_ensembles < 1 or n_walkers % n_ensembles:
         raise ValueError(f"n_ensembles: expected a divisor of the {n_walkers} walkers, got {n_ensembles!r}")
+    chain = chain[:, :: -(-n_draws // max_draws)]
+    n_draws = chain.shape[1]
     walkers = az.from_dict(posterior={n: chain[:, :, i] for i, n in enumerate(names)})
     per = n_walkers // n_ensembles  # (ensembles, steps x walkers in step order, ndim)
     pooled = chain.reshape(n_ensembles, per, n_draws, ndim).transpose(0, 2, 1, 3).reshape(n_ensembles, -1, ndim)
