@@ -174,10 +174,13 @@ def table(rows: list[dict]) -> str:
     rh = np.array([float(r["rhat"]) for r in ok]) if ok else np.array([])
     if rh.size:
         out.append(f"\nR-hat max: median {np.median(rh):.3f}, above 1.01 in {int(np.sum(rh > 1.01))} of {rh.size}")
-    conv = [int(r["converged"]) for r in ok if r.get("converged") not in (None, "")]
-    if conv:
-        steps = np.median([float(r["steps"]) for r in ok if r.get("converged") not in (None, "")])
-        out.append(f"converged (summary.json) in {sum(conv)} of {len(conv)}, median {steps:.0f} steps")
+    told = [r for r in ok if r.get("converged") not in (None, "")]  # rows since session 57 carry it
+    if told:
+        steps = np.median([float(r["steps"]) for r in told])
+        out.append(
+            f"converged (summary.json) in {sum(int(r['converged']) for r in told)} of {len(told)}, median "
+            f"{steps:.0f} steps"
+        )
     return "\n".join(out) + "\n"
 
 

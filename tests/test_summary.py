@@ -259,6 +259,10 @@ def test_build_summary_writes_each_number_from_the_draws():
     conv = doc["convergence"]
     assert conv["rhat_max"] == 1.03 and conv["ess_bulk_min"] == 700.0 and conv["rhat"] == diag["rhat"]
     assert conv["ess_bulk"] == diag["ess_bulk"] and "youngs_modulus" not in doc
+    assert "rhat_walkers_max" not in conv  # diagnostics without the walkers' R-hat: none reported
+    walkers = {"EI0": 1.02, "p": 1.04, "sigma_force_N": 1.01}
+    told = S.build_summary(spec, post, samples, {**diag, "rhat_walkers": walkers}, {}, [], {})["convergence"]
+    assert told["rhat_walkers_max"] == 1.04 and told["rhat_max"] == 1.03
     # a base spring per draw softens k_theta; measured diameters add the modulus block
     soft = S.build_summary(spec, post, {**samples, "base_compliance": np.full(400, 3.0)}, diag, {}, [], {})
     assert soft["k_theta"][0]["median"] < doc["k_theta"][0]["median"]

@@ -183,6 +183,11 @@ class SamplingResult:
 WALKER_RHAT_MAX = 1.1
 
 
+def rhat_walkers_max(diag: dict) -> float:
+    """The largest R-hat over walkers in :func:`diagnostics`' output; 1.0 where it holds none."""
+    return max(diag.get("rhat_walkers", {"": 1.0}).values())
+
+
 def missed_targets(
     diag: dict, n_steps: int, tau: NDArray, target_ess: float, target_rhat: float, targeted, n_stuck: int = 0
 ) -> list[str]:
@@ -198,7 +203,7 @@ def missed_targets(
     rhat = max(diag["rhat"].values())
     if not rhat <= target_rhat:
         out.append(f"R-hat max {rhat:.4f} with the ensembles as chains, target {target_rhat:g}")
-    rw = max(diag.get("rhat_walkers", {"": 1.0}).values())
+    rw = rhat_walkers_max(diag)
     if not rw <= WALKER_RHAT_MAX:
         out.append(f"R-hat over walkers {rw:.3f}, above {WALKER_RHAT_MAX:g}: walkers disagree")
     ess = min(diag["ess_bulk"][n] for n in targeted)
@@ -223,7 +228,7 @@ def convergence_message(
     targeted = list(diag["ess_bulk"])[:2]  # run_ensembles' ESS target: the first two parameters
     missed = missed_targets(diag, res.n_steps, res.tau, target_ess, target_rhat, targeted, count_stuck(res))
     ess = min(diag["ess_bulk"][n] for n in targeted)
-    rhat, rw = max(diag["rhat"].values()), max(diag.get("rhat_walkers", {"": 1.0}).values())
+    rhat, rw = max(diag["rhat"].values()), rhat_walkers_max(diag)
     need = steps_needed(res.n_steps, rhat, ess, float(np.nanmax(res.tau)), target_rhat, target_ess, rw)
     unmet = f"R-hat target {target_rhat:g}, bulk ESS target {target_ess:g}"  # a run stopped short with none missed
     return (
