@@ -245,3 +245,14 @@ def test_append_rows_resumes_a_file_written_before_a_column_was_added(tmp_path):
     assert rows[0]["extra"] == "" and rows[1]["extra"] == "e"
     with pytest.raises(ValueError, match="gone"):
         list(append_rows(path, ["case", "x"], [], new_file=False))
+
+
+def test_a_path_with_a_nul_character_is_a_dataset_error_not_a_traceback(twig_copy):
+    """Found by test_fuzz_specimen_json in a fresh clone (session 57): pathlib raised ValueError("embedded null
+    byte") from inside the reader."""
+    path = twig_copy / "specimen.json"
+    doc = json.loads(path.read_text())
+    doc["pushes"][0]["force"] = "\x00"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(DatasetError, match=r"pushes\[0\]\.force"):
+        read_dataset(twig_copy)

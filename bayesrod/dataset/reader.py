@@ -262,7 +262,7 @@ def _parse_camera(c, name, obj) -> Camera | None:
 
 
 def _safe_path(c, name, root: Path, value, field) -> Path | None:
-    if not isinstance(value, str) or not value.strip():
+    if not isinstance(value, str) or not value.strip() or "\x00" in value:  # NUL: no path can hold it
         c.add(name, field, "a relative path (string)", _fmt(value))
         return None
     path = (root / value).resolve()
