@@ -468,6 +468,7 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
         seen["kw"], seen["theta0"] = kw, theta0
         chain = post.to_sample({k: natural[k] for k in post.names}).reshape(4, n // 4, post.ndim)
         diag = {"rhat": dict.fromkeys(post.names, 1.001), "ess_bulk": dict.fromkeys(post.names, 5000.0)}
+        diag["rhat_walkers"] = dict.fromkeys(post.names, 1.02)
         seen["post"] = post
         ok = seen.get("converged", True)
         return SamplingResult(chain, np.zeros((4, n // 4)), 2000, 1000, np.ones(post.ndim), 0.3, 4, diag, ok, (0,))
@@ -523,7 +524,13 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     assert s["level"] == 0.9 and s["force_noise"] == "ar1" and s["bayesrod"] == bayesrod.__version__
     assert s["sampler"]["steps"] == 2000 and s["sampler"]["burn_in"] == 1000 and s["sampler"]["seconds"] >= 0
     conv = s["convergence"]
-    assert conv == {"rhat_max": 1.001, "ess_bulk_min": 5000.0, "walkers_restarted": 0, "converged": True}
+    assert conv == {
+        "rhat_max": 1.001,
+        "ess_bulk_min": 5000.0,
+        "rhat_walkers_max": 1.02,
+        "walkers_restarted": 0,
+        "converged": True,
+    }
     ident = s["identifiability"]
     assert s["stem_id"] == "s1" and s["prior"] == "woody"
     assert ident["heights_per_condition"] == {"a": 1, "b": 1}
