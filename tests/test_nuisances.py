@@ -17,6 +17,7 @@ from bayesrod.inference.likelihood import (
     default_length_prior,
     force_offset_name,
     height_error_name,
+    height_nodes,
 )
 from bayesrod.inference.priors import load_prior
 from bayesrod.physics import force_from_displacement
@@ -70,6 +71,39 @@ def test_geometry_tables_match_tables_built_at_that_geometry(coarse_length_axis)
     wrong = lik.predict_nd_force_geometry(p, np.full(3, 0.9), np.zeros((3, 2)))
     ref = RodLikelihood(_geometry(spec, 0.8, (0, 0)), **grid).predict_nd_force(p)
     assert np.max(np.abs(wrong - ref)) > 1e-2 * np.max(np.abs(ref))
+
+
+@pytest.mark.parametrize(
+    "sd, errors",
+    [(0.003, (0.0052, -0.0101, 0.0013)), (0.02, (0.035, -0.063, 0.071))],
+    ids=["sd-3mm", "sd-5pct-of-height"],
+)
+def test_the_height_axis_reads_off_node_heights_within_1e_5_of_the_peak_force(sd, errors):
+    """The contact-height error axis against plain tables built at the moved height (one push at 0.40 m).
+
+    Off-node errors read within 1e-5 of the peak force: 2.5e-6 to 4.0e-6 here on 9 nodes (3 mm) and 17 (20 mm, 5%
+    of the contact, the largest sd allowed). Three nodes read quadratically (until session 58) were 2.4e-5 to
+    8.0e-5 off at 3 mm and 1.6e-2 to 2.9e-2 at 20 mm; 9 nodes at 20 mm (no spacing rule) 2.3e-5 to 5.1e-5. At 3 mm
+    the quadratic axis moved a three-height estimate by up to 0.27 sd (scripts/table_height_shift.py).
+    """
+    h = HEIGHTS[0]
+    D = np.linspace(0.0, 0.18, 60)
+    F = force_from_displacement(D, h, EI0, P, L_TRUE).force_N
+    spec = bayesrod.Dataset.from_arrays(length_m=L_TRUE, height_m=[h], displacement_m=[D], force_N=[F])
+    grid = {"p_range": (0.0, 1.2), "n_p": 7, "use_shapes": False}
+    p = np.array([0.3, 0.43, 1.1])
+    lik = RodLikelihood(spec, height_sd_m=sd, **grid)
+    assert lik.dh_grid.size == height_nodes(sd, h) and lik.dh_grid[-1] == pytest.approx(4 * sd)
+    for e in errors:
+        ref = RodLikelihood(_geometry(spec, L_TRUE, (e,)), **grid).predict_nd_force(p)
+        got = lik.predict_nd_force_geometry(p, np.full(3, L_TRUE), np.full((3, 1), e))
+        assert np.max(np.abs(got - ref)) < 1e-5 * np.max(np.abs(ref)), (sd, e)
+
+
+def test_height_nodes_space_the_axis_by_a_fortieth_of_the_lowest_contact():
+    assert height_nodes(0.003, 0.30) == 9  # the floor: 24 mm over 8 steps of 3 mm (7.5 mm allowed)
+    assert height_nodes(0.015, 0.30) == 17  # 120 mm in steps of at most 7.5 mm
+    assert height_nodes(0.02, 0.40) == 17 and height_nodes(0.0201, 0.40) == 18
 
 
 def test_the_length_axis_reads_a_push_to_its_branch_end_between_nodes():

@@ -802,8 +802,9 @@ class RodLikelihood:
         """Per push, forces on a grid of stem lengths x contact-height errors: (A, B, P, N_j) each.
 
         L enters both nondimensional groups (d = D/L, eta = h/L); the length axis is uniform in log L
-        over the prior's support (:data:`LENGTH_NODES` nodes, 4-point Lagrange), the height axis three
-        nodes at 0 and +-:data:`HEIGHT_CUT_SD` sd (quadratic). One batched set of forward solves.
+        over the prior's support (:data:`LENGTH_NODES` nodes, 4-point Lagrange), the height axis uniform
+        over +-:data:`HEIGHT_CUT_SD` sd (:func:`height_nodes` nodes, 4-point Lagrange). One batched set of
+        forward solves.
         """
         if self.length_prior is not None:
             lo, hi = self.length_prior.bounds()
@@ -811,8 +812,12 @@ class RodLikelihood:
         else:
             self.L_grid = np.array([self.L])
         sd = self.height_sd_m
-        self.dh_grid = HEIGHT_CUT_SD * sd * np.array([-1.0, 0.0, 1.0]) if sd > 0 else np.zeros(1)
         forced = self.force_data
+        if sd > 0:
+            n = height_nodes(sd, min(d.height_m for d in forced))
+            self.dh_grid = HEIGHT_CUT_SD * sd * np.linspace(-1.0, 1.0, n)
+        else:
+            self.dh_grid = np.zeros(1)
         etas = np.array([(d.height_m + b) / a for d in forced for a in self.L_grid for b in self.dh_grid])
         curves = ForceCurves.batch(etas, self.p_grid, n_f=GEOMETRY_N_F)
         A, B = self.L_grid.size, self.dh_grid.size
@@ -840,12 +845,10 @@ class RodLikelihood:
         out = []
         for j, T in enumerate(self._geom_tables):
             if self.dh_grid.size > 1:
-                t = np.asarray(height_error_m, float)[:, j] / self.dh_grid[-1]
-                wB = np.stack([0.5 * t * (t - 1.0), 1.0 - t**2, 0.5 * t * (t + 1.0)], axis=1)
-                iB = np.arange(3)
+                iB, wB = _lagrange4(self.dh_grid, np.asarray(height_error_m, float)[:, j])
             else:
-                wB, iB = np.ones((W, 1)), np.zeros(1, int)
-            g = T[iL[:, :, None, None], iB[None, None, :, None], ip[:, None, None, :]]  # (W, a, b, p, N_j)
+                wB, iB = np.ones((W, 1)), np.zeros((W, 1), int)
+            g = T[iL[:, :, None, None], iB[:, None, :, None], ip[:, None, None, :]]  # (W, a, b, p, N_j)
             out.append(np.einsum("wa,wb,wp,wabpn->wn", wL, wB, wp, g))
         return np.concatenate(out, axis=1)
 
@@ -1203,6 +1206,10 @@ LENGTH_NODES = 49
 GEOMETRY_N_F = 80
 LENGTH_FACTOR = 1.5
 HEIGHT_CUT_SD = 4.0
+#: the contact-height error axis (4-point Lagrange over +-HEIGHT_CUT_SD sd): at least HEIGHT_NODES nodes, spaced
+#: at most HEIGHT_STEP_FRACTION of the lowest contact height (:func:`height_nodes`)
+HEIGHT_NODES = 9
+HEIGHT_STEP_FRACTION = 0.025
 FORCE_OFFSET_SD = 0.05
 
 
@@ -1221,6 +1228,20 @@ def default_length_prior(spec: Specimen):
     L = float(spec.length_m)
     lo = max(L / LENGTH_FACTOR, 1.05 * max(p.height_m for p in spec.pushes))
     return _prior("length_m", "uniform", (lo, L * LENGTH_FACTOR), "m")
+
+
+def height_nodes(sd_m: float, lowest_height_m: float) -> int:
+    """Nodes of the contact-height error axis for an error sd ``sd_m`` [m] and the lowest contact [m].
+
+    The force moves with the contact height about as h^-3, so the axis (uniform over +-:data:`HEIGHT_CUT_SD`
+    sd, 4-point Lagrange) is spaced by at most :data:`HEIGHT_STEP_FRACTION` of the lowest contact, and has at
+    least :data:`HEIGHT_NODES` nodes. Three nodes read quadratically (until session 58) moved the estimate of a
+    noise-free three-height push with contacts from 0.30 m by up to 0.27 sd at an sd of 3 mm and by 41 sd at
+    15 mm; 9 nodes by at most 0.001 sd at 3 mm and 0.078 sd at 15 mm (scripts/table_height_shift.py;
+    docs/validation.md, "Session 58").
+    """
+    span = 2.0 * HEIGHT_CUT_SD * float(sd_m)
+    return max(HEIGHT_NODES, 1 + math.ceil(span / (HEIGHT_STEP_FRACTION * float(lowest_height_m)) - 1e-9))
 
 
 def _check_height_sd(height_sd_m, spec: Specimen) -> float:
