@@ -1208,7 +1208,7 @@ LENGTH_FACTOR = 1.5
 HEIGHT_CUT_SD = 4.0
 #: the contact-height error axis (4-point Lagrange over +-HEIGHT_CUT_SD sd): at least HEIGHT_NODES nodes, spaced
 #: at most HEIGHT_STEP_FRACTION of the lowest contact height (:func:`height_nodes`)
-HEIGHT_NODES = 9
+HEIGHT_NODES = 5
 HEIGHT_STEP_FRACTION = 0.025
 FORCE_OFFSET_SD = 0.05
 
@@ -1237,8 +1237,8 @@ def height_nodes(sd_m: float, lowest_height_m: float) -> int:
     sd, 4-point Lagrange) is spaced by at most :data:`HEIGHT_STEP_FRACTION` of the lowest contact, and has at
     least :data:`HEIGHT_NODES` nodes. Three nodes read quadratically (until session 58) moved the estimate of a
     noise-free three-height push with contacts from 0.30 m by up to 0.27 sd at an sd of 3 mm and by 41 sd at
-    15 mm; 9 nodes by at most 0.001 sd at 3 mm and 0.078 sd at 15 mm (scripts/table_height_shift.py;
-    docs/validation.md, "Session 58").
+    15 mm; 5 nodes by at most 0.002 sd at 3 mm (spaced by 2% of the lowest contact) and 0.84 sd at 15 mm (10%),
+    17 (2.5%) by at most 0.003 sd (scripts/table_height_shift.py; docs/validation.md, "Session 58").
     """
     span = 2.0 * HEIGHT_CUT_SD * float(sd_m)
     return max(HEIGHT_NODES, 1 + math.ceil(span / (HEIGHT_STEP_FRACTION * float(lowest_height_m)) - 1e-9))
