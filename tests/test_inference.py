@@ -612,8 +612,9 @@ def test_a_base_spring_is_sampled_in_u_only_on_forces_alone():
 
 
 def test_each_effect_axis_gets_the_documented_nodes(monkeypatch):
-    """25 nodes by default; 49 for rest curvature and base tilt with shapes (SHAPE_EFFECT_NODES) and for contact
-    friction with or without them (FORCE_EFFECT_NODES: 25 moved mu's MLE by +0.115 sd, docs/validation.md)."""
+    """25 nodes by default; 49 for base tilt with shapes (SHAPE_EFFECT_NODES) and for contact friction and rest
+    curvature with or without them (FORCE_EFFECT_NODES: 25 moved mu's MLE by +0.115 sd and rest curvature's log EI0
+    by -0.053 sd, docs/validation.md)."""
     from bayesrod.inference import likelihood as LK
 
     class Built(Exception):
@@ -632,7 +633,7 @@ def test_each_effect_axis_gets_the_documented_nodes(monkeypatch):
         ("contact_friction", False): 49,
         ("contact_friction", True): 49,
         ("rest_curvature", True): 49,
-        ("rest_curvature", False): 25,
+        ("rest_curvature", False): 49,
         ("base_tilt", True): 49,
         ("base_tilt", False): 25,
         ("base_compliance", True): 25,

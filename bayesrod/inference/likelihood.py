@@ -423,8 +423,9 @@ class ForceCurves:
 SHAPE_EFFECT_NODES = {"rest_curvature": 49, "base_tilt": 49}
 #: effect-axis nodes where 25 are not enough on forces alone (build_likelihood): a friction axis, read in log
 #: space, moved the forces-only twig's MLE of mu by +0.115 sd with 25 nodes and by -0.023 sd with 49
-#: (docs/validation.md, session 47)
-FORCE_EFFECT_NODES = {"contact_friction": 49}
+#: (docs/validation.md, session 47); a rest-curvature axis moved its log EI0 by -0.049 sd (0.3 1/m) and -0.053 sd
+#: (0.6 1/m) with 25, -0.011 sd with 49 (session 58)
+FORCE_EFFECT_NODES = {"contact_friction": 49, "rest_curvature": 49}
 
 #: nondimensional step before a curve's end over which a shape's slope in d is taken (RodLikelihood)
 SHAPE_END_STEP = 0.01
@@ -1704,8 +1705,9 @@ def build_likelihood(
     (``scripts/table_accuracy.py``, docs/validation.md). The tables take about twice as long to build.
     With shapes, rest curvature and base tilt get 49 nodes (:data:`SHAPE_EFFECT_NODES`): the centerline
     above the contact, nearly level late in a push, moves steeply with either, and 25 nodes moved the
-    estimate by up to 0.50 sd (49: at most 0.015 sd). Contact friction gets 49 with or without shapes
-    (:data:`FORCE_EFFECT_NODES`; its tables take twice as long to build). ``slip`` adds the term for where
+    estimate by up to 0.50 sd (49: at most 0.015 sd). Contact friction and rest curvature get 49 with or
+    without shapes (:data:`FORCE_EFFECT_NODES`; rest curvature on forces alone moved log EI0 by -0.053 sd with
+    25; their tables take twice as long to build). ``slip`` adds the term for where
     each push's slip lies (:meth:`RodLikelihood.slip_loglik`; docs/inference.md, "The slip").
     """
     tabled = [e for e in effects if e in TABLE_EFFECTS]
