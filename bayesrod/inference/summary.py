@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..physics import flexural_rigidity, k_theta, stem_diameter
+from .sampler import rhat_walkers_max
 
 
 def import_arviz():
@@ -266,5 +267,4 @@ def walker_rhat(diag: dict) -> dict:
     """``{"rhat_walkers_max": ..}``, the largest R-hat with every walker as a chain (a mixing measure: about
     sqrt(1 + 2 tau / kept steps); the criterion is ``rhat_max``, each ensemble as a chain), or ``{}`` where the
     diagnostics do not hold it."""
-    rw = diag.get("rhat_walkers")
-    return {"rhat_walkers_max": float(max(rw.values()))} if rw else {}
+    return {"rhat_walkers_max": float(rhat_walkers_max(diag))} if diag.get("rhat_walkers") else {}
