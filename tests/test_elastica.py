@@ -228,7 +228,7 @@ def test_plain_fast_step_matches_the_general_step(p, sig):
     assert P["_plain"]
     fast = E._step_plain(Y, sig, h, f, P, active)
     np.testing.assert_allclose(fast, E._step_general(Y, sig, h, f, P, active), rtol=1e-11, atol=1e-14)
-    np.testing.assert_array_equal(E._step(Y, sig, h, f, P, active), fast)  # _step takes the fast path
+    _assert_step_takes_the_fast_path(E, (Y, sig, h, f, P, active), fast)
 
 
 @pytest.mark.parametrize("p", [0.43, [0.2, 1.0, 2.0, 0.0]])
@@ -245,7 +245,61 @@ def test_plain_step_per_element_matches_the_general_step(p):
     for s, a in [(sig, active), (0.4, 1.0)]:
         fast = E._step_plain_each(Y, s, h, f, P, a)
         np.testing.assert_allclose(fast, E._step_general(Y, s, h, f, P, a), rtol=1e-11, atol=1e-14)
-        np.testing.assert_array_equal(E._step(Y, s, h, f, P, a), fast)
+        _assert_step_takes_the_fast_path(E, (Y, s, h, f, P, a), fast)
+
+
+def _assert_step_takes_the_fast_path(E, args, numpy_fast):
+    """_step takes the compiled loop when numba is there (and it matches the numpy fast path to round-off), else
+    the numpy fast path itself."""
+    got = E._step(*args)
+    if E._compiled.plain_step is None:
+        np.testing.assert_array_equal(got, numpy_fast)
+    else:
+        np.testing.assert_array_equal(got, E._step_plain_compiled(*args))
+        np.testing.assert_allclose(got, numpy_fast, rtol=1e-11, atol=1e-14)  # a tangent spun to 1570 rad: 1e-12
+
+
+def test_the_compiled_step_is_there_unless_switched_off():
+    """numba is a dependency: the suite runs the compiled loop users get, unless BAYESROD_NO_JIT asks for numpy."""
+    import os
+
+    from bayesrod.physics import _compiled
+
+    assert (_compiled.plain_step is None) == bool(os.environ.get("BAYESROD_NO_JIT"))
+
+
+@pytest.mark.skipif("not __import__('bayesrod.physics._compiled').physics._compiled.plain_step")
+@pytest.mark.parametrize("B", [0, 1, 7, 300])
+@pytest.mark.parametrize("one_taper", [True, False])
+def test_compiled_step_matches_the_numpy_step_on_every_element(B, one_taper):
+    """The compiled loop against the numpy paths, one step size and one per element, on batches with rods past
+    the contact (no load), at the tip (sigma = 1), with NaN and infinite states (which must stay NaN, not raise),
+    and a non-contiguous state array."""
+    from bayesrod.physics import elastica as E
+
+    rng = np.random.default_rng(11 + B)
+    p = 0.43 if one_taper else rng.uniform(0.0, 2.0, B)
+    P = E._prepare(E._problem(np.full(B, 0.6), np.broadcast_to(np.asarray(p, float), B), None)[0])
+    n = 2 * B
+    wide = np.vstack([rng.uniform(0, 0.3, (2, n)), rng.uniform(-1.5, 1.5, (1, n)), rng.uniform(-1, 1, (1, n))])
+    Y = wide[:, ::2]  # a view with stride 2
+    if B >= 7:
+        Y[2, 3], Y[3, 4], Y[2, 5] = np.nan, np.inf, -np.inf
+    f, active = rng.uniform(0.0, 4.0, B), (rng.uniform(size=B) < 0.7).astype(float)
+    for sig, h in [(0.3, 1.0 / 48), (1.0 - 1.0 / 48, 1.0 / 48), (1.0, 1e-4)]:
+        Ys = Y.copy() if sig < 0.9 else np.vstack([Y[:3], np.zeros((1, B))])  # near the tip: above the contact
+        want = E._step_plain(Ys, sig, h, f, P, active if sig < 0.9 else 0.0)
+        got = E._step_plain_compiled(Ys, sig, h, f, P, active if sig < 0.9 else 0.0)
+        np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-15)
+    sig_b, h_b = rng.uniform(0.0, 0.6, B), rng.uniform(0.0, 0.03, B)
+    for sig, h, a in [(sig_b, h_b, active), (0.4, h_b, 1.0), (sig_b, 0.01, 0.0)]:
+        want = E._step_plain_each(Y, sig, h, f, P, a)
+        got = E._step_plain_compiled(Y, sig, h, f, P, a)
+        # round-off grows with the turn of the tangent (a rod near a tapered tip spins by thousands of radians)
+        turn = np.nan_to_num(np.abs(want[2] - Y[2]), nan=0.0, posinf=0.0)
+        np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+        miss, size = (np.nan_to_num(np.abs(a), nan=0.0, posinf=0.0) for a in (got - want, want))
+        assert np.all(miss <= 1e-13 * size + 1e-14 * (1.0 + turn)), miss.max()
 
 
 def _curled_arc(n=48, sweep=2.6):

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from . import _compiled
 from .effects import Effects
 from .lumped import kx_nd
 
@@ -257,6 +258,7 @@ def _rhs(sig, Y, af, P, out=None):
     return out
 
 
+_A_SQUARE = np.ascontiguousarray(_A[:12, :12])  # (12, 12), for the compiled step
 # Rows of the tableau without their zero tail: stage i combines the first i slopes.
 _A_ROWS = [np.ascontiguousarray(_A[i, :i]) for i in range(12)]
 
@@ -330,9 +332,35 @@ def _step_plain_each(Y, sig, h, f, P, active):
     return Y + h * (_B @ K2).reshape(4, B)
 
 
+def _step_plain_compiled(Y, sig, h, f, P, active):
+    """:func:`_step_plain` and :func:`_step_plain_each` in one compiled loop over the rods
+    (:data:`bayesrod.physics._compiled.plain_step`), the taper at the stages evaluated inside it."""
+    return _compiled.plain_step(
+        np.ascontiguousarray(Y, dtype=float),
+        _flat(sig),
+        _flat(h),
+        _flat(f),
+        _flat(active),
+        _flat(P["_p4_scalar"] if P["_p4_scalar"] is not None else P["_p4"]),
+        _C,
+        _A_SQUARE,
+        _B,
+    )
+
+
+def _flat(a) -> NDArray:
+    """A scalar or array as a 1-d float array (one element, or one per rod), for the compiled step."""
+    return np.asarray(a, dtype=float).reshape(-1)
+
+
 def _step(Y, sig, h, f, P, active):
-    """One explicit RK step (DOP853 tableau, 8th order) of size h (scalar or (B,))."""
+    """One explicit RK step (DOP853 tableau, 8th order) of size h (scalar or (B,)).
+
+    A plain rod takes the compiled loop when numba is there (:mod:`bayesrod.physics._compiled`), else the numpy
+    paths it is tested against; any effect takes the general path."""
     if P.get("_plain"):
+        if _compiled.plain_step is not None:
+            return _step_plain_compiled(Y, sig, h, f, P, active)
         if isinstance(h, float) and isinstance(sig, float):
             return _step_plain(Y, sig, h, f, P, active)
         return _step_plain_each(Y, sig, h, f, P, active)
