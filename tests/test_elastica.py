@@ -252,10 +252,10 @@ def _assert_step_takes_the_fast_path(E, args, numpy_fast):
     """_step takes the compiled loop when numba is there (and it matches the numpy fast path to round-off), else
     the numpy fast path itself."""
     got = E._step(*args)
-    if E._compiled.plain_step is None:
+    if E._compiled.step is None:
         np.testing.assert_array_equal(got, numpy_fast)
     else:
-        np.testing.assert_array_equal(got, E._step_plain_compiled(*args))
+        np.testing.assert_array_equal(got, E._step_compiled(*args))
         np.testing.assert_allclose(got, numpy_fast, rtol=1e-11, atol=1e-14)  # a tangent spun to 1570 rad: 1e-12
 
 
@@ -265,10 +265,10 @@ def test_the_compiled_step_is_there_unless_switched_off():
 
     from bayesrod.physics import _compiled
 
-    assert (_compiled.plain_step is None) == bool(os.environ.get("BAYESROD_NO_JIT"))
+    assert (_compiled.step is None) == bool(os.environ.get("BAYESROD_NO_JIT"))
 
 
-@pytest.mark.skipif("not __import__('bayesrod.physics._compiled').physics._compiled.plain_step")
+@pytest.mark.skipif("not __import__('bayesrod.physics._compiled').physics._compiled.step")
 @pytest.mark.parametrize("B", [0, 1, 7, 300])
 @pytest.mark.parametrize("one_taper", [True, False])
 def test_compiled_step_matches_the_numpy_step_on_every_element(B, one_taper):
@@ -289,17 +289,51 @@ def test_compiled_step_matches_the_numpy_step_on_every_element(B, one_taper):
     for sig, h in [(0.3, 1.0 / 48), (1.0 - 1.0 / 48, 1.0 / 48), (1.0, 1e-4)]:
         Ys = Y.copy() if sig < 0.9 else np.vstack([Y[:3], np.zeros((1, B))])  # near the tip: above the contact
         want = E._step_plain(Ys, sig, h, f, P, active if sig < 0.9 else 0.0)
-        got = E._step_plain_compiled(Ys, sig, h, f, P, active if sig < 0.9 else 0.0)
+        got = E._step_compiled(Ys, sig, h, f, P, active if sig < 0.9 else 0.0)
         np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-15)
     sig_b, h_b = rng.uniform(0.0, 0.6, B), rng.uniform(0.0, 0.03, B)
     for sig, h, a in [(sig_b, h_b, active), (0.4, h_b, 1.0), (sig_b, 0.01, 0.0)]:
         want = E._step_plain_each(Y, sig, h, f, P, a)
-        got = E._step_plain_compiled(Y, sig, h, f, P, a)
+        got = E._step_compiled(Y, sig, h, f, P, a)
         # round-off grows with the turn of the tangent (a rod near a tapered tip spins by thousands of radians)
         turn = np.nan_to_num(np.abs(want[2] - Y[2]), nan=0.0, posinf=0.0)
         np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
         miss, size = (np.nan_to_num(np.abs(a), nan=0.0, posinf=0.0) for a in (got - want, want))
         assert np.all(miss <= 1e-13 * size + 1e-14 * (1.0 + turn)), miss.max()
+
+
+@pytest.mark.skipif("not __import__('bayesrod.physics._compiled').physics._compiled.step")
+@pytest.mark.parametrize("B", [1, 9, 300])
+@pytest.mark.parametrize(
+    "eff",
+    [{"kappa0": 0.4}, {"mu": 0.3}, {"w0": 0.8}, {"kappa0": -0.3, "mu": 0.2, "w0": 1.5}, "per-rod"],
+    ids=["rest-curvature", "friction", "weight", "all", "per-rod"],
+)
+@pytest.mark.parametrize("one_taper", [True, False])
+def test_compiled_general_step_matches_the_numpy_general_step(B, eff, one_taper):
+    """The compiled loop's general path against _step_general (and _rhs), each effect alone, all three, and
+    different effects per rod (some rods plain): one step size and one per element, below and past the tip."""
+    from bayesrod.physics import elastica as E
+
+    rng = np.random.default_rng(21 + B)
+    p = 0.43 if one_taper else rng.uniform(0.0, 1.5, B)
+    if eff == "per-rod":
+        eff = {k: rng.uniform(0.0, 1.0, B) * (rng.uniform(size=B) < 0.5) for k in ("kappa0", "mu", "w0")}
+    P = E._prepare(E._problem(np.full(B, 0.6), np.broadcast_to(np.asarray(p, float), B), eff)[0])
+    assert not P["_plain"]
+    Y = np.vstack([rng.uniform(0, 0.3, (2, B)), rng.uniform(-1.5, 1.5, (1, B)), rng.uniform(-1, 1, (1, B))])
+    f, active = rng.uniform(0.0, 4.0, B), (rng.uniform(size=B) < 0.7).astype(float)
+    cases = [(0.3, 1.0 / 48, active), (1.0 - 1.0 / 48, 1.0 / 48, active), (1.0, 1e-4, 0.0)]
+    cases += [(rng.uniform(0.0, 0.6, B), rng.uniform(0.0, 0.03, B), active), (0.4, rng.uniform(0.0, 0.03, B), 1.0)]
+    for sig, h, a in cases:
+        Ys = Y if np.max(sig) < 0.9 else np.vstack([Y[:3], np.zeros((1, B))])  # near the tip: above the contact
+        a = a if np.max(sig) < 0.9 else 0.0
+        want = E._step_general(Ys, sig, h, f, P, a)
+        got = E._step_compiled(Ys, sig, h, f, P, a)
+        np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+        turn = np.nan_to_num(np.abs(want[2] - Ys[2]), nan=0.0, posinf=0.0)
+        miss, size = (np.nan_to_num(np.abs(x), nan=0.0, posinf=0.0) for x in (got - want, want))
+        assert np.all(miss <= 1e-13 * size + 1e-14 * (1.0 + turn)), (sig, miss.max())
 
 
 def _curled_arc(n=48, sweep=2.6):

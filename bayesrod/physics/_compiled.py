@@ -1,13 +1,14 @@
-"""The plain rod's Runge-Kutta step compiled (numba): the fast path beside the numpy reference.
+"""The rod's Runge-Kutta step compiled (numba): the fast path beside the numpy reference.
 
 One step of :func:`bayesrod.physics.elastica._step_plain` (DOP853 tableau, no weight, friction or rest curvature)
-for every rod of a batch, its twelve stages in one compiled loop per rod instead of five array calls per stage. The
+or of :func:`bayesrod.physics.elastica._step_general` (any of them) for every rod of a batch, its twelve stages in
+one compiled loop per rod instead of five to a dozen array calls per stage. The
 numpy path spends its time in array-call overhead at the batch sizes a fit uses (one to a few hundred rods); the
 loop takes 4-15x less time at 1-64 rods and 1.3x less at 4096 (``benchmarks/bench_compiled_step.py``). Tests
 check the two paths agree to round-off (tests/test_elastica.py).
 
 The numpy path is taken instead when numba is missing or the environment sets ``BAYESROD_NO_JIT`` (to a non-empty
-value): :data:`plain_step` is then ``None``.
+value): :data:`step` is then ``None``.
 """
 
 from __future__ import annotations
@@ -43,18 +44,56 @@ def _jit(**options):
 
 @_jit(inline="always")
 def _inverse_taper(s: float, p4: float, one_taper: bool) -> float:
-    """1 / e(s) of eq. taper, e floored at 1e-300, as the numpy path evaluates it: (1 - s)^(4p) with one exponent
-    for the batch (1 when p = 0), exp(4p log(1 - s)) with one per rod."""
+    """1 / e(s) of eq. taper as the numpy plain step evaluates it (``elastica._inverse_taper``): e floored at
+    1e-300 (past the tip 1 / e = 1e300), (1 - s)^(4p) with one exponent for the batch (1 when p = 0),
+    exp(4p log(1 - s)) with one per rod."""
     if one_taper:
         return 1.0 if p4 == 0.0 else 1.0 / max(max(1.0 - s, 0.0) ** p4, 1e-300)
     return 1.0 / max(math.exp(p4 * math.log(max(1.0 - s, 1e-300))), 1e-300)
 
 
+@_jit(inline="always")
+def _taper(s: float, p4: float, power: bool) -> float:
+    """e(s) of eq. taper as the numpy general step evaluates it (``elastica._rhs``): infinite at and past the tip
+    (no bending there), floored at 1e-300, (1 - s)^(4p) with one exponent and one sigma for the batch (``power``;
+    1 when p = 0), else exp(4p log(1 - s))."""
+    if s >= 1.0:
+        return math.inf
+    if power:
+        return 1.0 if p4 == 0.0 else max((1.0 - s) ** p4, 1e-300)
+    return max(math.exp(p4 * math.log(max(1.0 - s, 1e-300))), 1e-300)
+
+
+@_jit(inline="always")
+def _weight(s: float, q: float) -> float:
+    """(1 - s)^q / q, the weight above s per unit w0 (q = 2p + 1), as ``elastica._rhs`` evaluates it."""
+    return math.exp(q * math.log(max(1.0 - s, 1e-300))) / q
+
+
+@_jit(inline="always")
+def _at(x: NDArray, j: int) -> float:
+    """x[j] of a per-rod array, x[0] of a (1,) array shared by the batch."""
+    return x[0] if x.shape[0] == 1 else x[j]
+
+
 @_jit(nogil=True)
-def _plain_step_loop(
-    Y: NDArray, sig: NDArray, h: NDArray, f: NDArray, active: NDArray, p4: NDArray, c: NDArray, a: NDArray, b: NDArray
+def _step_loop(
+    Y: NDArray,
+    sig: NDArray,
+    h: NDArray,
+    f: NDArray,
+    active: NDArray,
+    p4: NDArray,
+    kappa0: NDArray,
+    mu: NDArray,
+    w0: NDArray,
+    q: NDArray,
+    general: bool,
+    c: NDArray,
+    a: NDArray,
+    b: NDArray,
 ) -> NDArray:
-    """One RK step of a plain rod for each rod of the batch.
+    """One RK step (DOP853 tableau) of every rod of the batch.
 
     Parameters
     ----------
@@ -65,8 +104,13 @@ def _plain_step_loop(
     f, active : (1,) or (B,) float arrays
         The nondimensional push f = F L^2 / EI0 and the contact factor a(sigma) (1 below the contact, 0 above).
     p4 : (1,) or (B,) float array
-        4 p, the exponent of e(sigma) = (1 - sigma)^(4p) (eq. taper): one for the batch, or one per rod (then
-        evaluated as exp(4p log(1 - sigma)), as the numpy path does).
+        4 p, the exponent of e(sigma) = (1 - sigma)^(4p) (eq. taper): one for the batch, or one per rod.
+    kappa0, mu, w0, q : (1,) or (B,) float arrays
+        Rest curvature, friction coefficient, weight and 2p + 1 (the weight's exponent) of the general step.
+    general : bool
+        False: the plain rod (``elastica._step_plain``; kappa0, mu and w0 are not read); True: the general step
+        (``elastica._step_general`` and ``elastica._rhs``), with any of the effects: rest curvature where kappa0
+        is non-zero, friction where mu is, weight where w0 is.
     c, a, b : (12,), (12, 12) and (12,) float arrays
         The tableau's nodes, stage and weight coefficients.
 
@@ -77,25 +121,30 @@ def _plain_step_loop(
 
     Notes
     -----
-    The slopes are (sin phi, cos phi, m / e, -a f cos phi) (eq. constitutive): a stage's state needs only phi and
-    m, so only those two are combined per stage; xi and zeta are summed once, from the stages' slopes, at the end.
-    e is floored at 1e-300 (past the tip: 1 / e = 1e300, as the numpy path's taper), and 1 when p = 0.
+    The slopes are (sin phi, cos phi, m / e + kappa0, -a f (cos phi - mu sin phi) - W sin phi) (eqs. ivp,
+    constitutive): a stage's state needs only phi and m, so only those two are combined per stage; xi and zeta
+    are summed once, from the stages' slopes, at the end. Each path's taper is evaluated as its numpy step does
+    (:func:`_inverse_taper`, :func:`_taper`), so the two agree to round-off.
     """
     n = Y.shape[1]
     out = np.empty((4, n))
     k = np.empty((12, 4))
     one_taper = p4.shape[0] == 1
-    # one taper, one step start and size: the twelve stages' 1 / e are the same for every rod
+    # one taper, one step start and size: the twelve stages' taper is the same for every rod
     shared = one_taper and sig.shape[0] == 1 and h.shape[0] == 1
-    shared_inv_e = np.empty(12)
+    taper = np.empty(12)  # 1 / e (plain) or e (general) at the stages, when shared
+    weight = np.empty(12)  # the weight's (1 - s)^q / q at the stages, when shared (q = 2p + 1: one p, one q)
     if shared:
         for i in range(12):
-            shared_inv_e[i] = _inverse_taper(sig[0] + c[i] * h[0], p4[0], True)
+            s = sig[0] + c[i] * h[0]
+            taper[i] = _taper(s, p4[0], True) if general else _inverse_taper(s, p4[0], True)
+            weight[i] = _weight(s, q[0])
     for j in range(n):
-        hj = h[0] if h.shape[0] == 1 else h[j]
-        sj = sig[0] if sig.shape[0] == 1 else sig[j]
-        pj = p4[0] if p4.shape[0] == 1 else p4[j]
-        neg_af = -(active[0] if active.shape[0] == 1 else active[j]) * (f[0] if f.shape[0] == 1 else f[j])
+        hj = _at(h, j)
+        sj = _at(sig, j)
+        pj = _at(p4, j)
+        af = _at(active, j) * _at(f, j)
+        kap, mu_j, w0_j, qj = (_at(kappa0, j), _at(mu, j), _at(w0, j), _at(q, j)) if general else (0.0, 0.0, 0.0, 1.0)
         phi0 = Y[2, j]
         m0 = Y[3, j]
         for i in range(12):
@@ -106,12 +155,21 @@ def _plain_step_loop(
                 s_m += a[i, stage] * k[stage, 3]
             phi = phi0 + hj * s_phi
             m = m0 + hj * s_m
-            inv_e = shared_inv_e[i] if shared else _inverse_taper(sj + c[i] * hj, pj, one_taper)
+            s = sj + c[i] * hj
             cos_phi = math.cos(phi)
-            k[i, 0] = math.sin(phi)
+            sin_phi = math.sin(phi)
+            k[i, 0] = sin_phi
             k[i, 1] = cos_phi
-            k[i, 2] = m * inv_e
-            k[i, 3] = cos_phi * neg_af
+            if not general:
+                k[i, 2] = m * (taper[i] if shared else _inverse_taper(s, pj, one_taper))
+                k[i, 3] = cos_phi * -af
+                continue
+            k[i, 2] = m / (taper[i] if shared else _taper(s, pj, False))
+            if kap != 0.0:
+                k[i, 2] += kap
+            k[i, 3] = -((cos_phi - mu_j * sin_phi) * af) if mu_j != 0.0 else cos_phi * -af
+            if w0_j != 0.0:
+                k[i, 3] -= w0_j * (weight[i] if shared else _weight(s, qj)) * sin_phi
         for comp in range(4):
             total = 0.0
             for i in range(12):
@@ -120,5 +178,5 @@ def _plain_step_loop(
     return out
 
 
-plain_step = _plain_step_loop if _numba is not None else None
-"""The compiled :func:`_plain_step_loop`, or None when the numpy path is to be used."""
+step = _step_loop if _numba is not None else None
+"""The compiled :func:`_step_loop`, or None when the numpy steps are to be used."""

@@ -332,20 +332,30 @@ def _step_plain_each(Y, sig, h, f, P, active):
     return Y + h * (_B @ K2).reshape(4, B)
 
 
-def _step_plain_compiled(Y, sig, h, f, P, active):
-    """:func:`_step_plain` and :func:`_step_plain_each` in one compiled loop over the rods
-    (:data:`bayesrod.physics._compiled.plain_step`), the taper at the stages evaluated inside it."""
-    return _compiled.plain_step(
+def _step_compiled(Y, sig, h, f, P, active):
+    """:func:`_step_plain` (a plain rod) or :func:`_step_general` (any effect) in one compiled loop over the rods
+    (:data:`bayesrod.physics._compiled.step`), the taper at the stages evaluated inside it as each does."""
+    general = not P["_plain"]
+    zero = _ZERO
+    return _compiled.step(
         np.ascontiguousarray(Y, dtype=float),
         _flat(sig),
         _flat(h),
         _flat(f),
         _flat(active),
         _flat(P["_p4_scalar"] if P["_p4_scalar"] is not None else P["_p4"]),
+        _flat(P["kappa0"]) if general and P["_curved"] else zero,
+        _flat(P["mu"]) if general and P["_friction"] else zero,
+        _flat(P["w0"]) if general and P["_weighted"] else zero,
+        _flat(P["_q"]) if general and P["_weighted"] else _ONE,
+        general,
         _C,
         _A_SQUARE,
         _B,
     )
+
+
+_ZERO, _ONE = np.zeros(1), np.ones(1)
 
 
 def _flat(a) -> NDArray:
@@ -356,11 +366,11 @@ def _flat(a) -> NDArray:
 def _step(Y, sig, h, f, P, active):
     """One explicit RK step (DOP853 tableau, 8th order) of size h (scalar or (B,)).
 
-    A plain rod takes the compiled loop when numba is there (:mod:`bayesrod.physics._compiled`), else the numpy
-    paths it is tested against; any effect takes the general path."""
+    The compiled loop when numba is there (:mod:`bayesrod.physics._compiled`), else the numpy paths it is tested
+    against: a plain rod's, or the general one for any effect."""
+    if _compiled.step is not None:
+        return _step_compiled(Y, sig, h, f, P, active)
     if P.get("_plain"):
-        if _compiled.plain_step is not None:
-            return _step_plain_compiled(Y, sig, h, f, P, active)
         if isinstance(h, float) and isinstance(sig, float):
             return _step_plain(Y, sig, h, f, P, active)
         return _step_plain_each(Y, sig, h, f, P, active)
