@@ -26,6 +26,11 @@ from bayesrod.inference.sampler import run_ensembles
 from bayesrod.inference.summary import prior_sensitivity
 
 
+def _num(v: dict | None, side: str) -> str:
+    """A sensitivity to 3 decimals, or null (none reported: a clamp's compliance with too few soft draws)."""
+    return "null" if v is None or v.get(side) is None else f"{v[side]:.3f}"
+
+
 def one(rep: int, heights: list[float], stride: int) -> None:
     dss, *_ = replicate_data(rep, "base", heights, 0.9, stride)
     lik = GroupLikelihood({d.extra["condition"]: d for d in dss}, load_prior("woody"), pooled=("rho_force",))
@@ -41,8 +46,9 @@ def one(rep: int, heights: list[float], stride: int) -> None:
         q = np.quantile(r, [0.05, 0.5, 0.95])
         print(f"  rho {c:7s} {q[1]:.3f} [{q[0]:.3f}, {q[2]:.3f}]")
     for q in ("rho_force", "sigma_force_N", "base_compliance_rad_per_Nm"):
-        print(f"  {q:27s} prior", " ".join(f"{c} {v['prior']:.3f}" for c, v in sens[q].items()))
-        print(f"  {'':27s} likelihood", " ".join(f"{c} {v['likelihood']:.3f}" for c, v in sens[q].items()))
+        for side in ("prior", "likelihood"):  # a clamp with too few soft draws reports null (summary.json's null)
+            cells = " ".join(f"{c} {_num(v, side)}" for c, v in sens[q].items())
+            print(f"  {q if side == 'prior' else '':27s} {side}", cells)
     print(f"  EI0 prior {sens['EI0']['prior']:.3f} likelihood {sens['EI0']['likelihood']:.3f}")
     z = np.arctanh(rho)
     jac = -np.sum(np.log1p(-(rho**2)), axis=0)
