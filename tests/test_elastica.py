@@ -270,15 +270,15 @@ def test_the_compiled_step_is_there_unless_switched_off():
 
 @pytest.mark.skipif("not __import__('bayesrod.physics._compiled').physics._compiled.step")
 @pytest.mark.parametrize("B", [0, 1, 7, 300])
-@pytest.mark.parametrize("one_taper", [True, False])
-def test_compiled_step_matches_the_numpy_step_on_every_element(B, one_taper):
+@pytest.mark.parametrize("taper", [0.43, 0.25, "per-rod"])  # 0.25: 4p = 1, where a test of p4 == 1 would hide
+def test_compiled_step_matches_the_numpy_step_on_every_element(B, taper):
     """The compiled loop against the numpy paths, one step size and one per element, on batches with rods past
     the contact (no load), at the tip (sigma = 1), with NaN and infinite states (which must stay NaN, not raise),
     and a non-contiguous state array."""
     from bayesrod.physics import elastica as E
 
     rng = np.random.default_rng(11 + B)
-    p = 0.43 if one_taper else rng.uniform(0.0, 2.0, B)
+    p = rng.uniform(0.0, 2.0, B) if taper == "per-rod" else taper
     P = E._prepare(E._problem(np.full(B, 0.6), np.broadcast_to(np.asarray(p, float), B), None)[0])
     n = 2 * B
     wide = np.vstack([rng.uniform(0, 0.3, (2, n)), rng.uniform(-1.5, 1.5, (1, n)), rng.uniform(-1, 1, (1, n))])
@@ -309,14 +309,14 @@ def test_compiled_step_matches_the_numpy_step_on_every_element(B, one_taper):
     [{"kappa0": 0.4}, {"mu": 0.3}, {"w0": 0.8}, {"kappa0": -0.3, "mu": 0.2, "w0": 1.5}, "per-rod"],
     ids=["rest-curvature", "friction", "weight", "all", "per-rod"],
 )
-@pytest.mark.parametrize("one_taper", [True, False])
-def test_compiled_general_step_matches_the_numpy_general_step(B, eff, one_taper):
+@pytest.mark.parametrize("taper", [0.43, 0.25, "per-rod"])
+def test_compiled_general_step_matches_the_numpy_general_step(B, eff, taper):
     """The compiled loop's general path against _step_general (and _rhs), each effect alone, all three, and
     different effects per rod (some rods plain): one step size and one per element, below and past the tip."""
     from bayesrod.physics import elastica as E
 
     rng = np.random.default_rng(21 + B)
-    p = 0.43 if one_taper else rng.uniform(0.0, 1.5, B)
+    p = rng.uniform(0.0, 1.5, B) if taper == "per-rod" else taper
     if eff == "per-rod":
         eff = {k: rng.uniform(0.0, 1.0, B) * (rng.uniform(size=B) < 0.5) for k in ("kappa0", "mu", "w0")}
     P = E._prepare(E._problem(np.full(B, 0.6), np.broadcast_to(np.asarray(p, float), B), eff)[0])
