@@ -269,6 +269,25 @@ def test_the_compiled_step_is_there_unless_switched_off():
 
 
 @pytest.mark.skipif("not __import__('bayesrod.physics._compiled').physics._compiled.step")
+def test_the_step_compiles_where_no_cache_can_be_written():
+    """A read-only install with no writable home: numba finds no cache location and raises at decoration; bayesrod
+    must still import and compile (in the process) rather than fail on import."""
+    import subprocess
+    import sys
+
+    code = (
+        "import numba.core.caching as c; c.CacheImpl._locator_classes = []\n"
+        "import numpy as np\n"
+        "from bayesrod.physics import elastica as E, _compiled\n"
+        "assert _compiled.step is not None\n"
+        "print(float(E.force_from_displacement_nd(np.array([0.1]), 0.5, 0.4)['f'][0]))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert abs(float(out.stdout) - 1.8143987) < 1e-6
+
+
+@pytest.mark.skipif("not __import__('bayesrod.physics._compiled').physics._compiled.step")
 @pytest.mark.parametrize("B", [0, 1, 7, 300])
 @pytest.mark.parametrize("taper", [0.43, 0.25, "per-rod"])  # 0.25: 4p = 1, where a test of p4 == 1 would hide
 def test_compiled_step_matches_the_numpy_step_on_every_element(B, taper):

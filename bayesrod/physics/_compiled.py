@@ -36,10 +36,18 @@ _numba = _load_numba()
 
 def _jit(**options):
     """numba.njit with the compiled code cached on disk (in __pycache__, or numba's user-wide cache where that is
-    read-only), or the function itself when numba is not used."""
+    read-only; compiled in each process where neither can be written), or the function itself when numba is not
+    used."""
     if _numba is None:
         return lambda fn: fn
-    return _numba.njit(cache=True, **options)
+
+    def compiled(fn):
+        try:
+            return _numba.njit(cache=True, **options)(fn)
+        except RuntimeError:  # numba: "cannot cache function ...: no locator available" (nowhere to write)
+            return _numba.njit(**options)(fn)
+
+    return compiled
 
 
 @_jit(inline="always")
