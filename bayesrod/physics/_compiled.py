@@ -4,7 +4,8 @@ One step of :func:`bayesrod.physics.elastica._step_plain` (DOP853 tableau, no we
 or of :func:`bayesrod.physics.elastica._step_general` (any of them) for every rod of a batch, its twelve stages in
 one compiled loop per rod instead of five to a dozen array calls per stage. The
 numpy path spends its time in array-call overhead at the batch sizes a fit uses (one to a few hundred rods); the
-loop takes 4-15x less time at 1-64 rods and 1.3x less at 4096 (``benchmarks/bench_compiled_step.py``). Tests
+loop takes 3.7-12x less time at 1-64 rods (7-24x with effects) and 1.3x less at 4096
+(``benchmarks/bench_compiled_step.py``). Tests
 check the two paths agree to round-off (tests/test_elastica.py).
 
 The numpy path is taken instead when numba is missing or the environment sets ``BAYESROD_NO_JIT`` (to a non-empty
@@ -152,7 +153,7 @@ def _step_loop(
         sj = _at(sig, j)
         pj = _at(p4, j)
         af = _at(active, j) * _at(f, j)
-        kap, mu_j, w0_j, qj = (_at(kappa0, j), _at(mu, j), _at(w0, j), _at(q, j)) if general else (0.0, 0.0, 0.0, 1.0)
+        kap, mu_j, w0_j, qj = _at(kappa0, j), _at(mu, j), _at(w0, j), _at(q, j)  # read by the general path only
         phi0 = Y[2, j]
         m0 = Y[3, j]
         for i in range(12):

@@ -258,7 +258,6 @@ def _rhs(sig, Y, af, P, out=None):
     return out
 
 
-_A_SQUARE = np.ascontiguousarray(_A[:12, :12])  # (12, 12), for the compiled step
 # Rows of the tableau without their zero tail: stage i combines the first i slopes.
 _A_ROWS = [np.ascontiguousarray(_A[i, :i]) for i in range(12)]
 
@@ -336,7 +335,6 @@ def _step_compiled(Y, sig, h, f, P, active):
     """:func:`_step_plain` (a plain rod) or :func:`_step_general` (any effect) in one compiled loop over the rods
     (:data:`bayesrod.physics._compiled.step`), the taper at the stages evaluated inside it as each does."""
     general = not P["_plain"]
-    zero = _ZERO
     return _compiled.step(
         np.ascontiguousarray(Y, dtype=float),
         _flat(sig),
@@ -344,13 +342,13 @@ def _step_compiled(Y, sig, h, f, P, active):
         _flat(f),
         _flat(active),
         _flat(P["_p4_scalar"] if P["_p4_scalar"] is not None else P["_p4"]),
-        _flat(P["kappa0"]) if general and P["_curved"] else zero,
-        _flat(P["mu"]) if general and P["_friction"] else zero,
-        _flat(P["w0"]) if general and P["_weighted"] else zero,
+        _flat(P["kappa0"]) if general and P["_curved"] else _ZERO,
+        _flat(P["mu"]) if general and P["_friction"] else _ZERO,
+        _flat(P["w0"]) if general and P["_weighted"] else _ZERO,
         _flat(P["_q"]) if general and P["_weighted"] else _ONE,
         general,
         _C,
-        _A_SQUARE,
+        _A,
         _B,
     )
 
