@@ -173,9 +173,7 @@ def _step_loop(
                 k[i, 2] = m * (taper[i] if shared else _inverse_taper(s, pj, one_taper))
                 k[i, 3] = cos_phi * -af
                 continue
-            k[i, 2] = m / (taper[i] if shared else _taper(s, pj, False))
-            if kap != 0.0:
-                k[i, 2] += kap
+            k[i, 2] = m / (taper[i] if shared else _taper(s, pj, False)) + kap  # + 0.0 is exact: no branch
             k[i, 3] = -((cos_phi - mu_j * sin_phi) * af) if mu_j != 0.0 else cos_phi * -af
             if w0_j != 0.0:
                 k[i, 3] -= w0_j * (weight[i] if shared else _weight(s, qj)) * sin_phi
