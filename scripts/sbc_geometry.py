@@ -9,9 +9,9 @@ Each replicate draws, from its seed:
 * the data: forces only, or forces and centerlines (alternating with each cycle of the effects, so each
   effect is seen both ways);
 * one model effect or none, cycling through none, base_compliance, rest_curvature, force_offset, base_tilt
-  and contact_friction (yield is not: the reference solver has none),
-  its value drawn from the same prior's effect block; the effect is switched on in the simulation
-  *and fitted*.
+  and contact_friction (``--effects`` may add yield; self_weight cannot be fitted), its value drawn from the
+  same prior's effect block; the effect is switched on in the simulation *and fitted*. A yield replicate is
+  forces only (the fit refuses centerlines with yield).
 
 The pushes are placed by bayesrod's simulator with a fixed robot step of 0.01 L (``--step-l``; the
 simulator's default spreads 60 samples knowing where each push slips, so the robot positions alone give
@@ -49,6 +49,8 @@ from bayesrod.physics import reference as R  # noqa: E402
 
 PRIOR = str(Path(__file__).with_name("sbc_prior.json"))
 EFFECTS = (None, "base_compliance", "rest_curvature", "force_offset", "base_tilt", "contact_friction")
+#: every effect ``--effects`` accepts: the default cycle (EFFECTS, kept so earlier seeds draw the same cases) and yield
+ALL_EFFECTS = EFFECTS + ("yield",)
 PARAMS = ("EI0", "p", "sigma_force_N", "effect")
 FIELDS = (
     ["seed", "length_m", "n_heights", "shapes", "effect", "rhat_max", "max_ref_vs_fast_N", "n_fast_fallback"]
@@ -73,8 +75,9 @@ def draw_case(seed: int, effects: tuple = EFFECTS) -> dict:
         "sigma_force_N": float(pr.get("sigma_force_N").draw(rng, 1)[0]),
         "length_m": L,
         "heights_m": tuple(float(e * L) for e in eta),
-        # forces only and with centerlines alternate per cycle of effects, so each effect gets both
-        "shapes": bool((seed // len(effects)) % 2),
+        # forces only and with centerlines alternate per cycle of effects, so each effect gets both (but yield,
+        # whose fit takes forces only)
+        "shapes": bool((seed // len(effects)) % 2) and effect != "yield",
         "effect": effect,
     }
     if effect is not None:
@@ -114,17 +117,33 @@ def simulate_case(
     return simulate(stem, seed=seed, noise_model=noise, effects=switched, config_overrides=extra)
 
 
+def _reference_forces(d: np.ndarray, eta: float, p: float, nd: dict, m_yield: float) -> np.ndarray:
+    """Nondimensional forces at contact displacements ``d`` (since first contact) by the reference solver.
+
+    A base that yields at the nondimensional moment ``m_yield`` (inf: never) is a perfectly plastic hinge: the
+    horizontal force at height eta holds the base moment at f eta, so a monotone push is elastic up to the
+    displacement where the elastic force reaches m_yield / eta (solved force-first by the reference) and
+    holds that force beyond it (the base rotating plastically)."""
+    d_yield = np.inf
+    if np.isfinite(m_yield):
+        at_yield = R.solve_force(m_yield / eta, eta, p, nd)
+        if at_yield["found"]:  # else the elastic branch ends before the base yields
+            d_yield = at_yield["xi_c"] - R.solve_force(0.0, eta, p, nd)["xi_c"]
+    return np.array([m_yield / eta if di >= d_yield else R.solve_displacement(di, eta, p, nd)["f"] for di in d])
+
+
 def reference_dataset(ds, case: dict):
     """The simulated dataset with every force and centerline solved again by the reference solver."""
     cfg, sim = ds.simulation
     L, EI0, p, eff = cfg.length_m, cfg.EI0, cfg.p, cfg.effects
     nd = {k: float(v) for k, v in eff.nondim(L, EI0).items() if k != "m_yield"}
+    m_yield = float(eff.nondim(L, EI0)["m_yield"])
     pushes, worst, n_fallback = [], 0.0, 0
     for push, sp in zip(ds.pushes, sim, strict=True):
         eng = sp.engaged
         D = sp.contact_x_m[eng]
         fast = force_from_displacement(D, sp.height_m, EI0, p, L, eff).force_N  # sensor force, offset included
-        ref = np.array([R.solve_displacement(d / L, sp.height_m / L, p, nd)["f"] for d in D]) * EI0 / L**2
+        ref = _reference_forces(D / L, sp.height_m / L, p, nd, m_yield) * EI0 / L**2
         ref = ref + eff.force_offset
         # the last sample can lie within ~1e-6 L of the branch end, past the reference's own end: keep the
         # fast value there (counted)
@@ -230,7 +249,7 @@ def summarise(rows: list[dict], out: Path) -> str:
 
     for k in PARAMS:
         row_for(k, ok, "all")
-    for eff in ("none",) + EFFECTS[1:]:
+    for eff in ("none",) + ALL_EFFECTS[1:]:
         sel = [r for r in ok if r["effect"] == eff]
         for k in PARAMS:
             row_for(k, sel, f"effect {eff}")
@@ -281,7 +300,8 @@ def main(argv=None) -> None:
         "--effects",
         default=",".join(EFFECTS[1:]),
         help="the effects the replicates cycle through after 'none' (comma separated; default all of "
-        f"{', '.join(EFFECTS[1:])}); contact_friction's likelihood tables take tens of minutes per replicate",
+        f"{', '.join(EFFECTS[1:])}; yield may be added); contact_friction's likelihood tables take tens of minutes "
+        "per replicate",
     )
     ap.add_argument(
         "--only",
@@ -299,9 +319,9 @@ def main(argv=None) -> None:
     csv = args.out / "sbc_geometry.csv"
     seeds = range(args.first_seed, args.first_seed + args.replicates)
     effects = (None, *[e for e in args.effects.split(",") if e])
-    bad = [e for e in effects[1:] if e not in EFFECTS]
+    bad = [e for e in effects[1:] if e not in ALL_EFFECTS]
     if bad:
-        ap.error(f"--effects: expected names among {', '.join(EFFECTS[1:])}, got {', '.join(bad)}")
+        ap.error(f"--effects: expected names among {', '.join(ALL_EFFECTS[1:])}, got {', '.join(bad)}")
     if args.only != "all" or args.skip_none:
         cases = {s: draw_case(s, effects) for s in seeds}
         keep = {
