@@ -41,6 +41,36 @@ def test_noise_after_a_slip_is_not_taken_for_a_loaded_stretch():
         assert detect_engagement(F).slip_index == 58
 
 
+#: scripts/sbc_geometry.py --effects yield, seed 61, the push at 0.70 m: 27 engaged samples (the last, 0.155 N,
+#: on the falling branch), then the unloaded sensor (the simulator's own mask)
+SEED61_TOP_PUSH_N = [
+    0.0624, 0.0233, 0.0237, 0.0566, 0.0882, 0.0802, 0.1038, 0.1573, 0.124, 0.1224, 0.2465, 0.2118,
+    0.1542, 0.1755, 0.3085, 0.205, 0.1945, 0.259, 0.1945, 0.2144, 0.2352, 0.2031, 0.2307, 0.2189,
+    0.2637, 0.2703, 0.1546, 0.0241, -0.0141, -0.0021, -0.0287, 0.0185, -0.0533, -0.0496, 0.0253,
+]  # fmt: skip
+
+
+def test_a_line_that_falls_through_the_unloaded_level_is_not_a_loaded_stretch():
+    """After a fall to 0.155 N the next two samples read 0.024 and -0.014 N: the unloaded sensor. A line through
+    0.155, 0.024, -0.014 passed the change point's gaps, join and BIC and took both as loaded (slip 29, two
+    unloaded samples fitted at ~5 sigma each: the noise sd read 36% high in the SBC). A stem in contact pushes
+    the sensor one way, so the loaded line must end above the unloaded level: the slip stays at sample 26 (one
+    engaged sample lost, none unloaded kept)."""
+    from bayesrod.dataset.engagement import _slip_change_point, _slip_change_point_reference
+
+    eng = detect_engagement(SEED61_TOP_PUSH_N)
+    assert eng.slip_index == 26
+    F, sigma = np.asarray(SEED61_TOP_PUSH_N), eng.noise_N
+    assert _slip_change_point(F, 26, sigma) == _slip_change_point_reference(F, 26, sigma) == 26
+    # noise-free: a stretch falling from 5 sigma to -0.4 sigma (its line ends at -0.3) passes the gaps, the join
+    # and the BIC but ends below the unloaded level; the same stretch ending at 2.2 sigma is loaded
+    sigma, base = 0.5, 1.0
+    F = base + sigma * np.r_[np.full(3, 5.5), [5.0, 2.6, -0.4], np.zeros(6)]
+    assert _slip_change_point(F, 3, sigma) == _slip_change_point_reference(F, 3, sigma) == 3
+    F = base + sigma * np.r_[np.full(3, 3.2), [3.0, 2.6, 2.2], np.zeros(6)]
+    assert _slip_change_point(F, 3, sigma) == _slip_change_point_reference(F, 3, sigma) == 6
+
+
 def test_robust_noise_reads_the_sd_of_white_noise_through_a_trend_and_needs_two_second_differences():
     from bayesrod.dataset.engagement import robust_noise
 

@@ -104,8 +104,10 @@ def _slip_change_point(F: NDArray, first_low: int, sigma: float) -> int:
     four unloaded after it: with two, chance lows among them drew the slip 6 samples late) lies above the
     constant by 1.5 sigma and by three standard errors of the difference of their means (the noise taken as
     independent); and where the line starts at least 0.4 of the way from the constant up to the force just
-    before ``first_low`` (the stem does not jump). Otherwise the slip stays at ``first_low``. Never moves the
-    slip earlier.
+    before ``first_low`` (the stem does not jump), and ends above the constant (a stem in contact pushes the
+    sensor one way: a line that falls through the unloaded level is a slip followed by noise; SBC yield seed
+    61 read two unloaded samples as loaded so, docs/validation.md, session 60). Otherwise the slip stays at
+    ``first_low``. Never moves the slip earlier.
 
     Every split's line and constant come from cumulative sums, so the cost grows linearly with the samples
     after ``first_low`` (:func:`_slip_change_point_reference` fits each split's line anew; the two agree,
@@ -150,11 +152,13 @@ def _slip_change_point(F: NDArray, first_low: int, sigma: float) -> int:
     # the stem does not jump: the loaded line starts at least 0.4 of the way from the constant to the force
     # just before first_low (a ring of the unloaded sensor after a clear slip starts near the constant)
     joined = intercept - after_mean > 0.4 * (pre - after_mean)
+    # still loaded at its last sample: the line ends above the constant
+    above = intercept + slope * (s - 1) > after_mean
     # the loaded part's mean above the constant by 1.5 sigma and by 3 standard errors of the difference
     # (iid noise assumed): a sensor's ring or drift after the slip moves a stretch's mean by less
     diff = sy / s - after_mean
     gap = (diff > 1.5 * sigma) & (diff > 3.0 * sigma * np.sqrt(1.0 / s + 1.0 / n_after))
-    ok = gap & joined & (sse < sse_flat - 3.0 * sigma**2 * np.log(m))
+    ok = gap & joined & above & (sse < sse_flat - 3.0 * sigma**2 * np.log(m))
     if not ok.any():
         return first_low
     return first_low + int(s[ok][np.argmin(sse[ok])])
@@ -177,10 +181,11 @@ def _slip_change_point_reference(F: NDArray, first_low: int, sigma: float) -> in
         # the stem does not jump: the loaded line starts at least 0.4 of the way from the constant to the force
         # just before first_low (a ring of the unloaded sensor after a clear slip starts near the constant)
         joined = line[0] - after.mean() > 0.4 * (pre - after.mean())
+        above = line[-1] > after.mean()  # still loaded at its last sample
         # the loaded part's mean above the constant by 1.5 sigma and by 3 standard errors of the difference
         # (iid noise assumed): a sensor's ring or drift after the slip moves a stretch's mean by less
         diff = before.mean() - after.mean()
         gap = diff > 1.5 * sigma and diff > 3.0 * sigma * np.sqrt(1.0 / s + 1.0 / (m - s))
-        if sse < best and gap and joined:
+        if sse < best and gap and joined and above:
             best, best_s = sse, s
     return first_low + best_s
