@@ -23,6 +23,11 @@ the truth among 99 thinned posterior draws and whether the 90% interval covers i
 ``sbc_geometry.csv`` (resumable: rows already there are not recomputed) and ``sbc_geometry.md`` (coverage
 per parameter and per case, with the binomial range of 90% coverage and a chi-square test of the rank
 histogram) into --out.
+
+A seed fixes its case and its noise draws whatever the effect cycle: runs over the same seeds with other
+``--effects`` (the yield study's odd seeds 1-79 and the main study's 0-119) share their noise draws, so a lean
+they show together is one piece of evidence, not two. ``scripts/sbc_noise_draws.py`` reports how large a seed
+set's force-noise draws came out before any fit (seeds 0-119 drew them small: docs/validation.md, session 61).
 """
 
 from __future__ import annotations
