@@ -186,34 +186,10 @@ def test_fit_with_slip_writes_the_window_and_the_model_slip_and_only_then(one_he
     plain_post = bayesrod.fit(one_height, **kw)
     plain = plain_post.to_dict()
     assert "slip" not in plain["data"]
-    # one height, forces only, a slip seen: without the term the summary and the report say the intervals are
-    # likely too narrow (docs/validation.md, "One height, forces only"); with it, they do not
-    assert "about 80%" in plain["calibration"]["message"] and "calibration" not in summary
-    assert "Intervals likely too narrow" in plain_post.report_html(pngs={})
-    assert "Intervals likely too narrow" not in post.report_html(pngs={})
-
-
-def test_the_calibration_caution_is_for_one_height_forces_only_and_a_slip_seen(one_height, coarse_length_axis):
-    from bayesrod.api.fitting import one_height_slip_caution
-
-    pr = load_prior("default")
-
-    def caution(ds, **kw):
-        return one_height_slip_caution(build_likelihood(ds, pr, **kw), ds.heights_m)
-
-    assert "one height" in caution(one_height, use_shapes=False)
-    assert "--slip" in caution(one_height, use_shapes=False)  # the remedy where it applies
-    # with the length sampled the slip term is off (its table has no length axis): not offered
-    unknown = caution(one_height, use_shapes=False, length="unknown")
-    assert "one height" in unknown and "--slip" not in unknown
-    assert caution(one_height, use_shapes=True) is None  # centerlines
-    assert caution(one_height, use_shapes=False, slip=True) is None  # the slip term reads where it stopped
-    two = bayesrod.simulate("twig", seed=4, heights_m=[0.45, 0.6], config_overrides={"n_frames_engaged": 2})
-    assert caution(two, use_shapes=False) is None
-    short = bayesrod.simulate(
-        "twig", seed=4, heights_m=[0.5], config_overrides={"n_frames_engaged": 2, "max_contact_displacement_m": 0.1}
-    )
-    assert caution(short, use_shapes=False) is None  # stopped before the slip: the stop says nothing
+    # no calibration caution either way: one height, forces only, ending at the slip, the plain fit's 90%
+    # intervals covered EI0 and p in 89 and 87 of 98 fresh simulated replicates (docs/validation.md, session 61)
+    assert "calibration" not in plain and "calibration" not in summary
+    assert "Intervals likely too narrow" not in plain_post.report_html(pngs={})
 
 
 def test_the_slip_term_reads_the_tabled_effect_and_moves_its_window_with_the_preload(one_height):

@@ -34,7 +34,6 @@ from ..inference.likelihood import (
     effective_shape_weight,
     geometry_blocker,
     length_is_approximate,
-    one_height_stiffness,
     table_check,
     table_workers,
 )
@@ -612,30 +611,6 @@ def _lumped_points(lik) -> list:
     return pts
 
 
-def one_height_slip_caution(lik, heights_m) -> str | None:
-    """The calibration caution of a fit on forces alone at one height whose pushes end where the stem slipped
-    off the probe (docs/validation.md, "One height, forces only: fresh seeds 240-479"), else None.
-
-    Where a push stops then depends on the stem, which the likelihood (without its slip term) does not read:
-    over 44 simulated replicates the 90% intervals of p covered 0.80 (0.91 with the same pushes stopped at a
-    fixed fraction of L; 0.86, EI0 0.91, with the slip term). The slip term is suggested where it applies
-    (a known length, no height errors, no yield)."""
-    if lik.n_points or lik.slip or one_height_stiffness(heights_m, [lik.L], False) is None:
-        return None
-    if not any(np.isfinite(d.slipped_by_m) for d in lik.force_data):
-        return None
-    slip_applies = not lik.geometry and "yield" not in lik.effects
-    remedy = (
-        "fit with the slip term (--slip, fit(slip=True): 0.86-0.91 in the same simulation), " if slip_applies else ""
-    )
-    return (
-        "all pushes at one height, forces only, ending where the stem slipped off the probe: in simulation the "
-        "90% intervals of EI0 and p covered the truth in about 80% of such fits, not 90% (where a push stops "
-        "depends on the stem; docs/validation.md, 'One height, forces only'). Read them as too narrow, or "
-        f"{remedy}push at a second height (bayesrod design) or record centerlines"
-    )
-
-
 def _assumptions(spec, lik=None) -> list[str]:
     a = [
         "A1 planar bending in one vertical plane",
@@ -995,10 +970,6 @@ def fit(
         extra["model_check"]["pushes_starting_loaded"] = loaded
     if misfit:
         log.warning("warning: %s: %s", spec.specimen, extra["model_check"]["message"])
-    caution = one_height_slip_caution(lik, spec.heights_m)
-    if caution:
-        extra["calibration"] = {"message": caution}
-        log.warning("warning: %s: %s", spec.specimen, caution)
     try:
         tables = table_check(lik, median)
     except ValueError as err:  # an exact solve the tables never needed (e.g. a rest shape that misses a height)

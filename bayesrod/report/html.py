@@ -169,9 +169,6 @@ def fit_report(summary: dict, pngs: Mapping[str, bytes], provenance: dict | None
             if mc.get("pushes")
             else ""
         )
-    cal = (summary.get("calibration") or {}).get("message")
-    if cal:
-        check_html += f'<p class="warn"><b>Intervals likely too narrow.</b> {esc(cal)}.</p>'
     body = f"""<h1>bayesrod report: {esc(summary["specimen"])}</h1>{check_html}
 <p>Species: {esc(str(summary.get("species")))}. Length {summary["length_m"]:g} m. Prior: {esc(summary["prior"])}.
 Effects: {esc(", ".join(summary["effects"]) or "none")}.</p>
