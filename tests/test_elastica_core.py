@@ -398,6 +398,40 @@ def test_forces_from_displacements_with_friction_against_the_push_match_the_refe
     assert float(sol["sig_c"][6]) == pytest.approx(ref["sig_c"], abs=1e-8)
 
 
+def test_the_reference_finds_the_first_root_where_its_moment_bracket_holds_a_later_jump():
+    """SBC friction seed 3's low push (eta 0.4957, p 0.4729, mu -0.0846): the base-moment residual rises smoothly
+    through a root at m0 2.2152 for f 4.18, then jumps back below zero near 2.27 (the contact leaping from 0.70 to
+    0.93 L) and bends over at 2.28. brentq on the doubled bracket closed on the jump and the reference held no
+    contact at f 4.173-4.199; solve_displacement then returned the hole's edge, f 4.1721, for displacements
+    0.40-0.42 L (0.28 N of reference data off, session 61). It now takes the first root from below, the fast
+    path's forces to 1e-10; and a displacement whose bracket closes on forces without a contact is NaN, not
+    the edge's force."""
+    eta, p, eff = 0.45248603955546574 / 0.9128173377291625, 0.4729029098272553, {"mu": -0.0846471584547399}
+    d = np.array([0.40183, 0.41172, 0.42164])
+    fast = force_from_displacement_nd(d, eta, p, eff)
+    for i, di in enumerate(d):
+        ref = R.solve_displacement(float(di), eta, p, eff)
+        assert ref["f"] == pytest.approx(float(fast["f"][i]), abs=1e-10)
+    held = R.solve_force(4.18, eta, p, eff)
+    assert held["found"] and held["m0"] == pytest.approx(2.215157, abs=1e-6)
+
+
+def test_a_reference_displacement_whose_bracket_closes_on_no_contact_is_nan(monkeypatch):
+    """solve_displacement's brentq reads a force without a contact as past the target; where it closes on such a
+    force's edge instead of on d, the answer is NaN (flagged), never that edge's force."""
+    real = R.solve_force
+
+    def holed(f, *a, **k):  # no contact at forces 0.34-0.40 of a plain rod: between two of the scan's forces
+        return {"found": False} if 0.34 < f < 0.40 else real(f, *a, **k)  # (1e-3 x 1.25^k: 0.331, 0.414)
+
+    monkeypatch.setattr(R, "solve_force", holed)
+    x0 = real(0.0, 0.5, 0.4)["xi_c"]
+    out = R.solve_displacement(float(real(0.37, 0.5, 0.4)["xi_c"] - x0), 0.5, 0.4)
+    assert np.isnan(out["f"]) and out["no_contact_inside"] and not out["slipped"]
+    below = R.solve_displacement(float(real(0.2, 0.5, 0.4)["xi_c"] - x0), 0.5, 0.4)
+    assert below["f"] == pytest.approx(0.2, abs=1e-10)  # away from the hole: the force as before
+
+
 def test_a_displacement_far_past_the_slip_of_a_sprung_stem_with_friction_against_the_push_is_slipped():
     """eta 0.75, p 0.6, a base spring (c 0.4), friction against the push (mu -0.1) and a rest curvature (0.1): the
     fast path holds the stem at d 0.45 with the reference's force (0.553764) and calls d = eta slipped, without a

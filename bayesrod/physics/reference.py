@@ -22,6 +22,11 @@ ATOL = 1e-14
 
 #: brentq's relative tolerance on the base moment: its least (4 eps), so its root is a few ulps from the sign change
 _RTOL_M0 = 4.0 * np.finfo(float).eps
+#: points of the scan for the first root of the base-moment residual where the bracket held several (solve_force)
+SCAN_POINTS = 129
+#: |contact displacement - target| [L] above which solve_displacement's root is not one (a force with no contact
+#: inside the bracket, where the scan's "past the target" stood in for it)
+DISPLACEMENT_MATCH = 1e-6
 
 
 def _ei(sig: float, p: float) -> float:
@@ -112,7 +117,24 @@ def solve_force(
         lo, hi = hi, 2.0 * hi
         if hi > 1e6:
             return {"found": False}
-    m0 = brentq(resid, lo, hi, xtol=1e-15, rtol=_RTOL_M0)
+    out = _settle(shoot, brentq(resid, lo, hi, xtol=1e-15, rtol=_RTOL_M0))
+    if out is not None:
+        return out
+    # The bracket held more than one sign change and brentq closed on a jump (the contact leaping to a later
+    # crossing, the stem bending over): SBC friction seed 3 (eta 0.496, p 0.473, mu -0.085) had no contact at
+    # f 4.173-4.199 although the residual rises smoothly through a root at m0 2.2152, then jumps back below
+    # zero at 2.27 where the contact leaps from 0.70 to 0.93 L. The equilibrium of the loading branch is the
+    # first root above the bracket's lower end: scanned for on SCAN_POINTS points, then settled as above.
+    grid = np.linspace(lo, hi, SCAN_POINTS)
+    signs = [resid(m) >= 0.0 for m in grid]
+    for a, b, sa, sb in zip(grid[:-1], grid[1:], signs[:-1], signs[1:], strict=True):
+        if sb and not sa:
+            return _settle(shoot, brentq(resid, a, b, xtol=1e-15, rtol=_RTOL_M0)) or {"found": False}
+    return {"found": False}
+
+
+def _settle(shoot, m0: float) -> dict | None:
+    """The contact at the base moment ``m0`` brentq returned, or None where no equilibrium holds there."""
     out = shoot(m0)
     if out["found"] and abs(out["resid"]) <= 1e-9 * (1.0 + abs(m0)):
         return out
@@ -125,15 +147,15 @@ def solve_force(
     a, b = m0 - d, m0 + d
     below, above = shoot(a), shoot(b)
     if not (below["found"] and above["found"] and below["resid"] < 0.0 <= above["resid"]):
-        return {"found": False}
+        return None
     jump = above["resid"] - below["resid"] > STEEP_ROOT_JUMP * (1.0 + abs(m0))
     if jump or abs(above["sig_c"] - below["sig_c"]) > STEEP_ROOT_MOVE:
-        return {"found": False}
+        return None
     best = min((below, above), key=lambda o: abs(o["resid"]))
     while b - a > 4.0 * np.spacing(abs(m0)):
         mid = shoot(0.5 * (a + b))
         if not mid["found"]:
-            return {"found": False}
+            return None
         a, b = (mid["m0"], b) if mid["resid"] < 0.0 else (a, mid["m0"])
         best = min((best, mid), key=lambda o: abs(o["resid"]))
     return best
@@ -183,6 +205,10 @@ def solve_displacement(d: float, eta: float, p: float, eff: dict | None = None, 
     # Inside the scanned bracket, "no contact" can only mean "past the target".
     f = brentq(lambda x: 1.0 if math.isnan(g(x)) else g(x), lo, hi, xtol=1e-14, rtol=1e-13)
     r = solve_force(f, eta, p, eff, rtol=rtol)
+    if not r["found"] or abs(r["xi_c"] - x0 - d) > DISPLACEMENT_MATCH:
+        # brentq closed on the edge of forces without a contact, not on d: no answer rather than a wrong one
+        # (SBC friction seed 3 read the force at one such edge for three displacements 0.02 L apart)
+        return {"f": float("nan"), "slipped": False, "no_contact_inside": True}
     return {"f": f, "slipped": False, "sig_c": r["sig_c"], "phi_c": r["phi_c"]}
 
 
