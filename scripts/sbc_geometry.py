@@ -137,18 +137,24 @@ def _reference_forces(d: np.ndarray, eta: float, p: float, nd: dict, m_yield: fl
     return np.array([m_yield / eta if di >= d_yield else R.solve_displacement(di, eta, p, nd)["f"] for di in d])
 
 
+def engaged_forces(sp, cfg) -> np.ndarray:
+    """The noise-free sensor force [N] (offset included) of a simulated push ``sp`` of ``cfg`` at its engaged
+    samples, by the fast path the simulator used: the recorded force minus it is the simulator's noise."""
+    D = sp.contact_x_m[sp.engaged]
+    return force_from_displacement(D, sp.height_m, cfg.EI0, cfg.p, cfg.length_m, cfg.effects).force_N
+
+
 def reference_dataset(ds, case: dict):
     """The simulated dataset with every force and centerline solved again by the reference solver."""
     cfg, sim = ds.simulation
     L, EI0, p, eff = cfg.length_m, cfg.EI0, cfg.p, cfg.effects
-    groups = {k: float(v) for k, v in eff.nondim(L, EI0).items()}
-    m_yield = groups.pop("m_yield")  # the reference's rod has no yield: applied by _reference_forces
-    nd = groups
+    nd = {k: float(v) for k, v in eff.nondim(L, EI0).items()}
+    m_yield = nd.pop("m_yield")  # the reference's rod has no yield: applied by _reference_forces
     pushes, worst, n_fallback = [], 0.0, 0
     for push, sp in zip(ds.pushes, sim, strict=True):
         eng = sp.engaged
         D = sp.contact_x_m[eng]
-        fast = force_from_displacement(D, sp.height_m, EI0, p, L, eff).force_N  # sensor force, offset included
+        fast = engaged_forces(sp, cfg)
         ref = _reference_forces(D / L, sp.height_m / L, p, nd, m_yield) * EI0 / L**2
         ref = ref + eff.force_offset
         # the last sample can lie within ~1e-6 L of the branch end, past the reference's own end: keep the

@@ -22,9 +22,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from sbc_geometry import ALL_EFFECTS, EFFECTS, draw_case, simulate_case  # noqa: E402
-
-from bayesrod.physics import force_from_displacement  # noqa: E402
+from sbc_geometry import ALL_EFFECTS, EFFECTS, draw_case, engaged_forces, simulate_case  # noqa: E402
 
 
 def noise_draw(seed: int, effects: tuple) -> tuple[int, int, float] | None:
@@ -36,11 +34,10 @@ def noise_draw(seed: int, effects: tuple) -> tuple[int, int, float] | None:
     except ValueError:
         return None
     cfg, sim = ds.simulation
-    noise = []
-    for push, sp in zip(ds.pushes, sim, strict=True):
-        eng = sp.engaged
-        true = force_from_displacement(sp.contact_x_m[eng], sp.height_m, cfg.EI0, cfg.p, cfg.length_m, cfg.effects)
-        noise.append(np.asarray(push.force.force_N, float)[eng] - true.force_N)
+    noise = [
+        np.asarray(push.force.force_N, float)[sp.engaged] - engaged_forces(sp, cfg)
+        for push, sp in zip(ds.pushes, sim, strict=True)
+    ]
     e = np.concatenate(noise) / case["sigma_force_N"]
     n = e.size
     return len(case["heights_m"]), n, float((np.sum(e**2) - n) / np.sqrt(2.0 * n))
@@ -69,9 +66,10 @@ def main(argv=None) -> None:
     heights, n, u = (np.array(c, float) for c in zip(*rows, strict=True))
 
     def line(sel, label):
-        if sel.any():
-            m, se = u[sel].mean(), u[sel].std(ddof=1) / np.sqrt(sel.sum()) if sel.sum() > 1 else float("nan")
-            print(f"{label}: {int(sel.sum())} seeds, median {np.median(n[sel]):.0f} samples, u {m:+.3f} +- {se:.3f}")
+        k = int(sel.sum())
+        if k:
+            se = u[sel].std(ddof=1) / np.sqrt(k) if k > 1 else float("nan")
+            print(f"{label}: {k} seeds, median {np.median(n[sel]):.0f} samples, u {u[sel].mean():+.3f} +- {se:.3f}")
 
     print(f"seeds {seeds.start}-{seeds.stop - 1} (step {args.step}), {len(rows)} simulated; u is 0 +- 1 per seed")
     line(np.ones(u.size, bool), "all")

@@ -339,7 +339,7 @@ def test_the_noise_posterior_is_the_exact_marginal_of_the_least_squares_fit(post
     p(sigma | data) proportional to sigma^-(n - 2) exp(-RSS / (2 sigma^2)) (the half-normal prior, scale 0.5 N,
     is flat to 2e-3 over it), RSS the least-squares residual sum. Its 5/50/95% quantiles within 2% (the
     posterior's own sd is 5%), the sd of log sigma within 15%: a noise posterior too wide, too narrow or shifted
-    fails (measured: 0.3% and 0.7%; docs/validation.md, session 61)."""
+    fails (measured: within 0.22% and a ratio of 1.001; docs/validation.md, session 61)."""
     from scipy.optimize import minimize
 
     lik = post.likelihood

@@ -126,9 +126,8 @@ def solve_force(
     # zero at 2.27 where the contact leaps from 0.70 to 0.93 L. The equilibrium of the loading branch is the
     # first root above the bracket's lower end: scanned for on SCAN_POINTS points, then settled as above.
     grid = np.linspace(lo, hi, SCAN_POINTS)
-    signs = [resid(m) >= 0.0 for m in grid]
-    for a, b, sa, sb in zip(grid[:-1], grid[1:], signs[:-1], signs[1:], strict=True):
-        if sb and not sa:
+    for a, b in zip(grid[:-1], grid[1:], strict=True):  # resid(lo) < 0: the first b at or above zero closes it
+        if resid(b) >= 0.0:
             return _settle(shoot, brentq(resid, a, b, xtol=1e-15, rtol=_RTOL_M0)) or {"found": False}
     return {"found": False}
 
