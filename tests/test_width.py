@@ -55,6 +55,35 @@ def test_width_profile_is_subpixel_on_a_thin_and_a_wide_stem(w0):
     np.testing.assert_allclose(wp.width_m[ok], wp.width_px[ok] * Z / F, rtol=1e-6)
 
 
+@pytest.mark.parametrize(
+    "taper, w0",
+    [
+        (1.6, 3.3),
+        (0.43, 4.8),
+        pytest.param(
+            1.6, 2.6, marks=pytest.mark.xfail(strict=True, reason="reads +9% for 3.1% declared (issue 22, open)")
+        ),
+    ],
+)
+def test_a_thin_stems_base_reads_within_the_scale_error_it_declares(taper, w0):
+    """The median relative error of the stations below s/L 0.3 within 1.645 times the scale sd the frame
+    declares for its contrast fit and resolution (docs/validation.md, "The thin twig's width bias, taken
+    apart"; ``python scripts/thin_width_testbed.py`` prints the table). The steep stem drawn 2.6 px wide does not
+    hold (its two contrast fits disagree: scales 1.08, then 0.95) and is marked: it passes when that is mended."""
+    from bayesrod.vision.width import contrast_fit_scale_sd, thin_scale_sd
+
+    img, line, truth = _synthetic(w0, taper, 0.0)
+    wp = width_profile(img, None, line, CAM)
+    ok = wp.flag == "ok"
+    low = ok & (wp.s_m < 0.14)
+    rel = float(np.median(wp.width_px[low] / truth(wp.s_m[low]) - 1))
+    declared = np.hypot(
+        contrast_fit_scale_sd(wp.blur_over_width, wp.borrowed_share),
+        thin_scale_sd(float(np.percentile(wp.width_px[ok], 95))),
+    )
+    assert abs(rel) <= 1.645 * declared, (rel, declared)
+
+
 def test_thin_stem_widths_do_not_follow_the_background_behind_them():
     """A 3-px stem whose background brightens by 60 levels along it: the frame's stem colour is picked at the
     base, mixed there with the base's background by the blur; measured against another background the mix
