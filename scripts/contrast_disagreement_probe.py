@@ -1,0 +1,68 @@
+"""How far the contrast fit's two variants disagree on a rendered push, against the push's base error (issue 22;
+docs/validation.md, "Session 62").
+
+    python scripts/contrast_disagreement_probe.py STEM BASE_DIAMETER_M|- FIRST-LAST
+
+``bayesrod.vision.width.contrast_fit`` reads the contrast from the widest profiles alone, and adds up to
+``THIN_N`` thin ones when the blur is over ``BLUR_RATIO_OK`` of their width. Here every contrast fit of every
+frame computes both (the shipped choice is returned, so the extraction is unchanged) and records |log| of the
+ratio of their scales. One JSON row per seed (``scripts/_study.extracted_push``: the preset's middle height,
+exact widths; ``-`` for the preset's diameter): the median relative error of the stations below s/L 0.3 [%], the
+scale sd the extraction declared [%], and the median disagreement over all fits and over each frame's second
+(final) fit [%]. About 20-40 s a seed on one core.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from _study import extracted_push
+
+import bayesrod.vision.width as W
+
+DISAGREEMENT: list[float] = []
+_box_fit = W._box_fit
+
+
+def contrast_fit_both(profiles, s, n_max=W.AREA_N_MAX, *, loss="soft_l1", f_scale=0.1):
+    """``contrast_fit`` as shipped, recording how far the fit with the thin profiles lands from the one without."""
+    clean, trend = W._clean_profiles(profiles, s)
+    order = np.argsort(trend)[::-1]
+    wide = [i for i in order if clean[i] and trend[i] >= W.MIN_AREA_PX][:n_max]
+    if len(wide) < 5:
+        return W.ContrastFit()
+    fit = _box_fit(profiles, trend, wide, loss, f_scale)
+    thin = [i for i in order if clean[i] and W.THIN_MIN_AREA_PX <= trend[i] < W.MIN_AREA_PX]
+    alt = fit
+    if thin and W.THIN_N > 0:
+        use = wide + thin[:: max(1, len(thin) // W.THIN_N)][: W.THIN_N]
+        alt = _box_fit(profiles, trend, use, loss, f_scale, len(wide))
+    DISAGREEMENT.append(abs(float(np.log(alt.scale / fit.scale))))
+    return alt if fit.width_px > 0 and fit.blur_px / fit.width_px > W.BLUR_RATIO_OK else fit
+
+
+def main(argv=None) -> None:
+    stem, d0, seeds = argv or sys.argv[1:]
+    overrides = {} if d0 == "-" else {"base_diameter_m": float(d0)}
+    first, last = (int(x) for x in seeds.split("-"))
+    W.contrast_fit = contrast_fit_both
+    for seed in range(first, last + 1):
+        DISAGREEMENT.clear()
+        with tempfile.TemporaryDirectory() as tmp:
+            ex, drawn, _ = extracted_push(stem, seed, False, Path(tmp), overrides=overrides)
+        d = ex.diameters
+        ok = np.isfinite(d.d_m) & (d.s_m < 0.3 * ex.dataset.length_m) & (d.flag == "ok")
+        row = {"stem": stem, "base_diameter_m": overrides.get("base_diameter_m"), "seed": seed}
+        row["rel_pct"] = round(100 * float(np.median(d.d_m[ok] / drawn[ok] - 1)), 2)
+        row["declared_pct"] = round(100 * d.shared_scale_sd, 2)
+        row["disagree_median_pct"] = round(100 * float(np.median(DISAGREEMENT)), 2)
+        row["disagree_final_fits_median_pct"] = round(100 * float(np.median(DISAGREEMENT[1::2] or DISAGREEMENT)), 2)
+        print(json.dumps(row), flush=True)
+
+
+if __name__ == "__main__":
+    main()
