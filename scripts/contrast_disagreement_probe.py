@@ -14,8 +14,8 @@ scale sd the extraction declared [%], and the median disagreement over all fits 
 
 from __future__ import annotations
 
+import argparse
 import json
-import sys
 import tempfile
 from pathlib import Path
 
@@ -46,9 +46,14 @@ def contrast_fit_both(profiles, s, n_max=W.AREA_N_MAX, *, loss="soft_l1", f_scal
 
 
 def main(argv=None) -> None:
-    stem, d0, seeds = argv or sys.argv[1:]
-    overrides = {} if d0 == "-" else {"base_diameter_m": float(d0)}
-    first, last = (int(x) for x in seeds.split("-"))
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("stem", choices=("twig", "grass"))
+    ap.add_argument("base_diameter_m", help="the drawn base diameter [m], or - for the preset's")
+    ap.add_argument("seeds", help="FIRST-LAST")
+    a = ap.parse_args(argv)
+    stem = a.stem
+    overrides = {} if a.base_diameter_m == "-" else {"base_diameter_m": float(a.base_diameter_m)}
+    first, last = (int(x) for x in a.seeds.split("-"))
     W.contrast_fit = contrast_fit_both
     for seed in range(first, last + 1):
         DISAGREEMENT.clear()

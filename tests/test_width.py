@@ -69,7 +69,8 @@ def test_a_thin_stems_base_reads_within_the_scale_error_it_declares(taper, w0):
     """The median relative error of the stations below s/L 0.3 within 1.645 times the scale sd the frame
     declares for its contrast fit and resolution (docs/validation.md, "The thin twig's width bias, taken
     apart"; ``python scripts/thin_width_testbed.py`` prints the table). The steep stem drawn 2.6 px wide does not
-    hold (its two contrast fits disagree: scales 1.08, then 0.95) and is marked: it passes when that is mended."""
+    hold (its contrast fits land on either side of the blur-ratio switch that adds the thin profiles: scales 1.08,
+    then 0.95) and is marked: it passes when that is mended."""
     from bayesrod.vision.width import contrast_fit_scale_sd, thin_scale_sd
 
     img, line, truth = _synthetic(w0, taper, 0.0)
