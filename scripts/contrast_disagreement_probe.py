@@ -51,17 +51,16 @@ def main(argv=None) -> None:
     ap.add_argument("base_diameter_m", help="the drawn base diameter [m], or - for the preset's")
     ap.add_argument("seeds", help="FIRST-LAST")
     a = ap.parse_args(argv)
-    stem = a.stem
     overrides = {} if a.base_diameter_m == "-" else {"base_diameter_m": float(a.base_diameter_m)}
     first, last = (int(x) for x in a.seeds.split("-"))
     W.contrast_fit = contrast_fit_both
     for seed in range(first, last + 1):
         DISAGREEMENT.clear()
         with tempfile.TemporaryDirectory() as tmp:
-            ex, drawn, _ = extracted_push(stem, seed, False, Path(tmp), overrides=overrides)
+            ex, drawn, _ = extracted_push(a.stem, seed, False, Path(tmp), overrides=overrides)
         d = ex.diameters
         ok = np.isfinite(d.d_m) & (d.s_m < 0.3 * ex.dataset.length_m) & (d.flag == "ok")
-        row = {"stem": stem, "base_diameter_m": overrides.get("base_diameter_m"), "seed": seed}
+        row = {"stem": a.stem, "base_diameter_m": overrides.get("base_diameter_m"), "seed": seed}
         row["rel_pct"] = round(100 * float(np.median(d.d_m[ok] / drawn[ok] - 1)), 2)
         row["declared_pct"] = round(100 * d.shared_scale_sd, 2)
         row["disagree_median_pct"] = round(100 * float(np.median(DISAGREEMENT)), 2)
