@@ -9,7 +9,9 @@ frame computes both (the shipped choice is returned, so the extraction is unchan
 ratio of their scales. One JSON row per seed (``scripts/_study.extracted_push``: the preset's middle height,
 exact widths; ``-`` for the preset's diameter): the median relative error of the stations below s/L 0.3 [%], the
 scale sd the extraction declared [%], and the median disagreement over all fits and over each frame's second
-(final) fit [%]. About 20-40 s a seed on one core.
+(final) fit [%], and the median blur over width the wide profiles alone read (the ratio the switch
+tests) over all fits and over the final ones; ``fits`` lists each fit's (ratio, disagreement [%]). About
+20-40 s a seed on one core.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from _study import extracted_push
 import bayesrod.vision.width as W
 
 DISAGREEMENT: list[float] = []
+RATIO: list[float] = []  # each fit's blur over the wide profiles' width, from the wide profiles alone
 _box_fit = W._box_fit
 
 
@@ -42,6 +45,7 @@ def contrast_fit_both(profiles, s, n_max=W.AREA_N_MAX, *, loss="soft_l1", f_scal
         use = wide + thin[:: max(1, len(thin) // W.THIN_N)][: W.THIN_N]
         alt = _box_fit(profiles, trend, use, loss, f_scale, len(wide))
     DISAGREEMENT.append(abs(float(np.log(alt.scale / fit.scale))))
+    RATIO.append(fit.blur_px / fit.width_px if fit.width_px > 0 else float("nan"))
     return alt if fit.width_px > 0 and fit.blur_px / fit.width_px > W.BLUR_RATIO_OK else fit
 
 
@@ -56,6 +60,7 @@ def main(argv=None) -> None:
     W.contrast_fit = contrast_fit_both
     for seed in range(first, last + 1):
         DISAGREEMENT.clear()
+        RATIO.clear()
         with tempfile.TemporaryDirectory() as tmp:
             ex, drawn, _ = extracted_push(a.stem, seed, False, Path(tmp), overrides=overrides)
         d = ex.diameters
@@ -65,6 +70,9 @@ def main(argv=None) -> None:
         row["declared_pct"] = round(100 * d.shared_scale_sd, 2)
         row["disagree_median_pct"] = round(100 * float(np.median(DISAGREEMENT)), 2)
         row["disagree_final_fits_median_pct"] = round(100 * float(np.median(DISAGREEMENT[1::2] or DISAGREEMENT)), 2)
+        row["wide_ratio_median"] = round(float(np.nanmedian(RATIO)), 3)
+        row["wide_ratio_final_fits_median"] = round(float(np.nanmedian(RATIO[1::2] or RATIO)), 3)
+        row["fits"] = [[round(r, 4), round(100 * g, 3)] for r, g in zip(RATIO, DISAGREEMENT, strict=True)]
         print(json.dumps(row), flush=True)
 
 
