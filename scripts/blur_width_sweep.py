@@ -11,7 +11,8 @@ Gaussian of sd 1.2 cut to a 7 x 7 kernel (the renderer's shaded frames), disks o
 (``bayesrod.vision.width.choose_colour_model``), then ``width_profile`` on each seed. Prints per case the
 stations' median relative error against the drawn width (mean over seeds), the contrast fit's blur over
 the profiles' width (``WidthProfile.blur_over_width``, median over seeds) and the scale error sd the
-extraction then declares for blur and lens (``contrast_fit_scale_sd``); last, the rms of the
+extraction then declares for blur, lens and the contrast fit's variants (``contrast_fit_scale_sd``; the
+resolution term left out); last, the rms of the
 errors over the declared sd and the share within 1.645 sd. About three seconds per image.
 """
 
@@ -35,10 +36,10 @@ def _disk(r: float) -> np.ndarray:
     return acc / acc.sum()
 
 
-def case(w0: float, seeds, lens, shaded: bool) -> tuple[float, float, float, str]:
-    """(mean stations' median relative error, median blur / width, median share of fitted stations, the models
-    chosen) over ``seeds``."""
-    errors, ratios, shares, models = [], [], [], set()
+def case(w0: float, seeds, lens, shaded: bool) -> tuple[float, float, float, float, str]:
+    """(mean stations' median relative error, median blur / width, median share of fitted stations, median
+    spread of the contrast fit's variants, the models chosen) over ``seeds``."""
+    errors, ratios, shares, spreads, models = [], [], [], [], set()
     for seed in seeds:
         if isinstance(lens, float):
             img, line, truth = synthetic_stem_frame(w0, 1.6, 3.0, seed, blur=lens, shaded=shaded)
@@ -51,8 +52,10 @@ def case(w0: float, seeds, lens, shaded: bool) -> tuple[float, float, float, str
         errors.append(np.median(wp.width_px[ok] / truth(wp.s_m[ok]) - 1.0))
         ratios.append(wp.blur_over_width)
         shares.append(wp.borrowed_share)
+        spreads.append(wp.contrast_variant_spread)
         models.add(model)
-    return float(np.mean(errors)), float(np.median(ratios)), float(np.median(shares)), "/".join(sorted(models))
+    med = [float(np.median(x)) for x in (ratios, shares, spreads)]
+    return float(np.mean(errors)), *med, "/".join(sorted(models))
 
 
 def main(argv=None) -> None:
@@ -75,8 +78,8 @@ def main(argv=None) -> None:
     cases = []  # (error, declared sd, ratio)
     for style in a.styles:
         for w, name, lens in rows:
-            err, ratio, share, model = case(w, a.seeds, lens, style == "shaded")
-            sd = contrast_fit_scale_sd(ratio, share)
+            err, ratio, share, spread, model = case(w, a.seeds, lens, style == "shaded")
+            sd = contrast_fit_scale_sd(ratio, share, spread)
             print(
                 f"| {w:g} | {style} | {name} | {model} | {100 * err:+.2f}% | {ratio:.2f} | {100 * sd:.1f}% |",
                 flush=True,

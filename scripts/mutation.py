@@ -456,6 +456,8 @@ TARGETS["width_colour"] = (
                 "blur_scale_sd",
                 "lens_scale_sd",
                 "contrast_fit_scale_sd",
+                "variant_scale_sd",
+                "frame_scale_sd",
                 "_off_profile",
                 "_median_sd",
                 "_independent_frames",

@@ -51,10 +51,7 @@ def read(w0: float, p: float, noise: float, seed: int, true_colour: bool) -> tup
         W.contrast_fit, W._purest_pixel = contrast_fit, purest
     ok = wp.flag == "ok"
     low = ok & (wp.s_m < 0.14)
-    declared = np.hypot(
-        W.contrast_fit_scale_sd(wp.blur_over_width, wp.borrowed_share),
-        W.thin_scale_sd(float(np.percentile(wp.width_px[ok], 95))),
-    )
+    declared = W.frame_scale_sd(wp)
     err = 100 * float(np.median(wp.width_px[low] / truth(wp.s_m[low]) - 1))
     return err, wp.blur_over_width, scales, 100 * float(declared)
 

@@ -217,6 +217,38 @@ def test_extract_warns_about_a_stem_thinner_than_three_pixels(twig_frames, twig_
     assert any("px wide at its widest" in r.getMessage() for r in records)
 
 
+def test_extract_warns_when_the_contrast_fits_variants_land_apart(twig_frames, monkeypatch):
+    """A push whose combined profile (monkeypatched) reads a blur of 0.28 of the width on a 3.5-px stem and the
+    contrast fit's variants 3% apart: the report gives ``variant_spread`` and a warning with the spread and the
+    shared scale sd (2.6%: the variant term 0.3 x (0.28 - 0.2) with the lens's 1%), and the console prints it;
+    0.5% apart (a scale error of 0.5%), neither."""
+    import dataclasses
+
+    import bayesrod.vision.width as W
+    from bayesrod.vision.width import WidthProfile
+
+    k = 30
+    s = np.linspace(0.0, 0.1, k)
+    w_px = 3.5 * (1 - 0.5 * s / 0.1)
+    frames = [WidthProfile(s, w_px * 1e-4, np.full(k, 2e-6), w_px, np.full(k, "ok"), np.zeros((k, 2)))] * 5
+    combine = W.combine_profiles
+    for spread, warned in ((0.03, True), (0.005, False)):
+        frames = [
+            dataclasses.replace(f, blur_over_width=0.28, borrowed_share=1.0, contrast_variant_spread=spread)
+            for f in frames
+        ]
+        near = combine(frames, s)
+        assert near.contrast_variant_spread == spread
+        monkeypatch.setattr(W, "combine_profiles", lambda *a, near=near, **kw: near)
+        ex, records = _extract_logged(twig_frames)
+        assert ex.doc["diameters"]["contrast_scale"]["variant_spread"] == spread
+        warning = ex.doc["diameters"].get("warning", "")
+        assert ("3.0% apart" in warning and f"{100 * near.shared_scale_sd:.1f}%" in warning) == warned, warning
+        assert any("apart" in r.getMessage() for r in records) == warned
+        want = np.hypot(min(spread, 0.3 * (0.28 - 0.2)), W.LENS_SCALE_SD)
+        assert near.shared_scale_sd == pytest.approx(want, rel=1e-9)
+
+
 def test_a_thick_stems_path_does_not_start_up_a_spur_of_its_skeleton():
     """Near a blunt end the skeleton of a stem 38 px wide splits towards the corners, and the rendered twig's
     path started 8 px aside and ran diagonally to the trunk: 6 px of arc length too many at the base, which every

@@ -176,6 +176,7 @@ def extract(dataset, *, progress: bool = True, width_colour_model: str = "auto")
         choose_colour_model,
         combine_profiles,
         thin_scale_sd,
+        variant_scale_sd,
         width_profile,
     )
     from ._common import as_dataset, progress_enabled
@@ -267,6 +268,9 @@ def extract(dataset, *, progress: bool = True, width_colour_model: str = "auto")
                 # the contrast fit's blur over the width of the profiles it read: above BLUR_RATIO_OK the
                 # contrast, and every narrow station's width, is weakly determined (vision.width)
                 "blur_over_width": None if not np.isfinite(diameters.blur_over_width) else diameters.blur_over_width,
+                # how far the fit with the thin profiles and the fit without land apart near the switch between
+                # them (vision.width.variant_scale_sd), the frames' median
+                "variant_spread": diameters.contrast_variant_spread,
             },
             "shared_scale_sd": diameters.shared_scale_sd,
             "shared_taper_sd": diameters.shared_taper_sd,
@@ -284,6 +288,17 @@ def extract(dataset, *, progress: bool = True, width_colour_model: str = "auto")
                 f"'Thin stems' and 'The taper under a wide blur'); a closer or sharper camera avoids it"
             )
             warnings.append(blurred)
+        variant = variant_scale_sd(diameters.blur_over_width, diameters.contrast_variant_spread)
+        weak = max(blur_scale_sd(diameters.blur_over_width), thin_scale_sd(diameters.base_width_px))
+        if variant >= BLUR_WARN_SCALE_SD and variant > weak:
+            warnings.append(
+                f"the stem's colour contrast, read from the narrow stations with and without the thinnest of them, "
+                f"comes out {100 * diameters.contrast_variant_spread:.1f}% apart (the lens's blur is "
+                f"{diameters.blur_over_width:.2f} of their width, near the {BLUR_RATIO_OK:g} where the thinnest are "
+                f"added): every width now shares a scale error of sd {100 * diameters.shared_scale_sd:.1f}% "
+                f"(Young's modulus: four times that; docs/validation.md, 'Session 63'); a closer or sharper camera "
+                f"avoids it"
+            )
         if np.isfinite(diameters.base_width_px) and diameters.base_width_px < THIN_PX:
             if diameters.base_width_px < RESOLVED_PX:
                 what = "no width is used (every station is flagged unresolved)"
