@@ -1262,6 +1262,11 @@ def test_contrast_fit_reads_the_wide_profiles_then_refits_with_evenly_spread_thi
         fit = wmod.contrast_fit(profiles, s)
         assert calls == both and fit.scale == scale and fit.variant_spread == pytest.approx(spread, rel=1e-12)
     assert len(calls[1][0]) - len(wide) == min(len(thin_all), wmod.THIN_N)
+    # the fit with the thin profiles failed: the one without, no spread
+    monkeypatch.setattr(wmod, "_box_fit", lambda *a, **k: box_fit(*a, **k) if len(a) < 6 else wmod.ContrastFit())
+    fit = wmod.contrast_fit(profiles, s)
+    assert (fit.scale, fit.variant_spread) == (1.1, 0.0)
+    monkeypatch.setattr(wmod, "_box_fit", box_fit)
     for n, refits in ((0, False), (1, True)):
         monkeypatch.setattr(wmod, "THIN_N", n)
         calls.clear()

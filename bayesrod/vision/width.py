@@ -585,7 +585,9 @@ def contrast_fit(
     low, most on frames with clutter near the stem (docs/validation.md). Returns scale 1 (and no blur)
     when fewer than 5 clean profiles are ``MIN_AREA_PX`` or wider (no shape to read the contrast from).
     Where the blur is a large share of the profiles' width the scale is weakly determined
-    (:data:`BLUR_RATIO_OK`).
+    (:data:`BLUR_RATIO_OK`). From a blur of :data:`VARIANT_RATIO_FROM` of the width up both fits are read
+    (the one with the thin profiles returned only above :data:`BLUR_RATIO_OK`; the one without where that
+    one fails) and how far apart they land is returned as ``variant_spread`` (:func:`variant_scale_sd`).
 
     Parameters
     ----------
