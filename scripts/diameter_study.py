@@ -14,7 +14,9 @@ with clutter, the probe and depth dropouts, ``bayesrod simulate``'s renderer):
 3. the same stem drawn with a modulus gradient (diameter taper q = p - 0.15, so that
    E(s) ~ (1 - s/L)^0.6): the ``free`` fit's verdict (expected ``rejected``).
 
-``--length unknown`` fits every model with the stem length sampled (``bayesrod.fit(length="unknown")``):
+``--base-diameter-m D`` draws every stem with that base diameter [m] (e.g. the twig at 0.006: 2.9 px; write
+to an ``--out`` of its own: rows are resumed by stem and seed). ``--length unknown`` fits every model with the
+stem length sampled (``bayesrod.fit(length="unknown")``):
 on forces only p then trades off with L and EI0, and the width term's share of p's interval shows.
 
 Writes diameter_study.csv (resumable: done rows are skipped) and diameter_study.md (the table of
@@ -41,11 +43,12 @@ FIELDS += ["seconds", "length", "style"]
 
 
 def one(job) -> dict:
-    stem, seed, graded, length, style = job
+    stem, seed, graded, length, style, d0 = job
     t0 = time.perf_counter()
     row = {"stem": stem, "seed": seed, "graded": int(graded), "length": length, "style": style}
     with tempfile.TemporaryDirectory() as tmp:
-        ex, true, px = extracted_push(stem, seed, graded, Path(tmp), style)
+        overrides = {} if d0 is None else {"base_diameter_m": d0}
+        ex, true, px = extracted_push(stem, seed, graded, Path(tmp), style, overrides=overrides)
         ds, dp, truth = ex.dataset, ex.diameters, ex.source.extra["truth"]
         ok = dp.ok
         z = (dp.d_m[ok] - true[ok]) / dp.sd_m[ok]
@@ -132,13 +135,17 @@ def main(argv=None) -> None:
         "--length", choices=("known", "unknown"), default="known", help="the fits' stem length: given, or sampled"
     )
     ap.add_argument("--style", choices=("flat", "shaded"), default="flat", help="the renderer's render_style")
+    ap.add_argument("--base-diameter-m", type=float, help="the drawn base diameter [m] (default: the preset's)")
     a = ap.parse_args(argv)
+    if a.base_diameter_m is not None and not a.base_diameter_m > 0:
+        ap.error(f"--base-diameter-m: expected a positive diameter in metres, got {a.base_diameter_m}")
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     csv = out / "diameter_study.csv"
     stems = [s for s in a.stems.split(",") if s]
-    jobs = [(s, a.first_seed + k, False, a.length, a.style) for k in range(a.reps) for s in stems]
-    jobs += [(s, 100 + a.first_seed + k, True, a.length, a.style) for k in range(a.graded_reps) for s in stems]
+    d0 = a.base_diameter_m
+    jobs = [(s, a.first_seed + k, False, a.length, a.style, d0) for k in range(a.reps) for s in stems]
+    jobs += [(s, 100 + a.first_seed + k, True, a.length, a.style, d0) for k in range(a.graded_reps) for s in stems]
 
     def done_key(r):
         return r["stem"], int(float(r["seed"])), bool(int(float(r["graded"]))), r["length"], _style(r)
