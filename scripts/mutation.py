@@ -466,6 +466,16 @@ TARGETS["width_colour"] = (
         + ["xǁColourChoiceǁto_dict", "xǁDiameterProfileǁto_diameters", "xǁDiameterProfileǁcolumns"]
     ],
 )
+# the contrast fit's two variants near its switch and the scale sd they declare (session 63; these functions are
+# in width_colour as well: a narrow rerun of what that session changed)
+TARGETS["width_variant"] = (
+    "bayesrod/vision/width.py",
+    ["tests/test_width.py", "tests/test_width_frame.py"],
+    [
+        f"bayesrod.vision.width.x_{g}__mutmut_*"
+        for g in ("contrast_fit", "variant_scale_sd", "contrast_fit_scale_sd", "frame_scale_sd")
+    ],
+)
 TARGETS["moves"] = ("bayesrod/inference/moves.py", ["tests/test_moves.py"], None)
 
 STATUSES = ("killed", "timeout", "survived", "no tests", "suspicious", "skipped", "segfault")

@@ -1240,7 +1240,9 @@ def test_contrast_fit_reads_the_wide_profiles_then_refits_with_evenly_spread_thi
 
     def box_fit(profiles, tr, use, loss, f_scale, n_wide=None):
         calls.append((list(use), n_wide))
-        return wmod.ContrastFit(1.1 if n_wide is None else 1.2, state["blur"], 2.0)
+        first = n_wide is None
+        width = state.get("width" if first else "pinned_width", 2.0)
+        return wmod.ContrastFit(1.1 if first else 1.2, state["blur"] * width / 2.0, width)
 
     monkeypatch.setattr(wmod, "_box_fit", box_fit)
     order = list(np.argsort(trend)[::-1])
@@ -1267,6 +1269,27 @@ def test_contrast_fit_reads_the_wide_profiles_then_refits_with_evenly_spread_thi
     fit = wmod.contrast_fit(profiles, s)
     assert (fit.scale, fit.variant_spread) == (1.1, 0.0)
     monkeypatch.setattr(wmod, "_box_fit", box_fit)
+    # widths under 1 px read the same ratio; the second fit with a zero width failed: the first, no spread
+    for width, pinned, calls_want, scale, spread_want in (
+        (0.8, 0.8, both, 1.2, spread),
+        (2.0, 0.0, both, 1.1, 0.0),
+        (2.0, 0.8, both, 1.2, spread),
+    ):
+        state.update(width=width, pinned_width=pinned)
+        calls.clear()
+        fit = wmod.contrast_fit(profiles, s)
+        assert calls == calls_want and (fit.scale, fit.variant_spread) == pytest.approx((scale, spread_want))
+    # the first fit failed (no width): returned as it is, no second fit
+    state.update(width=float("nan"), pinned_width=2.0)
+    calls.clear()
+    fit = wmod.contrast_fit(profiles, s)
+    assert calls == [(wide, None)] and fit.variant_spread == 0.0
+    state.update(width=0.0)
+    calls.clear()
+    with np.errstate(divide="ignore", invalid="ignore"):
+        fit = wmod.contrast_fit(profiles, s)
+    assert calls == [(wide, None)] and fit.variant_spread == 0.0
+    state.update(width=2.0, pinned_width=2.0)
     for n, refits in ((0, False), (1, True)):
         monkeypatch.setattr(wmod, "THIN_N", n)
         calls.clear()
@@ -1299,6 +1322,11 @@ def test_the_switch_between_the_contrast_fits_variants_is_declared_below_the_blu
     assert contrast_fit_scale_sd(0.25, 1.0, 0.05, 2.9) == pytest.approx(np.hypot(0.015, 0.01), rel=1e-12)
     assert contrast_fit_scale_sd(0.9, 1.0, 0.05, 2.5) == pytest.approx(np.hypot(0.18, 0.01), rel=1e-12)
 
+    # the share clipped to 0-1, none where it is not a number
+    assert contrast_fit_scale_sd(0.25, 1.5, 0.05) == pytest.approx(np.hypot(0.015, 0.01), rel=1e-12)
+    assert contrast_fit_scale_sd(0.25, -0.5, 0.05) == 0.0
+    assert contrast_fit_scale_sd(0.25, np.nan, 0.05) == 0.0
+
     s = np.linspace(0.0, 0.1, 10)
     w = np.full(10, 0.003)
     frames = [
@@ -1311,3 +1339,27 @@ def test_the_switch_between_the_contrast_fits_variants_is_declared_below_the_blu
         dataclasses.replace(f, contrast_variant_spread=x) for f, x in zip(frames, (0.01, 0.005, 0.05), strict=True)
     ]
     assert combine_profiles(frames, s, min_frames=1).shared_scale_sd == pytest.approx(np.hypot(0.01, 0.01), rel=1e-12)
+
+
+def test_a_frames_scale_sd_reads_its_widest_ok_stations():
+    """frame_scale_sd: contrast_fit_scale_sd of the frame's blur ratio, share and variant spread, with the 95th
+    percentile of its ok stations' finite widths [px] as the widest stations' width (no resolution term where no
+    station is ok)."""
+    from bayesrod.vision.width import contrast_fit_scale_sd, frame_scale_sd
+
+    k = 40
+    w_px = np.linspace(1.0, 2.6, k)
+    flag = np.full(k, "ok", dtype=object)
+    flag[-5:] = "occluded"  # wider stations that are not ok
+    w_px[-5:] = 9.0
+    w_px[3] = np.nan  # an ok station without a number
+    wp = WidthProfile(np.linspace(0, 0.1, k), w_px * 1e-4, np.full(k, 1e-6), w_px, flag.astype(str), np.zeros((k, 2)))
+    wp = dataclasses.replace(wp, blur_over_width=0.25, borrowed_share=1.0, contrast_variant_spread=0.001)
+    ok = (flag == "ok") & np.isfinite(w_px)
+    want = contrast_fit_scale_sd(0.25, 1.0, 0.001, float(np.percentile(w_px[ok], 95)))
+    assert frame_scale_sd(wp) == pytest.approx(want, rel=1e-12) and want > np.hypot(0.06 * 0.5, 0.01)
+    # the spread counts
+    wide = dataclasses.replace(wp, width_px=w_px + 2.0, contrast_variant_spread=0.012)
+    assert frame_scale_sd(wide) == pytest.approx(np.hypot(0.012, 0.01), rel=1e-12)
+    none_ok = dataclasses.replace(wp, flag=np.full(k, "occluded"))
+    assert frame_scale_sd(none_ok) == pytest.approx(contrast_fit_scale_sd(0.25, 1.0, 0.001), rel=1e-12)
