@@ -1,12 +1,14 @@
 """How far the contrast fit's two variants disagree on a rendered push, against the push's base error (issue 22;
-docs/validation.md, "Session 62").
+docs/validation.md, "Session 62", "Session 63").
 
     python scripts/contrast_disagreement_probe.py STEM BASE_DIAMETER_M|- FIRST-LAST
 
 ``bayesrod.vision.width.contrast_fit`` reads the contrast from the widest profiles alone, and adds up to
 ``THIN_N`` thin ones when the blur is over ``BLUR_RATIO_OK`` of their width. Here every contrast fit of every
-frame computes both (the shipped choice is returned, so the extraction is unchanged) and records |log| of the
-ratio of their scales. One JSON row per seed (``scripts/_study.extracted_push``: the preset's middle height,
+frame computes both and records |log| of the ratio of their scales at any ratio (the library's own fit is
+returned, so the extraction and the sd it declares are the library's; since session 63 that sd holds the
+spread from ``VARIANT_RATIO_FROM`` up: the rows of docs/results/contrast_disagreement_session6{2,3}.jsonl
+predate it). One JSON row per seed (``scripts/_study.extracted_push``: the preset's middle height,
 exact widths; ``-`` for the preset's diameter): the median relative error of the stations below s/L 0.3 [%], the
 scale sd the extraction declared [%], and the median disagreement over all fits and over each frame's second
 (final) fit [%], and the median blur over width the wide profiles alone read (the ratio the switch
@@ -29,10 +31,13 @@ import bayesrod.vision.width as W
 DISAGREEMENT: list[float] = []
 RATIO: list[float] = []  # each fit's blur over the wide profiles' width, from the wide profiles alone
 _box_fit = W._box_fit
+_contrast_fit = W.contrast_fit  # the library's, which the extraction keeps using
 
 
 def contrast_fit_both(profiles, s, n_max=W.AREA_N_MAX, *, loss="soft_l1", f_scale=0.1):
-    """``contrast_fit`` as shipped, recording how far the fit with the thin profiles lands from the one without."""
+    """``contrast_fit`` as shipped (the library's own answer is returned), recording the blur ratio of the wide
+    profiles alone and how far the fit with the thin profiles lands from the one without, at every ratio (the
+    library reads the second fit only from ``VARIANT_RATIO_FROM`` up)."""
     clean, trend = W._clean_profiles(profiles, s)
     order = np.argsort(trend)[::-1]
     wide = [i for i in order if clean[i] and trend[i] >= W.MIN_AREA_PX][:n_max]
@@ -46,7 +51,7 @@ def contrast_fit_both(profiles, s, n_max=W.AREA_N_MAX, *, loss="soft_l1", f_scal
         alt = _box_fit(profiles, trend, use, loss, f_scale, len(wide))
     DISAGREEMENT.append(abs(float(np.log(alt.scale / fit.scale))))
     RATIO.append(fit.blur_px / fit.width_px if fit.width_px > 0 else float("nan"))
-    return alt if fit.width_px > 0 and fit.blur_px / fit.width_px > W.BLUR_RATIO_OK else fit
+    return _contrast_fit(profiles, s, n_max, loss=loss, f_scale=f_scale)
 
 
 def main(argv=None) -> None:
