@@ -38,17 +38,11 @@ def contrast_fit_both(profiles, s, n_max=W.AREA_N_MAX, *, loss="soft_l1", f_scal
     """``contrast_fit`` as shipped (the library's own answer is returned), recording the blur ratio of the wide
     profiles alone and how far the fit with the thin profiles lands from the one without, at every ratio (the
     library reads the second fit only from ``VARIANT_RATIO_FROM`` up)."""
-    clean, trend = W._clean_profiles(profiles, s)
-    order = np.argsort(trend)[::-1]
-    wide = [i for i in order if clean[i] and trend[i] >= W.MIN_AREA_PX][:n_max]
+    trend, wide, thin = W.contrast_profiles(profiles, s, n_max)
     if len(wide) < 5:
         return W.ContrastFit()
     fit = _box_fit(profiles, trend, wide, loss, f_scale)
-    thin = [i for i in order if clean[i] and W.THIN_MIN_AREA_PX <= trend[i] < W.MIN_AREA_PX]
-    alt = fit
-    if thin and W.THIN_N > 0:
-        use = wide + thin[:: max(1, len(thin) // W.THIN_N)][: W.THIN_N]
-        alt = _box_fit(profiles, trend, use, loss, f_scale, len(wide))
+    alt = _box_fit(profiles, trend, wide + thin, loss, f_scale, len(wide)) if thin else fit
     DISAGREEMENT.append(abs(float(np.log(alt.scale / fit.scale))))
     RATIO.append(fit.blur_px / fit.width_px if fit.width_px > 0 else float("nan"))
     return _contrast_fit(profiles, s, n_max, loss=loss, f_scale=f_scale)

@@ -75,14 +75,10 @@ def always_thin_contrast_fit(profiles, s, n_max=W.AREA_N_MAX, *, loss="soft_l1",
     """``contrast_fit`` with the thin profiles added whatever the blur. A copy without its gate, not the shipped
     function under a lowered ``BLUR_RATIO_OK``: that would run the wide-only fit first, and the probe would count
     it among the fits it reads."""
-    clean, trend = W._clean_profiles(profiles, s)
-    order = np.argsort(trend)[::-1]
-    wide = [i for i in order if clean[i] and trend[i] >= W.MIN_AREA_PX][:n_max]
+    trend, wide, thin = W.contrast_profiles(profiles, s, n_max)
     if len(wide) < 5:
         return W.ContrastFit()
-    thin = [i for i in order if clean[i] and W.THIN_MIN_AREA_PX <= trend[i] < W.MIN_AREA_PX]
-    use = wide + thin[:: max(1, len(thin) // W.THIN_N)][: W.THIN_N] if thin else wide
-    return W._box_fit(profiles, trend, use, loss, f_scale, len(wide))
+    return W._box_fit(profiles, trend, wide + thin, loss, f_scale, len(wide))
 
 
 def main(argv=None) -> None:

@@ -445,6 +445,7 @@ TARGETS["width_colour"] = (
                 "_purest_pixel",
                 "contrast_scale",
                 "contrast_fit",
+                "contrast_profiles",
                 "_box_fit",
                 "_blurred_box",
                 "_coverage_integrals",
@@ -473,7 +474,7 @@ TARGETS["width_variant"] = (
     ["tests/test_width.py", "tests/test_width_frame.py"],
     [
         f"bayesrod.vision.width.x_{g}__mutmut_*"
-        for g in ("contrast_fit", "variant_scale_sd", "contrast_fit_scale_sd", "frame_scale_sd")
+        for g in ("contrast_fit", "contrast_profiles", "variant_scale_sd", "contrast_fit_scale_sd", "frame_scale_sd")
     ],
 )
 TARGETS["moves"] = ("bayesrod/inference/moves.py", ["tests/test_moves.py"], None)

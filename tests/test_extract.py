@@ -221,7 +221,8 @@ def test_extract_warns_when_the_contrast_fits_variants_land_apart(twig_frames, m
     """A push whose combined profile (monkeypatched) reads a blur of 0.28 of the width on a 3.5-px stem and the
     contrast fit's variants 3% apart: the report gives ``variant_spread`` and a warning with the spread and the
     shared scale sd (2.6%: the variant term 0.3 x (0.28 - 0.2) with the lens's 1%), and the console prints it;
-    0.5% apart (a scale error of 0.5%), neither."""
+    0.5% apart (a scale error of 0.5%), neither; 3% apart on a stem 2.5 px wide at its widest, whose resolution
+    term (about 3%) is the larger, only the thin stem's warning."""
     import dataclasses
 
     import bayesrod.vision.width as W
@@ -229,15 +230,12 @@ def test_extract_warns_when_the_contrast_fits_variants_land_apart(twig_frames, m
 
     k = 30
     s = np.linspace(0.0, 0.1, k)
-    w_px = 3.5 * (1 - 0.5 * s / 0.1)
-    frames = [WidthProfile(s, w_px * 1e-4, np.full(k, 2e-6), w_px, np.full(k, "ok"), np.zeros((k, 2)))] * 5
     combine = W.combine_profiles
-    for spread, warned in ((0.03, True), (0.005, False)):
-        frames = [
-            dataclasses.replace(f, blur_over_width=0.28, borrowed_share=1.0, contrast_variant_spread=spread)
-            for f in frames
-        ]
-        near = combine(frames, s)
+    for spread, base_px, warned in ((0.03, 3.5, True), (0.005, 3.5, False), (0.03, 2.5, False)):
+        w_px = base_px * (1 - 0.5 * s / 0.1)
+        frame = WidthProfile(s, w_px * 1e-4, np.full(k, 2e-6), w_px, np.full(k, "ok"), np.zeros((k, 2)))
+        frame = dataclasses.replace(frame, blur_over_width=0.28, borrowed_share=1.0, contrast_variant_spread=spread)
+        near = combine([frame] * 5, s)
         assert near.contrast_variant_spread == spread
         monkeypatch.setattr(W, "combine_profiles", lambda *a, near=near, **kw: near)
         ex, records = _extract_logged(twig_frames)
@@ -245,8 +243,9 @@ def test_extract_warns_when_the_contrast_fits_variants_land_apart(twig_frames, m
         warning = ex.doc["diameters"].get("warning", "")
         assert ("3.0% apart" in warning and f"{100 * near.shared_scale_sd:.1f}%" in warning) == warned, warning
         assert any("apart" in r.getMessage() for r in records) == warned
-        want = np.hypot(min(spread, 0.3 * (0.28 - 0.2)), W.LENS_SCALE_SD)
-        assert near.shared_scale_sd == pytest.approx(want, rel=1e-9)
+        weak = max(min(spread, 0.3 * (0.28 - 0.2)), W.thin_scale_sd(near.base_width_px))
+        assert near.shared_scale_sd == pytest.approx(np.hypot(weak, W.LENS_SCALE_SD), rel=1e-9)
+        assert ("px wide at its widest" in warning) == (base_px < 3.0)
 
 
 def test_a_thick_stems_path_does_not_start_up_a_spur_of_its_skeleton():

@@ -1236,7 +1236,7 @@ def test_contrast_fit_reads_the_wide_profiles_then_refits_with_evenly_spread_thi
     clean[len(wide_trend)] = False
     monkeypatch.setattr(wmod, "_clean_profiles", lambda profiles, s: (clean, trend))
     calls = []
-    state = {}  # the blur the stubbed fits read
+    state = {}  # the blur ratio and the widths the stubbed fits read
 
     def box_fit(profiles, tr, use, loss, f_scale, n_wide=None):
         calls.append((list(use), n_wide))
@@ -1270,15 +1270,11 @@ def test_contrast_fit_reads_the_wide_profiles_then_refits_with_evenly_spread_thi
     assert (fit.scale, fit.variant_spread) == (1.1, 0.0)
     monkeypatch.setattr(wmod, "_box_fit", box_fit)
     # widths under 1 px read the same ratio; the second fit with a zero width failed: the first, no spread
-    for width, pinned, calls_want, scale, spread_want in (
-        (0.8, 0.8, both, 1.2, spread),
-        (2.0, 0.0, both, 1.1, 0.0),
-        (2.0, 0.8, both, 1.2, spread),
-    ):
+    for width, pinned, scale, spread_want in ((0.8, 0.8, 1.2, spread), (2.0, 0.0, 1.1, 0.0), (2.0, 0.8, 1.2, spread)):
         state.update(width=width, pinned_width=pinned)
         calls.clear()
         fit = wmod.contrast_fit(profiles, s)
-        assert calls == calls_want and (fit.scale, fit.variant_spread) == pytest.approx((scale, spread_want))
+        assert calls == both and (fit.scale, fit.variant_spread) == pytest.approx((scale, spread_want))
     # the first fit failed (no width): returned as it is, no second fit
     state.update(width=float("nan"), pinned_width=2.0)
     calls.clear()

@@ -600,24 +600,34 @@ def contrast_fit(
         The robust loss of the fit and its scale (``scipy.optimize.least_squares``); the defaults are the
         extraction's (scripts/contrast_scale_passes.py compares others).
     """
-    clean, trend = _clean_profiles(profiles, s)
-    order = np.argsort(trend)[::-1]
-    wide = [i for i in order if clean[i] and trend[i] >= MIN_AREA_PX][:n_max]
+    trend, wide, thin = contrast_profiles(profiles, s, n_max)
     if len(wide) < 5:
         return ContrastFit()
     fit = _box_fit(profiles, trend, wide, loss, f_scale)
     ratio = fit.blur_px / fit.width_px if fit.width_px > 0 else 0.0
-    thin = [i for i in order if clean[i] and THIN_MIN_AREA_PX <= trend[i] < MIN_AREA_PX]
-    if ratio <= VARIANT_RATIO_FROM or not thin or THIN_N <= 0:
+    if ratio <= VARIANT_RATIO_FROM or not thin:
         return fit
     # the blur a large share of the width: the thin profiles pin it (THIN_N); near the switch both fits are read
     # and how far apart they land is kept (variant_scale_sd)
-    use = wide + thin[:: max(1, len(thin) // THIN_N)][:THIN_N]
-    pinned = _box_fit(profiles, trend, use, loss, f_scale, len(wide))
+    pinned = _box_fit(profiles, trend, wide + thin, loss, f_scale, len(wide))
     if not (pinned.width_px > 0):
         return fit
     spread = abs(float(np.log(pinned.scale / fit.scale)))
     return replace(pinned if ratio > BLUR_RATIO_OK else fit, variant_spread=spread)
+
+
+def contrast_profiles(profiles: list, s: NDArray, n_max: int = AREA_N_MAX) -> tuple[NDArray, list, list]:
+    """The profiles :func:`contrast_fit` reads (arguments as there): the integrals' smooth trend (n,) [px]
+    (:func:`_clean_profiles`), the clean profiles of trend ``MIN_AREA_PX`` or wider, widest first, at most
+    ``n_max``, and the thin ones that pin the blur: every max(1, m // THIN_N)-th of the m clean ones of trend
+    ``THIN_MIN_AREA_PX`` (inclusive) to ``MIN_AREA_PX``, widest first, at most ``THIN_N`` (none where THIN_N is
+    0). Indices into ``profiles``; the probes in scripts/ read the same selection."""
+    clean, trend = _clean_profiles(profiles, s)
+    order = np.argsort(trend)[::-1]
+    wide = [i for i in order if clean[i] and trend[i] >= MIN_AREA_PX][:n_max]
+    thin = [i for i in order if clean[i] and THIN_MIN_AREA_PX <= trend[i] < MIN_AREA_PX]
+    picked = thin[:: max(1, len(thin) // THIN_N)][:THIN_N] if thin and THIN_N > 0 else []
+    return trend, wide, picked
 
 
 def _box_fit(
