@@ -12,8 +12,10 @@ width, the scale error's sd the frame declares for the contrast fit and the reso
 and ``thin_scale_sd`` in quadrature; an extraction adds the depth's and the frames' scatter), and the scale each of
 the frame's contrast fits returned (the first on the picked colour, the second after the colour was made pure with
 the first's scale). ``--true-colour`` hands the width measurement the drawn stem colour instead of the picked
-pixel, so the contrast fit starts from the truth (a scale of 1 is then right).
-About 0.2 s a frame.
+pixel, so the contrast fit starts from the truth (a scale of 1 is then right). ``--psf-uniforms N`` has the
+contrast fit model the point spread as its Gaussian convolved with N unit boxes (1: the pixel's area; 3: that and
+the triangle of the profiles' bilinear sampling) instead of the Gaussian alone (docs/validation.md, "Session 64").
+About 0.2 s a frame (several times that with ``--psf-uniforms``).
 """
 
 from __future__ import annotations
@@ -56,6 +58,26 @@ def read(w0: float, p: float, noise: float, seed: int, true_colour: bool) -> tup
     return err, wp.blur_over_width, scales, 100 * float(declared)
 
 
+def boxed_psf(n_boxes: int, per_box: int = 8):
+    """A stand-in for ``bayesrod.vision.width._blurred_box``: the box seen through the Gaussian convolved with
+    ``n_boxes`` unit boxes (midpoint rule, ``per_box`` nodes a box)."""
+    from scipy.special import ndtr
+
+    u = (np.arange(per_box) + 0.5) / per_box - 0.5
+    pts = np.zeros(1)
+    for _ in range(n_boxes):
+        pts = (pts[:, None] + u[None, :]).ravel()
+    off, count = np.unique(np.round(pts, 9), return_counts=True)
+    wt = count / count.sum()
+
+    def blurred_box(t, w, sigma):
+        t = np.asarray(t, float)[..., None] - off
+        w = np.asarray(w, float)[..., None]
+        return np.sum((ndtr((t + w / 2) / sigma) - ndtr((t - w / 2) / sigma)) * wt, axis=-1)
+
+    return blurred_box
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tapers", default="0.43,1.6")
@@ -63,7 +85,10 @@ def main(argv=None) -> None:
     ap.add_argument("--noise", default="0,3")
     ap.add_argument("--seeds", type=int, default=4)
     ap.add_argument("--true-colour", action="store_true")
+    ap.add_argument("--psf-uniforms", type=int, default=0)
     a = ap.parse_args(argv)
+    if a.psf_uniforms > 0:
+        W._blurred_box = boxed_psf(a.psf_uniforms)
     print(
         "| taper p | base width [px] | pixel noise | error below s/L 0.3: mean [%] | sd over seeds | blur / width |"
         " declared scale sd [%] | scales of the two fits (first seed) |"
