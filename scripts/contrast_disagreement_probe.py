@@ -11,11 +11,11 @@ spread from ``VARIANT_RATIO_FROM`` up: the rows of docs/results/contrast_disagre
 predate it). One JSON row per seed (``scripts/_study.extracted_push``: the preset's middle height,
 exact widths; ``-`` for the preset's diameter): the median relative error of the stations below s/L 0.3 [%], the
 scale sd the extraction declared [%], and the median disagreement over all fits and over each frame's second
-(final) fit [%], the median of the final fits' signed log ratio (thin over wide) [%], the sd over frames of
-the log of the scale their final fits returned [%], and the median blur over width the wide profiles alone read
-(the ratio the switch tests) over all fits and over the final ones; ``fits`` lists each fit's (ratio, signed log
-ratio [%], the returned scale; before session 64 only the first two, the ratio unsigned). About 20-40 s a seed
-on one core.
+(final) fit [%], the median of the final fits' signed log ratio (thin over wide) [%], the sd over frames of the
+log of each frame's scale (its two fits' scales multiplied) [%], and the median blur over width the wide
+profiles alone read (the ratio the switch tests) over all fits and over the final ones; ``fits`` lists each
+fit's (ratio, signed log ratio [%], the returned scale; before session 64 only the first two, the ratio
+unsigned). About 20-40 s a seed on one core.
 """
 
 from __future__ import annotations
@@ -30,8 +30,7 @@ from _study import extracted_push
 
 import bayesrod.vision.width as W
 
-DISAGREEMENT: list[float] = []
-SHIFT: list[float] = []  # the same, signed: log of the thin fit's scale over the wide one's
+SHIFT: list[float] = []  # each fit's log of the thin fit's scale over the wide one's (its size: the disagreement)
 SCALE: list[float] = []  # the scale the library's fit returned
 RATIO: list[float] = []  # each fit's blur over the wide profiles' width, from the wide profiles alone
 _box_fit = W._box_fit
@@ -48,7 +47,6 @@ def contrast_fit_both(profiles, s, n_max=W.AREA_N_MAX, *, loss="soft_l1", f_scal
     fit = _box_fit(profiles, trend, wide, loss, f_scale)
     alt = _box_fit(profiles, trend, wide + thin, loss, f_scale, len(wide)) if thin else fit
     SHIFT.append(float(np.log(alt.scale / fit.scale)))
-    DISAGREEMENT.append(abs(SHIFT[-1]))
     RATIO.append(fit.blur_px / fit.width_px if fit.width_px > 0 else float("nan"))
     out = _contrast_fit(profiles, s, n_max, loss=loss, f_scale=f_scale)
     SCALE.append(out.scale)
@@ -65,7 +63,6 @@ def main(argv=None) -> None:
     first, last = (int(x) for x in a.seeds.split("-"))
     W.contrast_fit = contrast_fit_both
     for seed in range(first, last + 1):
-        DISAGREEMENT.clear()
         SHIFT.clear()
         SCALE.clear()
         RATIO.clear()
@@ -76,12 +73,15 @@ def main(argv=None) -> None:
         row = {"stem": a.stem, "base_diameter_m": overrides.get("base_diameter_m"), "seed": seed}
         row["rel_pct"] = round(100 * float(np.median(d.d_m[ok] / drawn[ok] - 1)), 2)
         row["declared_pct"] = round(100 * d.shared_scale_sd, 2)
-        row["disagree_median_pct"] = round(100 * float(np.median(DISAGREEMENT)), 2)
-        row["disagree_final_fits_median_pct"] = round(100 * float(np.median(DISAGREEMENT[1::2] or DISAGREEMENT)), 2)
+        gap = np.abs(SHIFT)
+        row["disagree_median_pct"] = round(100 * float(np.median(gap)), 2)
+        row["disagree_final_fits_median_pct"] = round(100 * float(np.median(gap[1::2] if gap.size > 1 else gap)), 2)
         row["shift_final_fits_median_pct"] = round(100 * float(np.median(SHIFT[1::2] or SHIFT)), 2)
         row["wide_ratio_median"] = round(float(np.nanmedian(RATIO)), 3)
         row["wide_ratio_final_fits_median"] = round(float(np.nanmedian(RATIO[1::2] or RATIO)), 3)
-        row["final_scale_sd_pct"] = round(100 * float(np.std(np.log(SCALE[1::2] or SCALE))), 2)
+        k = np.log(SCALE)
+        # each frame's scale: its first fit's times its second's (the second reads the colour the first made pure)
+        row["frame_scale_sd_pct"] = round(100 * float(np.std(k[0::2] + k[1::2] if k.size % 2 == 0 else k)), 2)
         row["fits"] = [
             [round(r, 4), round(100 * g, 3), round(k, 5)] for r, g, k in zip(RATIO, SHIFT, SCALE, strict=True)
         ]
