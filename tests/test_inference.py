@@ -583,6 +583,9 @@ def test_the_fits_table_check_is_the_mle_shift_of_noise_free_exact_data(effect, 
     ref = table_shift_on(ds, prior, truth | switched, noise=(0.03, 0.0015), use_shapes=shapes, n_effect=nodes)
     shifts = np.array(list(got["shift_in_sd"].values()))
     np.testing.assert_allclose(shifts, ref["shift_in_sd"], rtol=0.05, atol=0.002)
+    # the Laplace sds it divides by (zoom_window sizes a narrowed axis with them): the reference's at its MLE,
+    # which a coarse axis puts sds away (rest curvature with centerlines, 16.6 sd: 0.000251 against 0.000279)
+    np.testing.assert_allclose(list(got["laplace_sd"].values()), ref["laplace_sd"], rtol=0.02 if not effect else 0.15)
     assert got["n_samples"] > 100 and got["max_error_over_sigma"] < (0.01 if effect is None else 1.0)
     if shapes:  # every frame is compared: none of these pushes slips
         assert got["n_points"] == lik.n_points and got["max_shape_error_over_sd"] < (0.01 if effect is None else 3.0)
@@ -597,6 +600,95 @@ def test_the_fits_table_check_is_the_mle_shift_of_noise_free_exact_data(effect, 
         assert "n_points" not in got
     if effect:
         assert np.abs(shifts).max() > 1.0  # a coarse axis is seen
+
+
+def test_a_fit_narrows_a_coarse_effect_axis_around_its_start(monkeypatch, tmp_path):
+    """Where the effect axis is coarse for the posterior (here base tilt on 5 nodes over its prior, precise
+    forces: the tables would move the start by about 4 sd), the fit narrows the axis around its start
+    (zoom_window: +-60 Laplace sds, same nodes), samples on it, says so in table_check.effect_axis_zoom, and a
+    saved run rebuilds the same tables. Measured (session 65): 3.9 sd before, 0.08 after at the start, 0.13 at
+    the median; without the zoom the median's check read several sd and the intervals missed."""
+    from bayesrod.dataset.simulate import NoiseModel
+    from bayesrod.inference import likelihood as LK
+
+    monkeypatch.setitem(LK.FORCE_EFFECT_NODES, "base_tilt", 5)
+    L, truth = 0.9, {"EI0": 2.6, "p": 0.43}
+    ds = bayesrod.simulate(
+        {**truth, "length_m": L, "heights_m": (0.4, 0.55), "specimen": "zoom"},
+        seed=3,
+        noise_model=NoiseModel(force_sd_N=0.0005, shape_sd_m=0.0),
+        effects={"base_tilt": 0.05},
+        config_overrides={"robot_step_m": 0.01 * L},
+    )
+    data = ds.save(tmp_path / "data")  # on disk: a loaded run rebuilds its likelihood from it
+    post = bayesrod.fit(data, "woody", effects=("base_tilt",), use_shapes=False, progress=False, seed=2)
+    zoom = post.doc["table_check"]["effect_axis_zoom"]
+    before = max(abs(v) for v in zoom["shift_in_sd_before"].values())
+    after = max(abs(v) for v in zoom["shift_in_sd_after"].values())
+    assert zoom["kept"] and zoom["nodes"] == 5 and before > 1.0 and after < 0.15, zoom
+    lo, hi = zoom["u_range"]
+    assert zoom["u_range_before"][0] < lo < 0.05 < hi < zoom["u_range_before"][1] and hi - lo < 0.1, zoom
+    assert zoom["draws_at_edge"] == 0.0 and "message" not in zoom
+    # +-60 Laplace sds about the start, which sits within a few sd of the median; the start's sd is larger (its
+    # noise sd the coarse tables' RMS residual: measured 1.52 x the median's)
+    sd = post.doc["table_check"]["laplace_sd"]["base_tilt (table coordinate u)"]
+    assert 1.0 < (hi - lo) / (120 * sd) < 2.0
+    assert abs((lo + hi) / 2 - np.median(post.samples["base_tilt"])) < 5 * sd
+    np.testing.assert_allclose(post._lik().axis.grid, np.linspace(lo, hi, 5))
+    assert max(abs(v) for v in post.doc["table_check"]["shift_in_sd"].values()) < 0.3
+    q = post.summary()
+    for name, value in (("EI0", 2.6), ("p", 0.43), ("base_tilt", 0.05), ("sigma_force_N", 0.0005)):
+        assert q.loc[name, "q05"] < value < q.loc[name, "q95"], (name, q.loc[name].to_dict())
+    loaded = bayesrod.Posterior.load(post.save(tmp_path / "run", figures=False))
+    np.testing.assert_allclose(loaded._lik().axis.grid, np.linspace(lo, hi, 5))
+
+
+def test_zoom_window_narrows_only_a_coarse_axis_and_stays_inside_it():
+    """zoom_window's rule on a made-up check: above TABLE_ZOOM_SD (0.05) on any parameter, u0 +- 60 Laplace sds
+    within the axis; None at or below it, without the effect's sd, or when the window would span over half the
+    axis."""
+    from types import SimpleNamespace
+
+    from bayesrod.inference.likelihood import EffectAxis, zoom_window
+
+    lik = SimpleNamespace(
+        axis=EffectAxis("base_tilt", np.linspace(-0.3, 0.3, 25)), effect_coordinate=lambda d: d["base_tilt"]
+    )
+    name = "base_tilt (table coordinate u)"
+
+    def check(shift, sd=1e-3):
+        return {"shift_in_sd": {"log EI0": 0.0, "p": shift, name: 0.0}, "laplace_sd": {name: sd} if sd else {}}
+
+    point = {"EI0": 2.0, "p": 0.4, "base_tilt": 0.05}
+    assert zoom_window(lik, point, check(0.05)) is None and zoom_window(lik, point, check(-0.049)) is None
+    np.testing.assert_allclose(zoom_window(lik, point, check(-0.051)), (0.05 - 0.06, 0.05 + 0.06))
+    np.testing.assert_allclose(zoom_window(lik, point | {"base_tilt": 0.28}, check(0.2)), (0.22, 0.3))  # the axis's end
+    assert zoom_window(lik, point, check(0.2, sd=None)) is None
+    assert zoom_window(lik, point, check(0.2, sd=2.6e-3)) is None  # 0.312 of the axis's 0.6: over half
+    assert zoom_window(lik, point, check(0.2, sd=2.4e-3)) is not None
+    assert zoom_window(SimpleNamespace(axis=None), point, check(0.2)) is None
+    # after sampling: draws within 2% of the window of an end the window (not the axis) set are counted and reported
+    from bayesrod.api.fitting import _zoom_edge
+
+    draws = {"base_tilt": np.array([0.0019, 0.0021, 0.05, 0.0979, 0.0981])}
+    zoom = {"kept": True, "u_range_before": [-0.3, 0.3], "u_range": [0.0, 0.1]}
+    got = _zoom_edge(lik, draws, zoom)
+    assert got["draws_at_edge"] == 0.4 and "40.00% of the draws" in got["message"]
+    assert _zoom_edge(lik, draws, zoom | {"u_range_before": [0.0, 0.3]})["draws_at_edge"] == 0.2  # a prior's end
+    assert _zoom_edge(lik, draws, zoom | {"u_range_before": [0.0, 0.1]}) == {"draws_at_edge": 0.0}
+    assert _zoom_edge(lik, draws, zoom | {"kept": False}) == {}
+
+
+def test_an_effect_window_is_checked():
+    from bayesrod.inference.likelihood import build_likelihood
+
+    ds = bayesrod.simulate("twig", seed=2, config_overrides={"heights_m": (0.55,), "n_frames_engaged": 2})
+    prior = load_prior("woody")
+    for window, effects in (((0.1, 0.1), ("base_tilt",)), ((0.2, 0.1), ("base_tilt",)), ((0.0, 0.1), ())):
+        with pytest.raises(ValueError, match=r"effect_window: expected \(lo, hi\)"):
+            build_likelihood(ds, prior, effects, effect_window=window)
+    with pytest.raises(ValueError, match="effect_window"):
+        build_likelihood(ds, prior, ("base_tilt",), effect_window=(float("nan"), 0.1))
 
 
 def test_a_base_spring_is_sampled_in_u_only_on_forces_alone():

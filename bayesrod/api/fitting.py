@@ -36,6 +36,7 @@ from ..inference.likelihood import (
     length_is_approximate,
     table_check,
     table_workers,
+    zoom_window,
 )
 from ..inference.priors import load_prior
 from ..inference.sampler import convergence_message, find_start, run_ensembles
@@ -104,6 +105,7 @@ def _likelihood_options(config: Mapping) -> dict:
         "force_offsets": config.get("force_offsets", False),
         "diameter": config.get("diameter", "off"),
         "slip": config.get("slip", False),
+        "effect_window": config.get("effect_window"),
     }
 
 
@@ -673,6 +675,87 @@ def sampling_coordinates(force_noise: str, effects, one_height: bool = False) ->
     }
 
 
+#: _zoom_edge: the share of a narrowed effect axis next to each of its inner ends whose draws are counted
+ZOOM_EDGE_SHARE = 0.02
+
+
+def _worst_shift(check: dict | None) -> float:
+    """The largest |shift| [Laplace sd] of a table check (inf without one)."""
+    return max((abs(v) for v in check["shift_in_sd"].values()), default=0.0) if check else float("inf")
+
+
+def _zoom_effect_axis(spec, pr, effects, config: dict, post, theta0: NDArray) -> tuple | None:
+    """Narrow the effect axis around the start point where the tables are too coarse there (:func:`zoom_window`).
+
+    The window is centred on the start, which stays the start. Returns None where the axis stays, else (the
+    record for summary.json's ``table_check.effect_axis_zoom``, the likelihood, posterior and start point to
+    sample with); the narrowed axis is kept only when the table check at the start improves on it, and
+    ``config["effect_window"]`` then records it (a saved run rebuilds the same tables).
+    """
+    lik = post.likelihood
+    point = {k: float(v[0]) for k, v in post.to_natural(theta0[None]).items()}
+    try:
+        before = table_check(lik, point)
+    except ValueError:  # an exact solve the tables never needed: the post-sampling check says so
+        return None
+    window = zoom_window(lik, point, before) if before is not None else None
+    if window is None:
+        return None
+    log.info(
+        "%s: the tables would move the start by %.2g sd; %s axis narrowed to u in [%.4g, %.4g] (%d nodes)",
+        spec.specimen,
+        _worst_shift(before),
+        lik.axis.name,
+        window[0],
+        window[1],
+        lik.axis.grid.size,
+    )
+    options = _likelihood_options(config) | {"effect_window": window, "n_effect": lik.axis.grid.size}
+    zlik = build_likelihood(spec, pr, effects, **options)
+    zlik.shape_weight = lik.shape_weight
+    zpost = LogPosterior(zlik, pr)
+    ztheta = zpost.to_sample(point)[0]
+    try:
+        after = table_check(zlik, point) if np.isfinite(zpost.log_prob(ztheta)) else None
+    except ValueError:
+        after = None
+    record = {
+        "nodes": int(zlik.axis.grid.size),
+        "u_range_before": [float(lik.axis.grid[0]), float(lik.axis.grid[-1])],
+        "u_range": [float(window[0]), float(window[1])],
+        "shift_in_sd_before": before["shift_in_sd"],
+        "shift_in_sd_after": after["shift_in_sd"] if after else None,
+        "kept": _worst_shift(after) < _worst_shift(before),
+    }
+    if not record["kept"]:
+        return record, lik, post, theta0
+    config["effect_window"] = [float(window[0]), float(window[1])]
+    return record, zlik, zpost, ztheta
+
+
+def _zoom_edge(lik, samples: Mapping, zoom: dict) -> dict:
+    """Draws of a narrowed effect axis next to its inner ends (where the window, not the prior, cut the axis):
+    ``draws_at_edge`` (share of draws within :data:`ZOOM_EDGE_SHARE` of the window of such an end) and a
+    ``message`` when any are (the window may truncate the posterior)."""
+    if not zoom["kept"]:
+        return {}
+    (lo0, hi0), (lo, hi) = zoom["u_range_before"], zoom["u_range"]
+    u = lik.effect_coordinate(samples)
+    band = ZOOM_EDGE_SHARE * (hi - lo)
+    near = np.zeros(u.shape, bool)
+    if lo > lo0:
+        near |= u < lo + band
+    if hi < hi0:
+        near |= u > hi - band
+    out = {"draws_at_edge": float(np.mean(near))}
+    if out["draws_at_edge"] > 0.0:
+        out["message"] = (
+            f"{out['draws_at_edge']:.2%} of the draws lie at an end of the narrowed {lik.axis.name} axis "
+            f"(u in [{lo:.4g}, {hi:.4g}]): the window may cut the posterior; report it"
+        )
+    return out
+
+
 def _check_checkpoint(checkpoint: Path, config: dict) -> None:
     """A checkpoint resumes only the run that made it: same data, prior, effects, seed, weighting."""
     import h5py
@@ -911,6 +994,12 @@ def fit(
                 theta0 = find_start(post, rng, init=two_stage)
         else:
             lik.shape_weight = float(shape_weight)
+    zoom = None
+    if lik.axis is not None:
+        with table_workers(n_workers, progress=progress_enabled(progress)):
+            zoomed = _zoom_effect_axis(spec, pr, effects, config, post, theta0)
+        if zoomed is not None:
+            zoom, lik, post, theta0 = zoomed
     theta0 = post.settle_base_coordinates(theta0)
     if "base_compliance" in post.names:
         log.info("%s: base spring sampled in %s", spec.specimen, "u" if post.base_pair() else "log k")
@@ -975,7 +1064,13 @@ def fit(
     except ValueError as err:  # an exact solve the tables never needed (e.g. a rest shape that misses a height)
         tables = None
         extra["table_check"] = {"message": f"not checked: {err}"}
+    if zoom is not None:
+        zoom.update(_zoom_edge(lik, samples, zoom))
+        extra.setdefault("table_check", {})["effect_axis_zoom"] = zoom
+        if zoom.get("message"):
+            log.warning("warning: %s: %s", spec.specimen, zoom["message"])
     if tables is not None:
+        tables.update({"effect_axis_zoom": zoom} if zoom is not None else {})
         extra["table_check"] = tables
         worst = max(abs(v) for v in tables["shift_in_sd"].values())
         if worst > TABLE_SHIFT_WARN_SD:

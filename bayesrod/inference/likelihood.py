@@ -426,6 +426,13 @@ SHAPE_EFFECT_NODES = {"rest_curvature": 49, "base_tilt": 49}
 #: (docs/validation.md, session 47); a rest-curvature axis moved its log EI0 by -0.049 sd (0.3 1/m) and -0.053 sd
 #: (0.6 1/m) with 25, -0.011 sd with 49 (session 58)
 FORCE_EFFECT_NODES = {"contact_friction": 49, "rest_curvature": 49}
+#: zoom_window: the largest shift [Laplace sd] the tables may cause at the start point before a fit narrows the
+#: effect axis around it (the table-accuracy target of docs/validation.md)
+TABLE_ZOOM_SD = 0.05
+#: zoom_window: half-width of a narrowed effect axis in Laplace sds of its coordinate at the start point. The
+#: Laplace sd assumes independent noise: an AR(1) noise's posterior is wider by up to sqrt((1 + rho) / (1 - rho))
+#: (4.4 at rho 0.9), so the window still spans +- 14 sd there
+ZOOM_HALF_WIDTH_SD = 60.0
 
 #: nondimensional step before a curve's end over which a shape's slope in d is taken (RodLikelihood)
 SHAPE_END_STEP = 0.01
@@ -1558,7 +1565,7 @@ def table_check(lik: RodLikelihood, point: dict) -> dict | None:
     EI0, p = float(one["EI0"][0]), float(one["p"][0])
     u = lik.effect_coordinate(one)
     eff = {} if lik.axis is None else {k: float(v) for k, v in lik.axis.nondim(u[0]).items()}
-    names = ["log EI0", "p"] + ([f"{lik.axis.name} (table coordinate u)"] if lik.axis is not None else [])
+    names = ["log EI0", "p"] + ([effect_axis_label(lik.axis)] if lik.axis is not None else [])
     names += (["force_offset"] if "force_offset" in lik.effects else []) + list(lik.offset_names)
     blocks, out = [], {"max_error_over_sigma": None, "n_samples": 0}
 
@@ -1625,7 +1632,46 @@ def table_check(lik: RodLikelihood, point: dict) -> dict | None:
     cov = np.linalg.pinv(J.T @ J)
     shift = -cov @ (J.T @ delta)
     sd_theta = np.sqrt(np.maximum(np.diag(cov), 1e-300))
-    return out | {"shift_in_sd": {names[i]: float(v) for i, v in zip(seen, shift / sd_theta, strict=True)}}
+    return out | {
+        "shift_in_sd": {names[i]: float(v) for i, v in zip(seen, shift / sd_theta, strict=True)},
+        "laplace_sd": {names[i]: float(v) for i, v in zip(seen, sd_theta, strict=True)},
+    }
+
+
+def effect_axis_label(axis: EffectAxis) -> str:
+    """The name :func:`table_check` gives the tabled effect's coordinate."""
+    return f"{axis.name} (table coordinate u)"
+
+
+def zoom_window(lik: RodLikelihood, point: dict, check: dict | None = None) -> tuple[float, float] | None:
+    """A narrower range of the effect axis, around ``point``, where the tables there are too coarse.
+
+    Where :func:`table_check` at ``point`` (natural units, as it takes them; ``check`` its result if already
+    computed) says the tables would move the estimate by more than :data:`TABLE_ZOOM_SD` on any parameter,
+    the window is the point's table coordinate u0 +- :data:`ZOOM_HALF_WIDTH_SD` of u's Laplace sd, within
+    the current axis. A table over it with the same number of nodes (``build_likelihood(effect_window=...)``)
+    is finer by the ratio of the ranges. None without a tabled effect, when the check passes or cannot be
+    made, or when the window would be more than half the current axis (too little gained).
+
+    Why: an axis spread over the effect's whole prior can be coarse for a precise posterior (SBC seed 5 of
+    the friction study, forces only: Laplace sd 0.0016 in mu against a node spacing of 0.0375 on 49 nodes;
+    the tables moved mu by +0.50 sd, 97 nodes by 0.00; docs/validation.md, session 65).
+    """
+    if lik.axis is None:
+        return None
+    check = table_check(lik, point) if check is None else check
+    if check is None or max(abs(v) for v in check["shift_in_sd"].values()) <= TABLE_ZOOM_SD:
+        return None
+    sd = check["laplace_sd"].get(effect_axis_label(lik.axis))
+    if sd is None or not np.isfinite(sd) or sd <= 0.0:
+        return None
+    one = {k: np.atleast_1d(np.asarray(v, float))[:1] for k, v in point.items()}
+    u0 = float(lik.effect_coordinate(one)[0])
+    g = lik.axis.grid
+    lo, hi = max(float(g[0]), u0 - ZOOM_HALF_WIDTH_SD * sd), min(float(g[-1]), u0 + ZOOM_HALF_WIDTH_SD * sd)
+    if not hi > lo or hi - lo > 0.5 * (g[-1] - g[0]):
+        return None
+    return lo, hi
 
 
 def force_scale_fit(lik: RodLikelihood, p: float, EI0: float | None = None) -> tuple[float, float]:
@@ -1690,6 +1736,7 @@ def build_likelihood(
     force_offsets: bool = False,
     diameter: str = "off",
     slip: bool = False,
+    effect_window: tuple[float, float] | None = None,
 ) -> RodLikelihood:
     """The likelihood for ``effects``; a tabled effect gets its axis from the prior and a plain EI0 estimate.
 
@@ -1709,8 +1756,17 @@ def build_likelihood(
     without shapes (:data:`FORCE_EFFECT_NODES`; rest curvature on forces alone moved log EI0 by -0.053 sd with
     25; their tables take twice as long to build). ``slip`` adds the term for where
     each push's slip lies (:meth:`RodLikelihood.slip_loglik`; docs/inference.md, "The slip").
+    ``effect_window`` (lo, hi): the effect axis spans this range of its table coordinate u instead (with
+    ``n_effect`` nodes; :func:`zoom_window` picks it); walkers outside it get zero density.
     """
     tabled = [e for e in effects if e in TABLE_EFFECTS]
+    if effect_window is not None:
+        lo_w, hi_w = (float(v) for v in effect_window)
+        if not tabled or not np.isfinite(lo_w) or not np.isfinite(hi_w) or not hi_w > lo_w:
+            raise ValueError(
+                "effect_window: expected (lo, hi), finite, lo < hi, with a tabled effect "
+                f"({', '.join(TABLE_EFFECTS)}), got {effect_window!r} with effects {list(effects)!r}"
+            )
     if n_effect is None:
         n_effect = FORCE_EFFECT_NODES.get(tabled[0], 25) if tabled else 25
         if tabled and use_shapes:
@@ -1718,7 +1774,9 @@ def build_likelihood(
     lo, hi = prior.get("p").bounds()
     p_range = (lo, min(hi, 3.0))
     axis = None
-    if tabled:
+    if tabled and effect_window is not None:
+        axis = EffectAxis(tabled[0], np.linspace(lo_w, hi_w, n_effect))
+    elif tabled:
         plain = RodLikelihood(spec, p_range=p_range, use_forces=use_forces, use_shapes=False)
         rng = effect_axis_ei0_range(tabled[0], scale_estimate(plain), prior)
         axis = EffectAxis.from_prior(tabled[0], prior.get(tabled[0]), rng, float(spec.length_m), n=n_effect)
