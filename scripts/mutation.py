@@ -167,6 +167,11 @@ TARGETS: dict[str, tuple[str, list[str], list[str] | None]] = {
             "*.xǁRodLikelihoodǁshape_offsets_preloaded__mutmut_*",
         ],
     ),
+    "table_zoom": (  # added in session 65: the fit's narrowing of a coarse effect axis (zoom_window)
+        "bayesrod/inference/likelihood.py",
+        ["tests/test_inference.py::test_zoom_window_narrows_only_a_coarse_axis_and_stays_inside_it"],
+        ["*.x_zoom_window__mutmut_*", "*.x_effect_axis_label__mutmut_*"],
+    ),
     "step_back": (  # added in session 31: the simulator's step back from a failed solve (session 30)
         "bayesrod/dataset/simulate.py",
         ["tests/test_simulate.py"],

@@ -1,6 +1,6 @@
 """How far the likelihood tables move the MLE on one SBC case, noise-free (issue 21).
 
-    python scripts/table_shift_sbc_case.py --seed 47 [--n-effect 145] [--fast] [--forces-only]
+    python scripts/table_shift_sbc_case.py --seed 47 [--n-effect 145] [--fast] [--forces-only] [--zoom]
 
 scripts/table_accuracy.py checks the tables on the twig at moderate effect values. This takes one case of
 scripts/sbc_geometry.py (its stem, heights, effect and value; the fixed robot step) without noise:
@@ -8,7 +8,9 @@ forces and centerlines solved again by the reference solver (``--fast``: the sim
 exact model's MLE is the truth. The table likelihood is maximised over (log EI0, p, the effect) with
 the noise at the case's force sd and 1.5 mm, and its shift from the truth is printed in Laplace sds,
 with the log likelihood at the truth and at the maximum. ``--n-effect``: nodes on the effect's table
-axis (default: the fit's).
+axis (default: the fit's). ``--zoom``: then also on the axis a fit narrows around its start where the
+tables there are too coarse (``bayesrod.inference.likelihood.zoom_window`` at the truth, the fit's rule; a
+second table build).
 """
 
 from __future__ import annotations
@@ -17,8 +19,10 @@ import argparse
 
 import sbc_geometry as S
 
-from bayesrod.api.calibration import table_shift_on
+from bayesrod.api._common import as_dataset
+from bayesrod.api.calibration import mle_shift
 from bayesrod.dataset.simulate import NoiseModel
+from bayesrod.inference.likelihood import build_likelihood, table_check, zoom_window
 from bayesrod.inference.priors import load_prior
 
 
@@ -29,6 +33,7 @@ def main(argv=None) -> None:
     ap.add_argument("--n-effect", type=int, default=None)
     ap.add_argument("--fast", action="store_true", help="keep the simulator's solves (no reference re-solve)")
     ap.add_argument("--forces-only", action="store_true")
+    ap.add_argument("--zoom", action="store_true", help="also the narrowed effect axis a fit would sample on")
     a = ap.parse_args(argv)
     case = S.draw_case(a.seed, (None, *a.effects.split(",")))
     effect = case["effect"]
@@ -36,21 +41,39 @@ def main(argv=None) -> None:
     ds = S.simulate_case(a.seed, case, prefix="table", noise=noise)
     if not a.fast:
         ds, _, _ = S.reference_dataset(ds, case | {"shapes": True})
-    out = table_shift_on(
-        ds,
-        load_prior(str(S.PRIOR)),
-        {"EI0": case["EI0"], "p": case["p"], **({effect: case["effect_value"]} if effect else {})},
-        noise=(max(case["sigma_force_N"], 1e-3), 0.0015),
-        use_shapes=not a.forces_only,
-        n_effect=a.n_effect,
-    )
+    truth = {"EI0": case["EI0"], "p": case["p"], **({effect: case["effect_value"]} if effect else {})}
+    held = (max(case["sigma_force_N"], 1e-3), 0.0015)  # the noise sds held fixed
+    fitted = (effect,) if effect else ()
+    prior = load_prior(str(S.PRIOR))
+    lik = build_likelihood(as_dataset(ds), prior, fitted, use_shapes=not a.forces_only, n_effect=a.n_effect)
     print(f"seed {a.seed}: {effect or 'no effect'}, {len(case['heights_m'])} heights, p {case['p']:.4f}")
+    show(mle_shift(lik, truth, noise=held))
+    if a.zoom and lik.axis is not None:
+        point = truth | {"sigma_force_N": held[0], "sigma_shape_m": held[1], "shape_sd_scale": 1.0}
+        check = table_check(lik, point)
+        window = zoom_window(lik, point, check)
+        worst = max(abs(v) for v in check["shift_in_sd"].values()) if check else float("nan")
+        if window is None:
+            print(f"  zoom: none (the check at the truth: {worst:.2f} sd; a window would span over 0.8 of the axis)")
+        else:
+            n = int(lik.axis.grid.size)
+            was = f"{lik.axis.grid[0]:.4g}, {lik.axis.grid[-1]:.4g}"
+            print(f"  zoom (the check at the truth: {worst:.2f} sd): u in [{window[0]:.5g}, {window[1]:.5g}]")
+            print(f"  ({n} nodes; was [{was}])")
+            zoomed = build_likelihood(
+                as_dataset(ds), prior, fitted, use_shapes=not a.forces_only, n_effect=n, effect_window=window
+            )
+            show(mle_shift(zoomed, truth, noise=held))
+
+
+def show(out: dict) -> None:
+    """Print one mle_shift result."""
     print(
         f"  effect axis nodes {out['effect_nodes']}; log likelihood at the truth {out['loglik_truth']:.2f}, "
         f"at the maximum {out['loglik_max']:.2f}"
     )
     for n, t, m, s, z in zip(*(out[k] for k in ("names", "truth", "mle", "laplace_sd", "shift_in_sd")), strict=True):
-        print(f"  {n}: truth {t:.5f}, table MLE {m:.5f}, Laplace sd {s:.5f}, shift {z:+.2f} sd")
+        print(f"  {n}: truth {t:.5f}, table MLE {m:.5f}, Laplace sd {s:.5f}, shift {z:+.2f} sd", flush=True)
 
 
 if __name__ == "__main__":

@@ -645,7 +645,7 @@ def test_a_fit_narrows_a_coarse_effect_axis_around_its_start(monkeypatch, tmp_pa
 
 def test_zoom_window_narrows_only_a_coarse_axis_and_stays_inside_it():
     """zoom_window's rule on a made-up check: above TABLE_ZOOM_SD (0.05) on any parameter, u0 +- 60 Laplace sds
-    within the axis; None at or below it, without the effect's sd, or when the window would span over half the
+    within the axis; None at or below it, without the effect's sd, or when the window would span over 0.8 of the
     axis."""
     from types import SimpleNamespace
 
@@ -664,8 +664,8 @@ def test_zoom_window_narrows_only_a_coarse_axis_and_stays_inside_it():
     np.testing.assert_allclose(zoom_window(lik, point, check(-0.051)), (0.05 - 0.06, 0.05 + 0.06))
     np.testing.assert_allclose(zoom_window(lik, point | {"base_tilt": 0.28}, check(0.2)), (0.22, 0.3))  # the axis's end
     assert zoom_window(lik, point, check(0.2, sd=None)) is None
-    assert zoom_window(lik, point, check(0.2, sd=2.6e-3)) is None  # 0.312 of the axis's 0.6: over half
-    assert zoom_window(lik, point, check(0.2, sd=2.4e-3)) is not None
+    assert zoom_window(lik, point, check(0.2, sd=4.1e-3)) is None  # 0.492 of the axis's 0.6: over 0.8 of it
+    assert zoom_window(lik, point, check(0.2, sd=3.9e-3)) is not None
     assert zoom_window(SimpleNamespace(axis=None), point, check(0.2)) is None
     # after sampling: draws within 2% of the window of an end the window (not the axis) set are counted and reported
     from bayesrod.api.fitting import _zoom_edge
