@@ -652,18 +652,22 @@ def test_zoom_window_narrows_only_a_coarse_axis_and_stays_inside_it():
     from bayesrod.inference.likelihood import EffectAxis, zoom_window
 
     lik = SimpleNamespace(
-        axis=EffectAxis("base_tilt", np.linspace(-0.3, 0.3, 25)), effect_coordinate=lambda d: d["base_tilt"]
+        axis=EffectAxis("base_tilt", np.linspace(-0.3, 0.3, 25)),
+        effect_coordinate=lambda d: np.atleast_1d(d["base_tilt"]),
     )
     name = "base_tilt (table coordinate u)"
 
     def check(shift, sd=1e-3):
-        return {"shift_in_sd": {"log EI0": 0.0, "p": shift, name: 0.0}, "laplace_sd": {name: sd} if sd else {}}
+        return {"shift_in_sd": {"log EI0": 0.0, "p": shift, name: 0.0}, "laplace_sd": {} if sd is None else {name: sd}}
 
     point = {"EI0": 2.0, "p": 0.4, "base_tilt": 0.05}
     assert zoom_window(lik, point, check(0.05)) is None and zoom_window(lik, point, check(-0.049)) is None
     np.testing.assert_allclose(zoom_window(lik, point, check(-0.051)), (0.05 - 0.06, 0.05 + 0.06))
     np.testing.assert_allclose(zoom_window(lik, point | {"base_tilt": 0.28}, check(0.2)), (0.22, 0.3))  # the axis's end
-    assert zoom_window(lik, point, check(0.2, sd=None)) is None
+    np.testing.assert_allclose(zoom_window(lik, point | {"base_tilt": -0.28}, check(0.2)), (-0.3, -0.22))
+    for sd in (None, 0.0, np.nan):
+        assert zoom_window(lik, point, check(0.2, sd=sd)) is None, sd
+    assert zoom_window(lik, point, None) is None  # no check (an exact solve failed)
     assert zoom_window(lik, point, check(0.2, sd=4.1e-3)) is None  # 0.492 of the axis's 0.6: over 0.8 of it
     assert zoom_window(lik, point, check(0.2, sd=3.9e-3)) is not None
     assert zoom_window(SimpleNamespace(axis=None), point, check(0.2)) is None

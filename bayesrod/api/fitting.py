@@ -698,7 +698,7 @@ def _zoom_effect_axis(spec, pr, effects, config: dict, post, theta0: NDArray) ->
         before = table_check(lik, point)
     except ValueError:  # an exact solve the tables never needed: the post-sampling check says so
         return None
-    window = zoom_window(lik, point, before) if before is not None else None
+    window = zoom_window(lik, point, before)
     if window is None:
         return None
     log.info(

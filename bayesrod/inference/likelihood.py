@@ -1646,11 +1646,11 @@ def effect_axis_label(axis: EffectAxis) -> str:
     return f"{axis.name} (table coordinate u)"
 
 
-def zoom_window(lik: RodLikelihood, point: dict, check: dict | None = None) -> tuple[float, float] | None:
+def zoom_window(lik: RodLikelihood, point: dict, check: dict | None) -> tuple[float, float] | None:
     """A narrower range of the effect axis, around ``point``, where the tables there are too coarse.
 
-    Where :func:`table_check` at ``point`` (natural units, as it takes them; ``check`` its result if already
-    computed) says the tables would move the estimate by more than :data:`TABLE_ZOOM_SD` on any parameter,
+    Where ``check``, :func:`table_check` at ``point`` (natural units, scalars, as it takes them), says the
+    tables would move the estimate by more than :data:`TABLE_ZOOM_SD` on any parameter,
     the window is the point's table coordinate u0 +- :data:`ZOOM_HALF_WIDTH_SD` of u's Laplace sd, within
     the current axis. A table over it with the same number of nodes (``build_likelihood(effect_window=...)``)
     is finer by the ratio of the ranges. None without a tabled effect, when the check passes or cannot be
@@ -1660,16 +1660,12 @@ def zoom_window(lik: RodLikelihood, point: dict, check: dict | None = None) -> t
     the friction study, forces only: Laplace sd 0.0016 in mu against a node spacing of 0.0375 on 49 nodes;
     the tables moved mu by +0.50 sd, 97 nodes by 0.00; docs/validation.md, session 65).
     """
-    if lik.axis is None:
-        return None
-    check = table_check(lik, point) if check is None else check
-    if check is None or max(abs(v) for v in check["shift_in_sd"].values()) <= TABLE_ZOOM_SD:
+    if lik.axis is None or check is None or max(abs(v) for v in check["shift_in_sd"].values()) <= TABLE_ZOOM_SD:
         return None
     sd = check["laplace_sd"].get(effect_axis_label(lik.axis))
-    if sd is None or not np.isfinite(sd) or sd <= 0.0:
+    if sd is None or not 0.0 < sd < np.inf:
         return None
-    one = {k: np.atleast_1d(np.asarray(v, float))[:1] for k, v in point.items()}
-    u0 = float(lik.effect_coordinate(one)[0])
+    u0 = float(lik.effect_coordinate(point)[0])
     g = lik.axis.grid
     lo, hi = max(float(g[0]), u0 - ZOOM_HALF_WIDTH_SD * sd), min(float(g[-1]), u0 + ZOOM_HALF_WIDTH_SD * sd)
     if not hi > lo or hi - lo > ZOOM_MAX_SHARE * (g[-1] - g[0]):
