@@ -882,6 +882,12 @@ def fit(
     Returns
     -------
     Posterior
+
+    Notes
+    -----
+    With a tabled effect, the tables are checked against exact solves at the sampler's start; where they
+    would move the estimate by more than 0.05 sd, the effect's axis is rebuilt over a window around the start
+    before sampling (one more table build; ``summary.json`` ``table_check.effect_axis_zoom``, docs/inference.md).
     """
     t0 = time.perf_counter()
     check_workers(n_workers)  # before any work
