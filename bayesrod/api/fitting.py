@@ -1070,13 +1070,7 @@ def fit(
     except ValueError as err:  # an exact solve the tables never needed (e.g. a rest shape that misses a height)
         tables = None
         extra["table_check"] = {"message": f"not checked: {err}"}
-    if zoom is not None:
-        zoom.update(_zoom_edge(lik, samples, zoom))
-        extra.setdefault("table_check", {})["effect_axis_zoom"] = zoom
-        if zoom.get("message"):
-            log.warning("warning: %s: %s", spec.specimen, zoom["message"])
     if tables is not None:
-        tables.update({"effect_axis_zoom": zoom} if zoom is not None else {})
         extra["table_check"] = tables
         worst = max(abs(v) for v in tables["shift_in_sd"].values())
         if worst > TABLE_SHIFT_WARN_SD:
@@ -1086,6 +1080,11 @@ def fit(
                 "less exact than they look; report it (docs/validation.md, 'Likelihood tables against exact solves')"
             )
             log.warning("warning: %s: %s", spec.specimen, tables["message"])
+    if zoom is not None:  # beside the check's result, or its "not checked" message
+        zoom.update(_zoom_edge(lik, samples, zoom))
+        extra.setdefault("table_check", {})["effect_axis_zoom"] = zoom
+        if zoom.get("message"):
+            log.warning("warning: %s: %s", spec.specimen, zoom["message"])
     doc = build_summary(spec, post, samples, res.diagnostics, lik.fit_error(median), effects, extra)
     not_converged = convergence_message(res, max_steps, target_ess)
     doc["convergence"]["converged"] = not_converged is None
