@@ -60,7 +60,7 @@ PARAMS = ("EI0", "p", "sigma_force_N", "effect")
 FIELDS = (
     ["seed", "length_m", "n_heights", "shapes", "effect", "rhat_max", "max_ref_vs_fast_N", "n_fast_fallback"]
     + [f"{k}_{s}" for k in PARAMS for s in ("true", "median", "rank", "covered")]
-    + ["error"]
+    + ["table_shift_sd", "table_shift_worst", "effect_axis_zoom", "error"]
 )
 N_RANK = 99
 
@@ -216,6 +216,7 @@ def replicate(
         return row | {"rhat_max": float("nan"), "max_ref_vs_fast_N": float("nan"), "error": f"{type(e).__name__}: {e}"}
     row |= {"rhat_max": res["rhat_max"], "max_ref_vs_fast_N": worst}
     row |= {"n_fast_fallback": n_fallback, "error": ""}
+    row |= {k: res[k] for k in ("table_shift_sd", "table_shift_worst", "effect_axis_zoom")}
     truth = {"EI0": case["EI0"], "p": case["p"], "sigma_force_N": case["sigma_force_N"]}
     names = {"EI0": "EI0", "p": "p", "sigma_force_N": "sigma_force_N", "effect": case["effect"]}
     if case["effect"]:

@@ -117,3 +117,19 @@ def test_frames_before_the_second_engaged_sample_are_not_used():
         assert data.frame_D_m.size == used.sum()
         exact = sim.frame_contact_x_m[used]
         np.testing.assert_allclose(data.frame_D_m, exact, rtol=0.01)
+
+
+def test_a_calibration_row_records_the_fits_worst_table_shift_and_its_zoom():
+    """The SBC rows say how far the fit's own table check moved the median (largest |shift|, which
+    parameter) and whether the effect axis was narrowed: a miss beside a table warning is then traceable."""
+    from bayesrod.api.calibration import table_columns
+
+    doc = {"table_check": {"shift_in_sd": {"log EI0": 0.02, "p": -1.8, "mu": 0.4}}}
+    assert table_columns(doc) == {"table_shift_sd": 1.8, "table_shift_worst": "p", "effect_axis_zoom": "none"}
+    doc["table_check"]["effect_axis_zoom"] = {"kept": True}
+    assert table_columns(doc)["effect_axis_zoom"] == "kept"
+    doc["table_check"]["effect_axis_zoom"] = {"kept": False}
+    assert table_columns(doc)["effect_axis_zoom"] == "refused"
+    unchecked = table_columns({"table_check": {"message": "not checked: x", "effect_axis_zoom": {"kept": True}}})
+    assert np.isnan(unchecked["table_shift_sd"]) and unchecked["table_shift_worst"] == ""
+    assert unchecked["effect_axis_zoom"] == "kept"

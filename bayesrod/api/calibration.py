@@ -80,9 +80,26 @@ def fit_for_calibration(
     idx = rng.permutation(n)[:n_rank]  # random thinning: ranks need (nearly) independent draws
     out = {"rhat_max": float(post.doc["convergence"]["rhat_max"]), "names": list(post.doc["parameters"])}
     out["steps"] = int(post.doc["sampler"]["steps"])
+    out |= table_columns(post.doc)
     for k, v in post.samples.items():
         out[k] = {"draws": np.asarray(v)[idx], "q": np.quantile(v, QUANTILES)}
     return out
+
+
+def table_columns(doc: dict) -> dict:
+    """A calibration row's record of the fit's table check (summary.json ``table_check``): ``table_shift_sd``,
+    the largest |shift| [Laplace sd] at the posterior median (NaN where not checked); ``table_shift_worst``,
+    the parameter it moves most; ``effect_axis_zoom``: ``"none"`` (axis kept as built), ``"kept"`` (narrowed
+    around the start) or ``"refused"`` (narrowed, but the check at the start did not improve)."""
+    check = doc.get("table_check") or {}
+    shifts = {k: abs(float(v)) for k, v in (check.get("shift_in_sd") or {}).items()}
+    worst = max(shifts, key=shifts.get) if shifts else ""
+    zoom = check.get("effect_axis_zoom")
+    return {
+        "table_shift_sd": shifts[worst] if worst else float("nan"),
+        "table_shift_worst": worst,
+        "effect_axis_zoom": "none" if zoom is None else ("kept" if zoom.get("kept") else "refused"),
+    }
 
 
 def sbc_replicate(seed: int, prior_name: str = "woody", *, use_shapes: bool = True, target_ess: float = 400.0):
