@@ -133,3 +133,55 @@ def test_compare_needs_species(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "species" in err and "Traceback" not in err
     assert not (tmp_path / "o").exists()  # nothing half-written
+
+
+def test_compare_reports_each_species_and_the_spread_between_specimens_from_its_draws(tmp_path, monkeypatch):
+    """compare.json's per-species numbers: EI0 (exp of the species mean of log EI0), p, E (the log-E model's),
+    the between-specimen sds and the convergence of both models; each the summary of the draws it names
+    (an index or an exp off would pass the contrasts' tests) and each covering the truth the specimens were
+    drawn from (oak EI0 5 N m^2, p 0.4, d0 10 mm; reed 1 N m^2, p 1.2, 6 mm; spreads TAU in log EI0 and p)."""
+    import importlib
+
+    import bayesrod
+    from bayesrod.inference.summary import credible_interval
+
+    cmp_module = importlib.import_module("bayesrod.api.compare")  # the package exports the function of its name
+    fits = []
+
+    def spy(*a, **k):  # the log-E model's R-hat made the worse, so the report must take it from there
+        fits.append(sample_species(*a, **k))
+        if len(fits) == 2:
+            fits[-1] = fits[-1] | {"rhat_max": fits[-1]["rhat_max"] + 0.5}
+        return fits[-1]
+
+    monkeypatch.setattr(cmp_module, "sample_species", spy)
+    rng = np.random.default_rng(3)
+    runs, truth = [], {"oak": (5.0, 0.4, 0.01), "reed": (1.0, 1.2, 0.006)}
+    for s in _species(rng, "oak", 5.0, 0.4, 3) + _species(rng, "reed", 1.0, 1.2, 2):
+        _fake_run(tmp_path / s.specimen, s.specimen, s.species, s.draws, d0=np.full(len(s.draws), truth[s.species][2]))
+        runs.append(tmp_path / s.specimen)
+    res = bayesrod.compare(runs, seed=1)
+    doc, (fit, fit_E) = res.to_dict(), fits
+    assert fit["species"] == fit_E["species"] == ["oak", "reed"]
+    for g, sp in enumerate(fit["species"]):
+        got, (EI0, p, d0) = doc["species"][sp], truth[sp]
+        assert got["n_specimens"] == {"oak": 3, "reed": 2}[sp]
+        assert got["EI0"] == pytest.approx(credible_interval(np.exp(fit["mu"][:, g, 0])), rel=1e-12)
+        assert got["p"] == pytest.approx(credible_interval(fit["mu"][:, g, 1]), rel=1e-12)
+        assert got["E_Pa"] == pytest.approx(credible_interval(np.exp(fit_E["mu"][:, g, 0])), rel=1e-12)
+        E = 64 * EI0 / (np.pi * d0**4)
+        for k, v in (("EI0", EI0), ("p", p), ("E_Pa", E)):
+            assert got[k]["q05"] < v < got[k]["q95"], (sp, k, got[k])
+    sd = doc["between_specimen_sd"]
+    assert sd["log_EI0"] == pytest.approx(credible_interval(fit["tau"][:, 0]), rel=1e-12)
+    assert sd["p"] == pytest.approx(credible_interval(fit["tau"][:, 1]), rel=1e-12)
+    assert sd["log_E"] == pytest.approx(credible_interval(fit_E["tau"][:, 0]), rel=1e-12)
+    for k, v in (("log_EI0", TAU[0]), ("p", TAU[1]), ("log_E", TAU[0])):  # d0 is the same within a species
+        assert sd[k]["q05"] < v < sd[k]["q95"], (k, sd[k])
+    # the run's convergence is the worse of the two models'
+    assert doc["convergence"] == {
+        "rhat_max": max(fit["rhat_max"], fit_E["rhat_max"]),
+        "ess_bulk_min": min(fit["ess_bulk_min"], fit_E["ess_bulk_min"]),
+    }
+    assert fit["rhat_max"] != fit_E["rhat_max"] and fit["ess_bulk_min"] != fit_E["ess_bulk_min"]
+    assert min(fit["ess_bulk_min"], fit_E["ess_bulk_min"]) >= 1000  # both models reach the sampler's target ESS

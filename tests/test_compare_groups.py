@@ -82,6 +82,9 @@ def test_genotypes_differ_at_the_cut_base_not_in_the_stem(stems, tmp_path, capsy
         band = res["anchorage"]["cut"]["species"][g]["base_compliance_rad_per_Nm"]
         assert band["q05"] < truth < band["q95"]
         assert band["q95"] - band["q05"] < 0.03  # three stems of spread 0.005 pin the mean, not the prior
+    # the stems' spread about their genotype's mean at the cut base: 0.005 rad/(N m) (not a genotype's mean)
+    spread = res["anchorage"]["cut"]["between_stem_sd_rad_per_Nm"]
+    assert spread["q05"] < 0.005 < spread["q95"] and spread["median"] < 0.015, spread
 
 
 def test_fit_group_refuses_conditions_of_different_species():

@@ -641,3 +641,42 @@ def test_design_reads_friction_forces_in_log_space_as_the_likelihood_does():
     F = pred.forces(np.array([np.log(EI0)]), np.array([0.43]), u=np.array([0.3]))[0]
     F_exact = EI0 / L**2 * exact.force(D / L)[0]
     assert np.abs(F - F_exact).max() < 4e-4 * F_exact.max()
+
+
+def test_the_planned_push_defaults_to_the_farthest_engaged_reach_and_the_median_engaged_count(tmp_path):
+    """design's default plan, from pushes of three lengths (a fixed robot step: 3 different engaged counts,
+    and samples after each slip): the farthest contact reach while engaged, not the travel after the slip,
+    and the median engaged count, not the largest."""
+    from bayesrod.api.design import default_plan
+    from bayesrod.dataset.engagement import detect_engagement
+    from bayesrod.dataset.reader import read_dataset
+
+    path = make_dataset(tmp_path / "ds", "twig", seed=3, heights_m=(0.3, 0.5, 0.7), robot_step_m=0.01)
+    spec = read_dataset(path)
+    reach, counts = [], []
+    for push in spec.pushes:
+        x, engaged = push.force.contact_x_m, detect_engagement(push.force.force_N).mask
+        assert np.nanmax(x) > np.nanmax(x[engaged]) + 0.01  # travel after the slip
+        reach.append(np.nanmax(x[engaged]))
+        counts.append(int(engaged.sum()))
+    assert len(set(counts)) == 3
+    plan = default_plan(spec)
+    assert plan["displacement_m"] == pytest.approx(max(reach), rel=1e-12)
+    assert plan["n_samples"] == sorted(counts)[1] and plan["force_range_N"] == (0.05, 50.0)
+
+
+def test_design_proposes_nineteen_heights_along_the_stem_by_default(fake_run, monkeypatch):
+    """Without candidate heights: 0.05 L to 0.95 L in 19 steps (L from the run, 0.8 m), in metres."""
+    import importlib
+
+    api_design = importlib.import_module("bayesrod.api.design")  # the package exports the function of its name
+    seen = {}
+
+    def capture(samples, L, cand, plan, **kw):
+        seen.update(L=L, cand=np.asarray(cand))
+        return {"recommended_height_m": None, "candidates": []}
+
+    monkeypatch.setattr(api_design, "design_heights", capture)
+    api_design.design(fake_run, progress=False)
+    assert seen["L"] == 0.8
+    np.testing.assert_allclose(seen["cand"], np.linspace(0.04, 0.76, 19), rtol=1e-12)

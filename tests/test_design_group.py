@@ -66,3 +66,22 @@ def test_design_of_a_group_needs_a_known_condition(tmp_path, capsys):
     assert main(["design", str(tmp_path / "s1"), "--out", str(tmp_path / "d"), "--displacement", "0.04"]) == 2
     err = capsys.readouterr().err
     assert "condition: expected one of intact, cut" in err and "Traceback" not in err
+
+
+def test_a_conditions_draws_are_its_own_with_a_clamp_as_an_infinitely_stiff_spring():
+    """design of one condition takes the stem's shared draws and that condition's own noise and base: the base
+    spring is 1/compliance, and a zero compliance (an intact clamp) an infinitely stiff spring, not none."""
+    from bayesrod.api.design import _group_draws
+
+    stem = _ridge_stem(n=200)
+    S = dict(stem.samples) | {"sigma_force_N__intact": np.full(200, 0.05)}  # the conditions' noise differs
+    stem = GroupFit("s1", stem.conditions, MappingProxyType(S), stem.doc)
+    for cond, sigma in (("cut", 0.03), ("intact", 0.05)):
+        samples, length, pushed, plan, source = _group_draws(stem, cond)
+        np.testing.assert_array_equal(samples["EI0"], S["EI0"])
+        np.testing.assert_array_equal(samples["p"], S["p"])
+        np.testing.assert_array_equal(samples["sigma_force_N"], np.full(200, sigma))
+        assert (length, pushed, plan, source) == (L, [H1], {}, f"s1/{cond}")
+    k_b = _group_draws(stem, "cut")[0]["base_compliance"]
+    np.testing.assert_allclose(k_b, 1.0 / S["base_compliance_rad_per_Nm__cut"], rtol=1e-12)
+    assert np.all(np.isposinf(_group_draws(stem, "intact")[0]["base_compliance"]))
