@@ -19,7 +19,10 @@ the slip away, a design no likelihood models: docs/validation.md), then every re
 frame's centerline is solved again by ``bayesrod.physics.reference`` (adaptive DOP853 + brentq, not the
 fast path the fit uses) and the simulator's noise is added back to the reference values. The fit is
 ``bayesrod.fit`` with the same prior. For EI0, p, the force noise and the effect it records the rank of
-the truth among 99 thinned posterior draws and whether the 90% interval covers it. Writes
+the truth among 99 thinned posterior draws and whether the 90% interval covers it, and from the fit's own
+``table_check`` the largest shift its tables would cause at the posterior median (``table_shift_sd``, Laplace
+sds; ``table_shift_worst``, the parameter it moves most) and whether it narrowed its effect axis
+(``effect_axis_zoom``: none, kept or refused; ``bayesrod.api.calibration.table_columns``). Writes
 ``sbc_geometry.csv`` (resumable: rows already there are not recomputed) and ``sbc_geometry.md`` (coverage
 per parameter and per case, with the binomial range of 90% coverage and a chi-square test of the rank
 histogram) into --out.
