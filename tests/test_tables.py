@@ -526,3 +526,59 @@ def test_a_long_tables_stems_take_their_own_length_and_species_from_metadata_key
         "expected a header with a column named file, stem_id or specimen, got plant, length_m"
         in capsys.readouterr().err
     )
+
+
+def test_the_unit_factors_are_the_exact_si_ones():
+    """Every factor the importer offers, against its definition (the round trip above writes its files
+    with the same table, so it cannot see a wrong factor by itself)."""
+    from bayesrod.dataset.importers import ANGLE_UNITS, DISPLACEMENT_UNITS, FORCE_UNITS, TIME_UNITS
+
+    assert TIME_UNITS == {"s": 1.0, "ms": 1e-3, "min": 60.0}
+    g, lb = 9.80665, 0.45359237
+    want = {"N": 1.0, "mN": 1e-3, "kN": 1e3, "gf": g / 1e3, "kgf": g, "lbf": lb * g, "ozf": lb * g / 16}
+    assert FORCE_UNITS == pytest.approx(want, rel=1e-15)
+    assert DISPLACEMENT_UNITS == pytest.approx({"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "in": 0.0254}, rel=1e-15)
+    assert ANGLE_UNITS == pytest.approx({"deg": np.pi / 180, "rad": 1.0}, rel=1e-15)
+
+
+def test_a_rotating_arm_advances_the_contact_by_its_length_times_the_sine_of_its_turn(tmp_path):
+    """A 0.4 m arm turned from 10 to 50 degrees: the contact advances 0.4 (sin(a - 10 deg)), not the arc
+    0.4 (a - 10 deg) (8% apart at the end of the turn)."""
+    t = np.linspace(0.0, 4.0, 81)
+    a = 10.0 + 10.0 * t  # degrees
+    x = 0.4 * np.sin(np.radians(a - 10.0))
+    F = 0.05 + 8.0 * np.clip(x - 0.02, 0.0, None)
+    path = tmp_path / "arm.csv"
+    np.savetxt(path, np.column_stack([t, F, a]), delimiter=",", header="t,load,angle", comments="", fmt="%.15g")
+    opts = dict(time="t", force="load", angle="angle", arm_height_m=0.4, height_m=0.4, length_m=0.9, specimen="arm")
+    imp = bayesrod.import_table(path, **opts)
+    push = read_dataset(imp.save(tmp_path / "out") / "arm").pushes[0].force
+    assert push.robot_x_m.max() == pytest.approx(x.max() - 0.02, abs=2e-3)  # counted from contact at 0.02 m
+    assert 0.4 * np.radians(40.0) - 0.02 - push.robot_x_m.max() > 0.02  # the arc would be 0.259 m
+
+
+@pytest.mark.parametrize("tare", ["auto", "none"])
+def test_load_unload_cycles_share_the_recordings_clock_the_contact_origin_and_the_tare(tmp_path, tare):
+    """Two load/unload cycles of a sensor reading 0.05 N before contact (at 10 mm, 25 N/m after): each loading
+    ramp and its unloading.csv are counted from the contact's position and the recording's first time (3 s),
+    and both are tared by the baseline, unless ``tare="none"`` (then the 0.05 N stays, reported as a preload)."""
+    up = np.linspace(0.0, 0.06, 61)
+    x = np.concatenate([up, up[::-1][1:], up[1:], up[::-1][1:]])
+    t = 3.0 + 0.1 * np.arange(x.size)
+    F = 0.05 + 25.0 * np.clip(x - 0.01, 0.0, None) + 1e-4 * np.sin(np.arange(x.size))
+    path = tmp_path / "cycles.csv"
+    np.savetxt(path, np.column_stack([t, F, x]), delimiter=",", header="t,load,travel", comments="", fmt="%.15g")
+    opts = dict(time="t", force="load", displacement="travel", height_m=0.5, length_m=0.9, specimen="c", tare=tare)
+    out = bayesrod.import_table(path, **opts).save(tmp_path / "out") / "c"
+    doc = json.loads((out / "specimen.json").read_text())
+    offset = 0.05 if tare == "none" else 0.0
+    for k, (push, entry) in enumerate(zip(read_dataset(out).pushes, doc["pushes"], strict=True)):
+        f, start = push.force, 1.0 + 12.0 * k  # contact at 10 mm: 1 s into each 12 s cycle
+        assert f.time_s[0] == pytest.approx(start, abs=0.06) and f.time_s[-1] == pytest.approx(start + 5.0, abs=1e-9)
+        assert f.robot_x_m[0] == pytest.approx(0.0, abs=1e-3) and f.robot_x_m[-1] == pytest.approx(0.05, abs=1e-3)
+        assert f.force_N[0] == pytest.approx(offset, abs=2e-3) and f.force_N[-1] == pytest.approx(1.25 + offset, abs=2e-3)
+        assert entry.get("preload_N", 0.0) == pytest.approx(offset, abs=2e-3)
+        u = np.genfromtxt(out / entry["unloading"], delimiter=",", names=True)
+        assert u["time_s"][[0, -1]] == pytest.approx([start + 5.0, start + 11.0], abs=1e-9)
+        assert u["robot_x_m"][[0, -1]] == pytest.approx([0.05, -0.01], abs=1e-3)
+        assert u["force_N"][[0, -1]] == pytest.approx([1.25 + offset, offset], abs=2e-3)
