@@ -67,3 +67,29 @@ def test_cane_length_must_exceed_heights(tmp_path, capsys):
 def test_importer_bad_source(tmp_path, capsys):
     assert main(["import", "blueberry", str(tmp_path), "--out", str(tmp_path / "o"), "--length-m", "1.6"]) == 2
     assert "SRC" in capsys.readouterr().err
+
+
+def test_a_blueberry_trial_converts_its_units_and_counts_time_and_travel_from_contact(tmp_path):
+    """A trial written in the rig's own units (ms stamps from an arbitrary origin that wrap at 16 bits, gf not
+    zeroed, mm): seconds from the first sample, newtons tared by the baseline, metres from the contact (runs
+    without the shared data, which the other importer tests need)."""
+    from bayesrod.dataset.importers import GF_TO_N, import_blueberry_trial
+
+    n = 80
+    stamp = (30000 + 500.0 * np.arange(n) + 32768) % 65536 - 32768  # wraps after 6 samples
+    travel_mm = 323.0 + 0.5 * np.arange(n)
+    contact = 12  # at 329 mm; 40 gf baseline, 300 gf per mm after
+    load_gf = 40.0 + 300.0 * np.clip(travel_mm - travel_mm[contact], 0, None) + 0.3 * np.sin(np.arange(n))
+    rows = np.column_stack([np.arange(2.0, n + 2), stamp, load_gf, travel_mm, np.full(n, 765.0)])
+    path = tmp_path / "bush_9_branch_1_trial_1.csv"
+    header = "Iteration,Time Stamp,Load Cell Reading (gf),Displacement (mm),Height (mm)"
+    np.savetxt(path, rows, delimiter=",", header=header, comments="", fmt="%.6g")
+    rep, cols = import_blueberry_trial(path, length_m=1.6)
+    assert rep.status == "imported" and rep.height_m == 0.765 and rep.onset_observed
+    k = n - cols["time_s"].size
+    assert abs(k - contact) <= 1
+    np.testing.assert_allclose(cols["time_s"], 0.5 * np.arange(k, n), atol=1e-9)  # seconds from the first sample
+    np.testing.assert_allclose(cols["robot_x_m"], (travel_mm[k:] - travel_mm[k]) / 1000.0, atol=1e-12)
+    assert rep.baseline_N == pytest.approx(40.0 * GF_TO_N, abs=0.01)
+    np.testing.assert_allclose(cols["force_N"], (load_gf[k:] - 40.0) * GF_TO_N, atol=0.01)
+    assert GF_TO_N == 9.80665e-3
