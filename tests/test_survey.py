@@ -103,6 +103,8 @@ def test_group_rows_are_one_per_condition_and_save_as_groups_tables(tmp_path, sh
     assert cut["EI0_median"] == 2.6 and cut["base_compliance_median"] == 0.05 and cut["prob_rigid_clamp"] == 0.0
     assert cut["p_median"] == (0.43 if "p" in shared else 0.45)  # the condition's own p where it is not shared
     assert cut["sharing"] == "supported" and cut["species"] == "maize" and cut["seconds"] == 12.5
+    assert (cut["EI0_q05"], cut["EI0_q95"]) == pytest.approx((0.9 * 2.6, 1.1 * 2.6), rel=1e-12)
+    assert (cut["base_compliance_q05"], cut["base_compliance_q95"]) == pytest.approx((0.045, 0.055), rel=1e-12)
     Survey((), {}, 2, tuple(rows)).save(tmp_path)
     lines = (tmp_path / "groups.csv").read_text().splitlines()
     assert lines[0] == ",".join(GROUP_COLUMNS) and len(lines) == 3 and lines[2].startswith("m1,cut,maize,0.8,2.6,")
@@ -147,3 +149,29 @@ def test_fit_many_grouped_fits_stems_jointly_and_the_rest_alone(tmp_path):
     from bayesrod.api.compare import expand_inputs
 
     assert out / "groups" / "m7" in expand_inputs([out])
+
+
+def test_a_survey_row_is_its_runs_summary():
+    """survey.csv's row of one fit: each interval's three quantiles, convergence, fit error and time, as the
+    run's summary.json has them."""
+    from pathlib import Path
+
+    from bayesrod.api.survey import SURVEY_COLUMNS, _row
+
+    summary = {
+        "specimen": "s1",
+        "species": "oak",
+        "length_m": 0.8,
+        "parameters": {"EI0": {"median": 2.6, "q05": 2.4, "q95": 2.9}, "p": {"median": 0.43, "q05": 0.4, "q95": 0.47}},
+        "convergence": {"rhat_max": 1.004, "ess_bulk_min": 512.0},
+        "fit_error": {"force_rmse_N": 0.031, "shape_rmse_mm": 1.2},
+        "sampler": {"seconds": 12.5},
+    }
+    row = _row(summary, Path("runs") / "s1")
+    assert list(row) == SURVEY_COLUMNS
+    assert [row[f"EI0_{q}"] for q in ("median", "q05", "q95")] == [2.6, 2.4, 2.9]
+    assert [row[f"p_{q}"] for q in ("median", "q05", "q95")] == [0.43, 0.4, 0.47]
+    assert (row["rhat_max"], row["ess_bulk_min"]) == (1.004, 512.0)
+    assert (row["force_rmse_N"], row["shape_rmse_mm"]) == (0.031, 1.2)
+    assert (row["specimen"], row["species"], row["length_m"], row["seconds"]) == ("s1", "oak", 0.8, 12.5)
+    assert row["run"] == str(Path("runs") / "s1")
