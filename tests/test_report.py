@@ -56,3 +56,33 @@ def test_the_report_reads_the_fits_own_convergence_verdict(run_dir):
     old = {k: v for k, v in conv.items() if k not in ("converged", "message")}
     assert "Converged:" in fit_report({**s, "convergence": old}, {})
     assert "Not converged" in fit_report({**s, "convergence": {**old, "rhat_max": 1.02}}, {})
+
+
+def test_the_reports_tables_are_the_summarys_numbers_under_the_level_it_states(run_dir):
+    """Each posterior and k_theta row shows summary.json's median, q05 and q95 in that order under the headers
+    the level gives (5% and 95% at 0.9); the modulus table in GPa and mm."""
+    import json
+
+    from bayesrod.report.html import _modulus_section, fit_report
+
+    s = json.loads((run_dir / "summary.json").read_text())
+    html = fit_report(s, {})
+    assert "Posterior (median and 90% credible interval)" in html
+    assert html.count("<th>median</th><th>5%</th><th>95%</th>") >= 2
+    cells = re.findall(r"<tr><td>([^<]*)</td><td>([^<]*)</td><td>([^<]*)</td><td>([^<]*)</td>", html)
+    rows = {c[0]: c[1:] for c in cells}
+    for k, v in s["parameters"].items():
+        assert rows[k] == tuple(f"{v[q]:.4g}" for q in ("median", "q05", "q95")), k
+    for r in s["k_theta"]:
+        assert rows[f"{r['height_m']:g}"] == tuple(f"{r[q]:.4g}" for q in ("median", "q05", "q95"))
+    wide = fit_report({**s, "level": 0.8}, {})
+    assert "80% credible" in wide and "<th>10%</th><th>90%</th>" in wide
+    ym = {
+        "E_Pa": {"median": 9.1e9, "q05": 8.2e9, "q95": 1.01e10},
+        "d0_m": {"median": 0.0102, "q05": 0.0099, "q95": 0.0105},
+        "model": "uniform",
+        "source": "calipers",
+    }
+    table = _modulus_section(ym, 5.0, 95.0)
+    assert "<td>E0 (base)</td><td>9.1</td><td>8.2</td><td>10.1</td><td>GPa</td>" in table
+    assert "<td>d0 (base diameter)</td><td>10.2</td><td>9.9</td><td>10.5</td><td>mm</td>" in table
