@@ -185,3 +185,49 @@ def test_compare_reports_each_species_and_the_spread_between_specimens_from_its_
     }
     assert fit["rhat_max"] != fit_E["rhat_max"] and fit["ess_bulk_min"] != fit_E["ess_bulk_min"]
     assert min(fit["ess_bulk_min"], fit_E["ess_bulk_min"]) >= 1000  # both models reach the sampler's target ESS
+
+
+def test_compare_expands_a_fit_many_output_and_a_fit_group_output_into_their_runs(tmp_path):
+    """A fit-many output stands for its finished runs and stems (a ``.done`` marker each; unfinished ones
+    left out), a fit-group output (groups.json) for its stems, in order; any other path is itself."""
+    from bayesrod.api.compare import expand_inputs
+
+    many = tmp_path / "many"
+    for kind, names in (("runs", ("b", "a", "unfinished")), ("groups", ("m7",))):
+        for n in names:
+            (many / kind / n).mkdir(parents=True)
+            if n != "unfinished":
+                (many / kind / f"{n}.done").touch()
+    (many / "survey.csv").write_text("specimen\n")
+    group = tmp_path / "group"
+    group.mkdir()
+    (group / "groups.json").write_text(json.dumps({"stems": {"stem 1": "stem_1", "s2": "s2"}, "problems": []}))
+    plain = tmp_path / "run"
+    got = expand_inputs([many, str(group), plain])
+    runs, groups = many / "runs", many / "groups"
+    assert got == [runs / "a", runs / "b", groups / "m7", group / "stem_1", group / "s2", plain]
+    assert expand_inputs([tmp_path / "many" / "runs"]) == [runs]  # without survey.csv: a path like any other
+    (many / "survey.csv").unlink()
+    assert expand_inputs([many]) == [many]
+
+
+def test_compare_says_why_it_leaves_the_anchorage_out():
+    """Stems fitted under several conditions: no condition name in common, or one species only: no anchorage
+    contrasts, and a warning that says which (compare reports it beside the stem contrasts)."""
+    import importlib
+    from types import MappingProxyType
+
+    from bayesrod.api.group import GroupFit
+
+    anchorage = importlib.import_module("bayesrod.api.compare")._anchorage
+
+    def stem(sid, species, conditions):
+        doc = {"stem_id": sid, "species": species, "shared": {"EI0": {}, "p": {}}, "length_m": 0.8}
+        return GroupFit(sid, conditions, MappingProxyType({}), MappingProxyType(doc))
+
+    apart = [(stem("a", "A", ("intact", "cut")), None), (stem("b", "B", ("wet", "dry")), None)]
+    assert anchorage(apart, 0) == ({}, ["anchorage not compared: the stems share no condition name"])
+    alike = [(stem("a", "A", ("intact", "cut")), None), (stem("b", "A", ("intact",)), None)]
+    msg = "anchorage not compared: the stems fitted under several conditions are of one species"
+    assert anchorage(alike, 0) == ({}, [msg])
+    assert anchorage([(object(), "A")], 0) == ({}, [])  # no stem under several conditions: nothing to say
