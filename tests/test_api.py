@@ -376,3 +376,34 @@ def test_a_table_check_that_cannot_solve_is_reported_not_raised(twig_noisy, monk
     assert post.to_dict()["table_check"] == {
         "message": "not checked: height_m: expected a height the unloaded stem reaches, got h/L = 0.9"
     }
+
+
+def test_the_fit_commands_printout_is_the_summarys_numbers(capsys):
+    """`bayesrod fit` prints each parameter, k_theta and Young's modulus (in GPa) as summary.json has them:
+    median, then q05 and q95 in that order."""
+    from types import SimpleNamespace
+
+    from bayesrod.cli import _print_fit
+
+    summary = {
+        "parameters": {
+            "EI0": {"median": 2.63, "q05": 2.41, "q95": 2.87},
+            "p": {"median": 0.43, "q05": 0.4, "q95": 0.47},
+        },
+        "k_theta": [{"height_m": 0.5, "median": 10.5, "q05": 9.75, "q95": 11.25}],
+        "youngs_modulus": {
+            "E_Pa": {"median": 9.1e9, "q05": 8.2e9, "q95": 1.01e10},
+            "model": "free",
+            "uniform_modulus": "consistent",
+            "modulus_taper": {"median": 0.012, "q05": -0.021, "q95": 0.044},
+        },
+        "convergence": {"rhat_max": 1.0031, "ess_bulk_min": 1698.0},
+        "sampler": {"seconds": 26.9},
+    }
+    _print_fit(summary, None, SimpleNamespace(json=False))
+    out = capsys.readouterr().out
+    assert "EI0 = 2.63  [2.41, 2.87]" in out and "p = 0.43  [0.4, 0.47]" in out
+    assert "k_theta(0.5 m) = 10.5  [9.75, 11.25] N m/rad" in out
+    assert "Young's modulus E0 = 9.1  [8.2, 10.1] GPa" in out
+    assert "uniform modulus consistent: p - p_geom = 0.012  [-0.021, 0.044]" in out
+    assert "R-hat max 1.0031, bulk ESS min 1698, 26.9 s" in out
