@@ -407,3 +407,31 @@ def test_the_fit_commands_printout_is_the_summarys_numbers(capsys):
     assert "Young's modulus E0 = 9.1  [8.2, 10.1] GPa" in out
     assert "uniform modulus consistent: p - p_geom = 0.012  [-0.021, 0.044]" in out
     assert "R-hat max 1.0031, bulk ESS min 1698, 26.9 s" in out
+
+
+def test_predict_from_a_posterior_prints_the_results_numbers(capsys):
+    """`bayesrod predict RUN`'s table: k_theta and k_x, then each displacement's median force, its 90% interval
+    (q05 before q95) and the slip probability, as the result holds them."""
+    from bayesrod.cli import _print_posterior_prediction
+
+    result = {
+        "posterior": {"run": "runs/s1", "draws": 400, "length_m": 0.8},
+        "height_m": 0.5,
+        "k_theta_Nm_per_rad": {"median": 10.5, "q05": 9.75, "q95": 11.25},
+        "k_x_N_per_m": {"median": 42.5, "q05": 40.25, "q95": 44.75},
+        "points": [
+            {
+                "displacement_m": 0.01,
+                "force_N": {"median": 0.4251, "q05": 0.4013, "q95": 0.4489},
+                "slip_probability": 0.0,
+            },
+            {"displacement_m": 0.3, "force_N": None, "slip_probability": 1.0},
+        ],
+    }
+    _print_posterior_prediction(result)
+    out = capsys.readouterr().out
+    assert "from runs/s1 (400 draws), L = 0.8 m, h = 0.5 m" in out
+    assert "k_theta = 10.5 [9.75, 11.25] N m/rad,  k_x = 42.5 [40.25, 44.75] N/m" in out
+    rows = out.strip().splitlines()[-2:]
+    assert rows[0].split() == ["0.0100", "0.4251", "[0.4013,", "0.4489]", "0.00"]
+    assert rows[1].split() == ["0.3000", "-", "-", "1.00"]

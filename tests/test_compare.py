@@ -115,6 +115,8 @@ def test_compare_cli_writes_contract_json_and_warns(tmp_path, capsys):
         assert {"a", "b", "parameter", "ratio_median", "ratio_q05", "ratio_q95", "prob_a_greater"} <= set(c)
     ei0 = next(c for c in res["contrasts"] if c["parameter"] == "EI0")
     assert ei0["ratio_q05"] > 1.0  # oak (a) stiffer than reed
+    line = f"EI0 oak / reed: {ei0['ratio_median']:.3g} [{ei0['ratio_q05']:.3g}, {ei0['ratio_q95']:.3g}] (90%)"
+    assert line + f", P(oak stiffer) = {ei0['prob_a_greater']:.3f}" in capsys.readouterr().out
     E = next(c for c in res["contrasts"] if c["parameter"] == "E")  # E ~ EI0 / d0^4: 5 x 0.6^4 = 0.65
     assert E["ratio_q05"] < 0.65 < E["ratio_q95"] and set(res["species"]["reed"]) >= {"E_Pa", "EI0"}
     assert "log_E" in res["between_specimen_sd"]

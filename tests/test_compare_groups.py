@@ -65,8 +65,11 @@ def test_genotypes_differ_at_the_cut_base_not_in_the_stem(stems, tmp_path, capsy
     assert loaded.species == "B" and loaded.conditions == ("intact", "cut")
     np.testing.assert_array_equal(loaded.samples["p"], stems[4].samples["p"])
     assert main(["compare", str(tmp_path / "groups"), "--out", str(tmp_path / "cmp"), "--seed", "1"]) == 0
-    assert "base compliance, cut: A - B = " in capsys.readouterr().out
+    printed = capsys.readouterr().out
     res = json.loads((tmp_path / "cmp" / "compare.json").read_text())
+    c = res["anchorage"]["cut"]["contrasts"][0]  # the printout is compare.json's, median then q05, q95
+    line = f"base compliance, cut: A - B = {c['difference_median']:.3g} [{c['difference_q05']:.3g}, "
+    assert line + f"{c['difference_q95']:.3g}] rad/(N m) (90%), P(A softer base) = {c['prob_a_greater']:.3f}" in printed
     assert set(res["anchorage"]) == {"intact", "cut"}
     assert res["groups"] == {"A": ["A0", "A1", "A2"], "B": ["B0", "B1", "B2"]}
     ei0 = next(c for c in res["contrasts"] if c["parameter"] == "EI0")
