@@ -201,3 +201,28 @@ def test_offset_is_attributed_and_the_refits_do_not_depend_on_the_worker_process
     assert json.dumps(pooled, sort_keys=True) == json.dumps(r["after"], sort_keys=True)
     with pytest.raises(ValueError, match="workers"):
         diagnose(m, candidates=("force_offset",), workers=0)
+
+
+def test_the_diagnose_printout_is_the_diagnosis(capsys):
+    """`bayesrod diagnose` prints the effects added, the alternatives it cannot tell apart, the fitted nuisances
+    (preload and height error in mm, the length with its bounds) and each error before -> after, as
+    diagnose.json holds them (an error without a value, e.g. shapes on forces only, is left out)."""
+    from bayesrod.cli import _print_diagnosis
+
+    doc = {
+        "added_effects": ["base_compliance"],
+        "alternatives": {"base_compliance": ["base_tilt"]},
+        "fitted": {"preload_m": [0.0021, 0.0005], "length_m": 1.234, "height_error_m": [0.0031, -0.0012]},
+        "settings": {"length": "unknown", "length_bounds_m": [1.0, 1.6]},
+        "before": {"force_rmse_N": 0.0812, "shape_rmse_mm": None, "heldout_force_rmse_N": 0.1534},
+        "after": {"force_rmse_N": 0.0301, "shape_rmse_mm": None, "heldout_force_rmse_N": 0.0402},
+        "unexplained_structure": True,
+    }
+    _print_diagnosis(doc)
+    out = capsys.readouterr().out
+    assert out.splitlines()[0] == "added effects: base_compliance"
+    assert "base_compliance fits these data no better than base_tilt" in out
+    assert "preload per push [mm]: 2.1, 0.5" in out and "contact-height error per push [mm]: +3.1, -1.2" in out
+    assert "stem length fitted: 1.23 m (within [1, 1.6] m)" in out
+    assert "force_rmse_N: 0.0812 -> 0.0301" in out and "heldout_force_rmse_N: 0.1534 -> 0.0402" in out
+    assert "shape_rmse_mm" not in out and "unexplained structure remains" in out

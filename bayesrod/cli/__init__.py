@@ -1182,7 +1182,6 @@ def parse_candidates(text: str):
 def cmd_diagnose(args: argparse.Namespace) -> int:
     from ..api import diagnose
     from ..inference.diagnose import CATALOG
-    from ..report.html import alternatives_text
 
     out = _prepare_out(args)
     cands = CATALOG
@@ -1206,6 +1205,15 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     if args.json:
         _emit_json(doc)
         return 0
+    _print_diagnosis(doc)
+    print(f"wrote {args.out}/diagnose.json and report.html")
+    return 0
+
+
+def _print_diagnosis(doc: dict) -> None:
+    """diagnose.json's story in a few lines: the effects added, the nuisances fitted, each error before -> after."""
+    from ..report.html import alternatives_text
+
     b, a = doc["before"], doc["after"]
     print(f"added effects: {', '.join(doc['added_effects']) or 'none'}")
     if alt := alternatives_text(doc.get("alternatives", {})):
@@ -1223,8 +1231,6 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
             print(f"  {k:>22}: {b[k]:.4g} -> {a[k]:.4g}")
     if doc["unexplained_structure"]:
         print("  unexplained structure remains in the residuals (see report.html)")
-    print(f"wrote {args.out}/diagnose.json and report.html")
-    return 0
 
 
 if __name__ == "__main__":  # pragma: no cover
