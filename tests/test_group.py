@@ -1189,3 +1189,25 @@ def test_correlation_sensitivity_thins_drops_non_finite_draws_and_reads_each_qua
     post = GroupPosterior(GroupLikelihood(specs, load_prior("woody"), force_noise="iid", _liks=liks))
     theta = post.to_sample({nm: natural[nm] for nm in post.names})
     assert api_group.correlation_sensitivity(post, theta[None], np.zeros((1, n))) is None
+
+
+def test_the_fit_group_printout_is_the_stems_summary(capsys):
+    """`bayesrod fit-group` prints, per stem, the shared parameters and each condition's base compliance as
+    median [q05, q95] from its summary, the sharing verdict, and the warnings on stderr."""
+    from bayesrod.cli import _print_group
+
+    d = {
+        "shared": {"EI0": {"median": 2.63, "q05": 2.51, "q95": 2.77}, "p": {"median": 0.43, "q05": 0.41, "q95": 0.45}},
+        "sharing": {"verdict": "supported"},
+        "conditions": {
+            "intact": {"base_compliance_rad_per_Nm": {"median": 0.0012, "q05": 0.0001, "q95": 0.0041}},
+            "cut": {"base_compliance_rad_per_Nm": {"median": 0.0521, "q05": 0.0432, "q95": 0.0634}},
+        },
+        "warnings": ["one height per condition"],
+    }
+    _print_group("m7", d)
+    out, err = capsys.readouterr()
+    assert out.splitlines()[0] == "m7: EI0 2.63 [2.51, 2.77], p 0.43 [0.41, 0.45]; sharing supported"
+    assert "intact: base compliance 0.0012 [0.0001, 0.0041] rad/(N m)" in out
+    assert "cut: base compliance 0.0521 [0.0432, 0.0634] rad/(N m)" in out
+    assert err.strip() == "warning: one height per condition"

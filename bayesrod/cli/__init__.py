@@ -1001,14 +1001,7 @@ def cmd_fit_group(args: argparse.Namespace) -> int:
         _emit_json({sid: g.to_dict() for sid, g in study.fits.items()} | {"problems": list(study.problems)})
         return 1 if study.problems else 0
     for sid, g in study.fits.items():
-        d = g.to_dict()
-        sh = ", ".join(f"{k} {v['median']:.4g} [{v['q05']:.4g}, {v['q95']:.4g}]" for k, v in d["shared"].items())
-        print(f"{sid}: {sh}" + (f"; sharing {d['sharing']['verdict']}" if d["sharing"] else ""))
-        for c, row in d["conditions"].items():
-            q = row["base_compliance_rad_per_Nm"]
-            print(f"  {c:>12}: base compliance {q['median']:.3g} [{q['q05']:.3g}, {q['q95']:.3g}] rad/(N m)")
-        for w in d["warnings"]:
-            print(f"  warning: {w}", file=sys.stderr)
+        _print_group(sid, g.to_dict())
     for p in study.problems:
         print(f"  problem: {p}", file=sys.stderr)
     print(f"wrote {out}/groups.json and one folder per stem")
@@ -1208,6 +1201,18 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     _print_diagnosis(doc)
     print(f"wrote {args.out}/diagnose.json and report.html")
     return 0
+
+
+def _print_group(sid: str, d: dict) -> None:
+    """One stem's joint fit in a few lines: the shared parameters, the sharing verdict, each condition's base
+    compliance (median [q05, q95]); its warnings on stderr."""
+    sh = ", ".join(f"{k} {v['median']:.4g} [{v['q05']:.4g}, {v['q95']:.4g}]" for k, v in d["shared"].items())
+    print(f"{sid}: {sh}" + (f"; sharing {d['sharing']['verdict']}" if d["sharing"] else ""))
+    for c, row in d["conditions"].items():
+        q = row["base_compliance_rad_per_Nm"]
+        print(f"  {c:>12}: base compliance {q['median']:.3g} [{q['q05']:.3g}, {q['q95']:.3g}] rad/(N m)")
+    for w in d["warnings"]:
+        print(f"  warning: {w}", file=sys.stderr)
 
 
 def _print_diagnosis(doc: dict) -> None:
