@@ -121,7 +121,10 @@ def test_compare_cli_writes_contract_json_and_warns(tmp_path, capsys):
     assert E["ratio_q05"] < 0.65 < E["ratio_q95"] and set(res["species"]["reed"]) >= {"E_Pa", "EI0"}
     assert "log_E" in res["between_specimen_sd"]
     assert any("one specimen only" in w for w in res["warnings"])
-    assert (out / "figures" / "forest.png").is_file()
+    import cv2
+
+    forest = cv2.imread(str(out / "figures" / "forest.png")).astype(int)  # drawn, not an empty frame:
+    assert np.mean(forest.max(axis=2) - forest.min(axis=2) > 40) > 0.001  # its coloured marks (measured 0.35%)
     capsys.readouterr()
     assert main(["compare", runs[0], runs[1], "--out", str(tmp_path / "x")]) == 2  # one species only
     assert "at least 2 species" in capsys.readouterr().err
