@@ -49,6 +49,7 @@ from _study import calibration_stats, run_pending  # noqa: E402
 
 from bayesrod import simulate  # noqa: E402
 from bayesrod.api.calibration import fit_for_calibration, rank_columns  # noqa: E402
+from bayesrod.api.fitting import TABLE_SHIFT_WARN_SD  # noqa: E402
 from bayesrod.dataset.model import ShapeFrame  # noqa: E402
 from bayesrod.dataset.simulate import NoiseModel  # noqa: E402
 from bayesrod.inference.priors import load_prior  # noqa: E402
@@ -283,6 +284,17 @@ def summarise(rows: list[dict], out: Path) -> str:
             kind = "forces and shapes" if shapes == "True" else "forces only"
             for k in ("EI0", "p"):
                 row_for(k, sel, f"{n_h} height(s), {kind}")
+    checked = [r for r in ok if np.isfinite(_num(r.get("table_shift_sd")))]  # rows since session 66
+    if checked:
+        warned = [r for r in checked if _num(r["table_shift_sd"]) > TABLE_SHIFT_WARN_SD]
+        missed = [r for r in warned if any(str(r.get(f"{k}_covered")) in ("False", "0") for k in PARAMS)]
+        zoomed = sum(r.get("effect_axis_zoom") == "kept" for r in checked)
+        lines += [
+            "",
+            f"The fit's own table check (rows that record it, {len(checked)}): {len(warned)} warned (tables move the "
+            f"median by more than {TABLE_SHIFT_WARN_SD:g} sd; {len(missed)} of them missed a parameter), the effect "
+            f"axis narrowed around the start in {zoomed}.",
+        ]
     worst = max((_num(r["max_ref_vs_fast_N"]) for r in ok), default=float("nan"))
     rh = max((_num(r["rhat_max"]) for r in ok), default=float("nan"))
     lines += ["", f"Largest |reference - fast| force over all replicates: {worst:.2e} N; largest R-hat {rh:.3f}."]
