@@ -680,3 +680,40 @@ def test_design_proposes_nineteen_heights_along_the_stem_by_default(fake_run, mo
     api_design.design(fake_run, progress=False)
     assert seen["L"] == 0.8
     np.testing.assert_allclose(seen["cand"], np.linspace(0.04, 0.76, 19), rtol=1e-12)
+
+
+def test_design_of_a_run_whose_dataset_is_gone_takes_the_pushed_heights_from_its_summary(tmp_path, monkeypatch):
+    """A saved run without its dataset (moved, or fitted elsewhere): the pushed heights come from summary.json's
+    ``data.heights_m``, the plan must be given (else a clear error), and the figure is drawn."""
+    import importlib
+
+    import bayesrod
+
+    run = tmp_path / "run"
+    run.mkdir()
+    np.savez(run / "samples.npz", length_m=0.8, **_posterior(np.random.default_rng(5), n=400, sigma=0.03))
+    (run / "summary.json").write_text(json.dumps({"specimen": "s", "length_m": 0.8, "data": {"heights_m": [0.5, 0.6]}}))
+    with pytest.raises(ValueError, match="displacement_m: expected the planned contact displacement"):
+        bayesrod.design(run, heights=[0.3], progress=False)
+    api_design = importlib.import_module("bayesrod.api.design")  # the package exports the function of its name
+    seen = {}
+
+    def capture(samples, L, cand, plan, **kw):
+        seen.update(plan=plan)
+        return {"recommended_height_m": 0.3, "candidates": [{"height_m": 0.3}]}
+
+    monkeypatch.setattr(api_design, "design_heights", capture)
+    d = bayesrod.design(run, heights=[0.3], displacement_m=0.05, n_samples=30, progress=False)
+    assert d.to_dict()["pushed_heights_m"] == [0.5, 0.6]
+    assert (seen["plan"].displacement_m, seen["plan"].n_samples) == (0.05, 30)
+
+
+def test_the_saved_design_figure_is_drawn(fake_run, tmp_path):
+    """design.png shows its coloured marks (an empty frame, or a figure drawn on other axes, would not)."""
+    import cv2
+
+    import bayesrod
+
+    bayesrod.design(fake_run, heights=[0.3, 0.5], method="gaussian", progress=False).save(tmp_path / "d")
+    png = cv2.imread(str(tmp_path / "d" / "figures" / "design.png")).astype(int)
+    assert np.mean(png.max(axis=2) - png.min(axis=2) > 40) > 0.001
