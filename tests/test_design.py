@@ -717,3 +717,28 @@ def test_the_saved_design_figure_is_drawn(fake_run, tmp_path):
     bayesrod.design(fake_run, heights=[0.3, 0.5], method="gaussian", progress=False).save(tmp_path / "d")
     png = cv2.imread(str(tmp_path / "d" / "figures" / "design.png")).astype(int)
     assert np.mean(png.max(axis=2) - png.min(axis=2) > 40) > 0.001
+
+
+def test_design_passes_the_sensor_the_confidence_and_the_target_to_the_estimator(fake_run, monkeypatch):
+    """What the user asks of `design` reaches the estimator: the sensor range and required confidence in the plan,
+    the target and its default method (nested MC for the parameters, linearised for the EI band and k_theta),
+    and the run as the design's source."""
+    import importlib
+
+    api_design = importlib.import_module("bayesrod.api.design")  # the package exports the function of its name
+    seen = {}
+
+    def capture(samples, L, cand, plan, **kw):
+        seen.update(plan=plan, **kw)
+        return {"recommended_height_m": 0.3, "candidates": [{"height_m": 0.3}]}
+
+    monkeypatch.setattr(api_design, "design_heights", capture)
+    d = api_design.design(fake_run, heights=[0.3], sensor=(0.2, 5.0), confidence=0.8, progress=False)
+    assert (seen["plan"].force_range_N, seen["plan"].confidence) == ((0.2, 5.0), 0.8)
+    assert (seen["target"], seen["method"]) == ("params", "nmc")
+    assert d.to_dict()["source"] == str(fake_run.resolve())
+    for target in ("ei", "k_theta"):
+        api_design.design(fake_run, heights=[0.3], target=target, target_height_m=0.4, progress=False)
+        assert (seen["target"], seen["method"], seen["target_height_m"]) == (target, "gaussian", 0.4)
+    with pytest.raises(ValueError, match="sensor: expected \\(low, high\\)"):
+        api_design.design(fake_run, heights=[0.3], sensor=5.0, progress=False)
