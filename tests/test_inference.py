@@ -629,6 +629,8 @@ def test_a_fit_narrows_a_coarse_effect_axis_around_its_start(monkeypatch, tmp_pa
     lo, hi = zoom["u_range"]
     assert zoom["u_range_before"][0] < lo < 0.05 < hi < zoom["u_range_before"][1] and hi - lo < 0.1, zoom
     assert zoom["draws_at_edge"] == 0.0 and "message" not in zoom
+    start = post.doc["table_check"]["at_start"]  # the check the decision read, and where: the window's centre
+    assert start["shift_in_sd"] == zoom["shift_in_sd_before"] and start["u"] == pytest.approx((lo + hi) / 2, abs=1e-12)
     # +-60 Laplace sds about the start, which sits within a few sd of the median; the start's sd is larger (its
     # noise sd the coarse tables' RMS residual: measured 1.52 x the median's)
     sd = post.doc["table_check"]["laplace_sd"]["base_tilt (table coordinate u)"]

@@ -684,20 +684,24 @@ def _worst_shift(check: dict | None) -> float:
     return max((abs(v) for v in check["shift_in_sd"].values()), default=0.0) if check else float("inf")
 
 
-def _zoom_effect_axis(spec, pr, effects, config: dict, post, theta0: NDArray) -> tuple | None:
+def _zoom_effect_axis(spec, pr, effects, config: dict, post, theta0: NDArray, at_start: dict) -> tuple | None:
     """Narrow the effect axis around the start point where the tables are too coarse there (:func:`zoom_window`).
 
     The window is centred on the start, which stays the start. Returns None where the axis stays, else (the
     record for summary.json's ``table_check.effect_axis_zoom``, the likelihood, posterior and start point to
     sample with); the narrowed axis is kept only when the table check at the start improves on it, and
-    ``config["effect_window"]`` then records it (a saved run rebuilds the same tables).
+    ``config["effect_window"]`` then records it (a saved run rebuilds the same tables). ``at_start`` receives
+    the start's table coordinate ``u`` and its check's ``shift_in_sd`` (summary.json ``table_check.at_start``:
+    whether a fit that warns after sampling was asked to zoom, and where).
     """
     lik = post.likelihood
     point = {k: float(v[0]) for k, v in post.to_natural(theta0[None]).items()}
+    at_start["u"] = float(lik.effect_coordinate(point)[0])
     try:
         before = table_check(lik, point)
     except ValueError:  # an exact solve the tables never needed: the post-sampling check says so
         return None
+    at_start["shift_in_sd"] = before["shift_in_sd"]
     window = zoom_window(lik, point, before)
     if window is None:
         return None
@@ -1000,10 +1004,10 @@ def fit(
                 theta0 = find_start(post, rng, init=two_stage)
         else:
             lik.shape_weight = float(shape_weight)
-    zoom = None
+    zoom, at_start = None, {}
     if lik.axis is not None:
         with table_workers(n_workers, progress=progress_enabled(progress)):
-            zoomed = _zoom_effect_axis(spec, pr, effects, config, post, theta0)
+            zoomed = _zoom_effect_axis(spec, pr, effects, config, post, theta0, at_start)
         if zoomed is not None:
             zoom, lik, post, theta0 = zoomed
     theta0 = post.settle_base_coordinates(theta0)
@@ -1080,6 +1084,8 @@ def fit(
                 "less exact than they look; report it (docs/validation.md, 'Likelihood tables against exact solves')"
             )
             log.warning("warning: %s: %s", spec.specimen, tables["message"])
+    if at_start:  # the check the zoom decision read, beside the check at the median
+        extra.setdefault("table_check", {})["at_start"] = at_start
     if zoom is not None:  # beside the check's result, or its "not checked" message
         zoom.update(_zoom_edge(lik, samples, zoom))
         extra.setdefault("table_check", {})["effect_axis_zoom"] = zoom
