@@ -665,28 +665,35 @@ def test_the_planned_push_defaults_to_the_farthest_engaged_reach_and_the_median_
     assert plan["n_samples"] == sorted(counts)[1] and plan["force_range_N"] == (0.05, 50.0)
 
 
-def test_design_proposes_nineteen_heights_along_the_stem_by_default(fake_run, monkeypatch):
-    """Without candidate heights: 0.05 L to 0.95 L in 19 steps (L from the run, 0.8 m), in metres."""
+@pytest.fixture
+def estimator_call(monkeypatch):
+    """``bayesrod.design`` with its estimator replaced by a recorder: the dict filled with what the last call
+    passed (``L``, ``cand``, ``plan`` and the keywords), the result one recommended candidate at 0.3 m."""
     import importlib
 
     api_design = importlib.import_module("bayesrod.api.design")  # the package exports the function of its name
     seen = {}
 
-    def capture(samples, L, cand, plan, **kw):
-        seen.update(L=L, cand=np.asarray(cand))
-        return {"recommended_height_m": None, "candidates": []}
+    def record(samples, L, cand, plan, **kw):
+        seen.update(L=L, cand=np.asarray(cand), plan=plan, **kw)
+        return {"recommended_height_m": 0.3, "candidates": [{"height_m": 0.3}]}
 
-    monkeypatch.setattr(api_design, "design_heights", capture)
-    api_design.design(fake_run, progress=False)
-    assert seen["L"] == 0.8
-    np.testing.assert_allclose(seen["cand"], np.linspace(0.04, 0.76, 19), rtol=1e-12)
+    monkeypatch.setattr(api_design, "design_heights", record)
+    return seen
 
 
-def test_design_of_a_run_whose_dataset_is_gone_takes_the_pushed_heights_from_its_summary(tmp_path, monkeypatch):
+def test_design_proposes_nineteen_heights_along_the_stem_by_default(fake_run, estimator_call):
+    """Without candidate heights: 0.05 L to 0.95 L in 19 steps (L from the run, 0.8 m), in metres."""
+    import bayesrod
+
+    bayesrod.design(fake_run, progress=False)
+    assert estimator_call["L"] == 0.8
+    np.testing.assert_allclose(estimator_call["cand"], np.linspace(0.04, 0.76, 19), rtol=1e-12)
+
+
+def test_design_of_a_run_whose_dataset_is_gone_takes_the_pushed_heights_from_its_summary(tmp_path, estimator_call):
     """A saved run without its dataset (moved, or fitted elsewhere): the pushed heights come from summary.json's
-    ``data.heights_m``, the plan must be given (else a clear error), and the figure is drawn."""
-    import importlib
-
+    ``data.heights_m``, and the plan must be given (else a clear error)."""
     import bayesrod
 
     run = tmp_path / "run"
@@ -695,17 +702,9 @@ def test_design_of_a_run_whose_dataset_is_gone_takes_the_pushed_heights_from_its
     (run / "summary.json").write_text(json.dumps({"specimen": "s", "length_m": 0.8, "data": {"heights_m": [0.5, 0.6]}}))
     with pytest.raises(ValueError, match="displacement_m: expected the planned contact displacement"):
         bayesrod.design(run, heights=[0.3], progress=False)
-    api_design = importlib.import_module("bayesrod.api.design")  # the package exports the function of its name
-    seen = {}
-
-    def capture(samples, L, cand, plan, **kw):
-        seen.update(plan=plan)
-        return {"recommended_height_m": 0.3, "candidates": [{"height_m": 0.3}]}
-
-    monkeypatch.setattr(api_design, "design_heights", capture)
     d = bayesrod.design(run, heights=[0.3], displacement_m=0.05, n_samples=30, progress=False)
     assert d.to_dict()["pushed_heights_m"] == [0.5, 0.6]
-    assert (seen["plan"].displacement_m, seen["plan"].n_samples) == (0.05, 30)
+    assert (estimator_call["plan"].displacement_m, estimator_call["plan"].n_samples) == (0.05, 30)
 
 
 def test_the_saved_design_figure_is_drawn(fake_run, tmp_path):
@@ -719,26 +718,19 @@ def test_the_saved_design_figure_is_drawn(fake_run, tmp_path):
     assert np.mean(png.max(axis=2) - png.min(axis=2) > 40) > 0.001
 
 
-def test_design_passes_the_sensor_the_confidence_and_the_target_to_the_estimator(fake_run, monkeypatch):
+def test_design_passes_the_sensor_the_confidence_and_the_target_to_the_estimator(fake_run, estimator_call):
     """What the user asks of `design` reaches the estimator: the sensor range and required confidence in the plan,
     the target and its default method (nested MC for the parameters, linearised for the EI band and k_theta),
     and the run as the design's source."""
-    import importlib
+    from bayesrod import design
 
-    api_design = importlib.import_module("bayesrod.api.design")  # the package exports the function of its name
-    seen = {}
-
-    def capture(samples, L, cand, plan, **kw):
-        seen.update(plan=plan, **kw)
-        return {"recommended_height_m": 0.3, "candidates": [{"height_m": 0.3}]}
-
-    monkeypatch.setattr(api_design, "design_heights", capture)
-    d = api_design.design(fake_run, heights=[0.3], sensor=(0.2, 5.0), confidence=0.8, progress=False)
+    seen = estimator_call
+    d = design(fake_run, heights=[0.3], sensor=(0.2, 5.0), confidence=0.8, progress=False)
     assert (seen["plan"].force_range_N, seen["plan"].confidence) == ((0.2, 5.0), 0.8)
     assert (seen["target"], seen["method"]) == ("params", "nmc")
     assert d.to_dict()["source"] == str(fake_run.resolve())
     for target in ("ei", "k_theta"):
-        api_design.design(fake_run, heights=[0.3], target=target, target_height_m=0.4, progress=False)
+        design(fake_run, heights=[0.3], target=target, target_height_m=0.4, progress=False)
         assert (seen["target"], seen["method"], seen["target_height_m"]) == (target, "gaussian", 0.4)
     with pytest.raises(ValueError, match="sensor: expected \\(low, high\\)"):
-        api_design.design(fake_run, heights=[0.3], sensor=5.0, progress=False)
+        design(fake_run, heights=[0.3], sensor=5.0, progress=False)

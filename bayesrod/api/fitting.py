@@ -684,27 +684,27 @@ def _worst_shift(check: dict | None) -> float:
     return max((abs(v) for v in check["shift_in_sd"].values()), default=0.0) if check else float("inf")
 
 
-def _zoom_effect_axis(spec, pr, effects, config: dict, post, theta0: NDArray, at_start: dict) -> tuple | None:
+def _zoom_effect_axis(spec, pr, effects, config: dict, post, theta0: NDArray) -> tuple[dict, tuple | None]:
     """Narrow the effect axis around the start point where the tables are too coarse there (:func:`zoom_window`).
 
-    The window is centred on the start, which stays the start. Returns None where the axis stays, else (the
-    record for summary.json's ``table_check.effect_axis_zoom``, the likelihood, posterior and start point to
-    sample with); the narrowed axis is kept only when the table check at the start improves on it, and
-    ``config["effect_window"]`` then records it (a saved run rebuilds the same tables). ``at_start`` receives
-    the start's table coordinate ``u`` and its check's ``shift_in_sd`` (summary.json ``table_check.at_start``:
-    whether a fit that warns after sampling was asked to zoom, and where).
+    The window is centred on the start, which stays the start. Returns (the start's record for summary.json's
+    ``table_check.at_start``: its table coordinate ``u`` and, where the check could be made, its
+    ``shift_in_sd``, the check that decided; then None where the axis stays, else (the record for
+    ``table_check.effect_axis_zoom``, the likelihood, posterior and start point to sample with)). The narrowed
+    axis is kept only when the table check at the start improves on it, and ``config["effect_window"]`` then
+    records it (a saved run rebuilds the same tables).
     """
     lik = post.likelihood
     point = {k: float(v[0]) for k, v in post.to_natural(theta0[None]).items()}
-    at_start["u"] = float(lik.effect_coordinate(point)[0])
+    at_start = {"u": float(lik.effect_coordinate(point)[0])}
     try:
         before = table_check(lik, point)
     except ValueError:  # an exact solve the tables never needed: the post-sampling check says so
-        return None
+        return at_start, None
     at_start["shift_in_sd"] = before["shift_in_sd"]
     window = zoom_window(lik, point, before)
     if window is None:
-        return None
+        return at_start, None
     log.info(
         "%s: the tables would move the start by %.2g sd; %s axis narrowed to u in [%.4g, %.4g] (%d nodes)",
         spec.specimen,
@@ -732,9 +732,9 @@ def _zoom_effect_axis(spec, pr, effects, config: dict, post, theta0: NDArray, at
         "kept": _worst_shift(after) < _worst_shift(before),
     }
     if not record["kept"]:
-        return record, lik, post, theta0
+        return at_start, (record, lik, post, theta0)
     config["effect_window"] = [float(window[0]), float(window[1])]
-    return record, zlik, zpost, ztheta
+    return at_start, (record, zlik, zpost, ztheta)
 
 
 def _zoom_edge(lik, samples: Mapping, zoom: dict) -> dict:
@@ -1007,7 +1007,7 @@ def fit(
     zoom, at_start = None, {}
     if lik.axis is not None:
         with table_workers(n_workers, progress=progress_enabled(progress)):
-            zoomed = _zoom_effect_axis(spec, pr, effects, config, post, theta0, at_start)
+            at_start, zoomed = _zoom_effect_axis(spec, pr, effects, config, post, theta0)
         if zoomed is not None:
             zoom, lik, post, theta0 = zoomed
     theta0 = post.settle_base_coordinates(theta0)
