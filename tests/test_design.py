@@ -734,3 +734,65 @@ def test_design_passes_the_sensor_the_confidence_and_the_target_to_the_estimator
         assert (seen["target"], seen["method"], seen["target_height_m"]) == (target, "gaussian", 0.4)
     with pytest.raises(ValueError, match="sensor: expected \\(low, high\\)"):
         design(fake_run, heights=[0.3], sensor=5.0, progress=False)
+
+
+def test_a_design_keeps_its_seed_length_and_recommendation_and_an_unsaved_fit_names_its_dataset(
+    fake_run, estimator_call
+):
+    """The seed reaches the estimator (a design is reproducible), the Design holds the estimator's recommended
+    height and the run's length, and a fit that was never saved (no ``run`` in its config) names its dataset as
+    the design's source."""
+    import dataclasses
+
+    import bayesrod
+    from bayesrod.api.group import load_run
+
+    d = bayesrod.design(fake_run, heights=[0.3], seed=7, progress=False)
+    assert estimator_call["seed"] == 7
+    assert d.recommended_height_m == 0.3 and d.to_dict()["recommended_height_m"] == 0.3
+    assert d.to_dict()["length_m"] == 0.8
+    post = load_run(fake_run)
+    unsaved = dataclasses.replace(post, config={k: v for k, v in post.config.items() if k != "run"})
+    dataset = json.loads((fake_run / "config.json").read_text())["dataset"]
+    assert bayesrod.design(unsaved, heights=[0.3], progress=False).to_dict()["source"] == dataset
+
+
+def test_the_default_plan_reads_a_sensor_range_only_where_the_dataset_gives_one(tmp_path):
+    """A dataset without a sensor, or with a sensor of unknown range, plans without a force range (the
+    feasibility check then has nothing to hold the peak force to); with one, the plan carries it."""
+    import dataclasses
+
+    from bayesrod.api.design import default_plan
+    from bayesrod.dataset.model import Sensor
+    from bayesrod.dataset.reader import read_dataset
+
+    spec = read_dataset(make_dataset(tmp_path / "ds", "twig", seed=3, heights_m=(0.5,), n_frames_engaged=2))
+    assert default_plan(spec)["force_range_N"] == tuple(spec.sensor.force_range_N)
+    assert "force_range_N" not in default_plan(dataclasses.replace(spec, sensor=None))
+    unknown = dataclasses.replace(spec, sensor=Sensor("unknown", None, None))
+    assert "force_range_N" not in default_plan(unknown)
+
+
+def test_a_saved_design_is_not_overwritten_unless_asked_and_its_figure_marks_the_pushed_heights(fake_run, tmp_path):
+    """``Design.save`` refuses a non-empty directory (nothing lost) unless ``overwrite=True``; ``Design.plot``
+    (which the saved figure draws) marks every height already pushed with a dotted line."""
+    import matplotlib.pyplot as plt
+
+    import bayesrod
+    from bayesrod.dataset.io import OutputExistsError
+
+    d = bayesrod.design(fake_run, heights=[0.3, 0.5], method="gaussian", progress=False)
+    out = d.save(tmp_path / "d")
+    (out / "mine.txt").write_text("a user's note")
+    with pytest.raises(OutputExistsError):
+        d.save(out)
+    assert (out / "mine.txt").exists()
+    d.save(out, overwrite=True)
+    assert (out / "design.json").exists() and not (out / "mine.txt").exists()
+    fig, ax = plt.subplots()
+    try:
+        d.plot(ax=ax)
+        dotted = [float(line.get_xdata()[0]) for line in ax.lines if line.get_linestyle() == ":"]
+    finally:
+        plt.close(fig)
+    assert dotted == d.to_dict()["pushed_heights_m"] == [0.5]

@@ -70,17 +70,11 @@ class Design(DocResult):
         """Write ``design.json`` and ``figures/design.png`` into the directory ``path``."""
         from ..dataset.io import atomic_dir, write_bytes_atomic, write_json
         from ..report.figures import render
-        from ..report.plots import plot_design
 
         path = Path(path)
         with atomic_dir(path, overwrite) as tmp:
             write_json(tmp / "design.json", self.to_dict())
-            png = render(
-                lambda ax: plot_design(self.doc, ax=ax, pushed_m=self.doc.get("pushed_heights_m", ())),
-                6.4,
-                3.6,
-                dpi=120,
-            )
+            png = render(lambda ax: self.plot(ax=ax), 6.4, 3.6, dpi=120)
             write_bytes_atomic(tmp / "figures" / "design.png", png)
         return path
 
