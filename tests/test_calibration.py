@@ -130,6 +130,8 @@ def test_a_calibration_row_records_the_fits_worst_table_shift_and_its_zoom():
     assert row == {"table_shift_sd": 1.8, "table_shift_worst": "p", "effect_axis_zoom": "none"}
     doc["table_check"]["at_start"] = {"u": 0.5, "shift_in_sd": {"log EI0": 0.01, "p": 0.02, "mu": -0.04}}
     assert table_columns(doc)["table_shift_start_sd"] == 0.04
+    doc["table_check"]["at_start"]["between_nodes"] = {"u": 0.52, "shift_in_sd": {"log EI0": 0.1, "p": 0.7, "mu": 0.6}}
+    assert table_columns(doc)["table_shift_start_sd"] == 0.7  # the worse of the two, which decided
     doc["table_check"]["effect_axis_zoom"] = {"kept": True}
     assert table_columns(doc)["effect_axis_zoom"] == "kept"
     doc["table_check"]["effect_axis_zoom"] = {"kept": False}

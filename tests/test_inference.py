@@ -630,7 +630,13 @@ def test_a_fit_narrows_a_coarse_effect_axis_around_its_start(monkeypatch, tmp_pa
     assert zoom["u_range_before"][0] < lo < 0.05 < hi < zoom["u_range_before"][1] and hi - lo < 0.1, zoom
     assert zoom["draws_at_edge"] == 0.0 and "message" not in zoom
     start = post.doc["table_check"]["at_start"]  # the check the decision read, and where: the window's centre
-    assert start["shift_in_sd"] == zoom["shift_in_sd_before"] and start["u"] == pytest.approx((lo + hi) / 2, abs=1e-12)
+    assert start["u"] == pytest.approx((lo + hi) / 2, abs=1e-12)
+    # the decision read the worse of the start's check and the check in the middle of its node interval
+    checks = [start["shift_in_sd"], start["between_nodes"]["shift_in_sd"]]
+    assert zoom["shift_in_sd_before"] == max(checks, key=lambda c: max(map(abs, c.values())))
+    g = np.linspace(*zoom["u_range_before"], 5)
+    i = np.searchsorted(g, start["u"]) - 1
+    assert start["between_nodes"]["u"] == pytest.approx((g[i] + g[i + 1]) / 2, abs=1e-12)
     # +-60 Laplace sds about the start, which sits within a few sd of the median; the start's sd is larger (its
     # noise sd the coarse tables' RMS residual: measured 1.52 x the median's)
     sd = post.doc["table_check"]["laplace_sd"]["base_tilt (table coordinate u)"]
@@ -643,6 +649,61 @@ def test_a_fit_narrows_a_coarse_effect_axis_around_its_start(monkeypatch, tmp_pa
         assert q.loc[name, "q05"] < value < q.loc[name, "q95"], (name, q.loc[name].to_dict())
     loaded = bayesrod.Posterior.load(post.save(tmp_path / "run", figures=False))
     np.testing.assert_allclose(loaded._lik().axis.grid, np.linspace(lo, hi, 5))
+
+
+def test_a_start_at_a_node_of_a_coarse_effect_axis_is_checked_between_nodes_too(monkeypatch):
+    """Cubic interpolation in u is exact at a node, so the table check at a start that sits on a node passes
+    however coarse the axis (friction SBC seed 7: the start passed, the median read 1.8 sd). The fit also checks
+    in the middle of the start's node interval and decides on the worse. Measured (base tilt on 5 nodes, the
+    zoom test's stem): 0.038 sd at the node u = 0, 9.2 sd at u = -0.077 between nodes."""
+    from bayesrod.api._common import as_dataset
+    from bayesrod.api.fitting import _check_between_nodes, _worse
+    from bayesrod.dataset.simulate import NoiseModel
+    from bayesrod.inference import likelihood as LK
+
+    monkeypatch.setitem(LK.FORCE_EFFECT_NODES, "base_tilt", 5)
+    truth = {"EI0": 2.6, "p": 0.43}
+    ds = bayesrod.simulate(
+        {**truth, "length_m": 0.9, "heights_m": (0.4, 0.55), "specimen": "node"},
+        seed=3,
+        noise_model=NoiseModel(force_sd_N=0.0005, shape_sd_m=0.0),
+        effects={"base_tilt": 0.05},
+        config_overrides={"robot_step_m": 0.009},
+    )
+    lik = LK.build_likelihood(as_dataset(ds), load_prior("woody"), ("base_tilt",), use_shapes=False)
+    g = lik.axis.grid
+    point = truth | {"base_tilt": float(g[2]), "sigma_force_N": 0.0005}  # on the middle node, u = 0
+    at, between, worse = _check_between_nodes(lik, point)
+    worst = {k: max(abs(v) for v in c["shift_in_sd"].values()) for k, c in (("at", at), ("between", between))}
+    assert worst["at"] < LK.TABLE_ZOOM_SD < 1.0 < worst["between"], worst
+    assert between["u"] == pytest.approx((g[1] + g[2]) / 2, abs=1e-12)
+    assert LK.zoom_window(lik, point, at) is None  # the node alone would not narrow the axis
+    assert worse is between and _worse(None, at) is at and _worse(None, None) is None
+    lo, hi = LK.zoom_window(lik, point, between)
+    assert g[1] < lo < 0.0 < hi < g[3]
+
+
+def test_an_effect_axis_maps_its_coordinate_back_to_the_effect():
+    """EffectAxis.value inverts EffectAxis.coordinate for each tabled effect (a base spring's u = 0: a clamp, an
+    infinitely stiff spring); between_nodes is the middle of the node interval that holds u."""
+    from bayesrod.inference.likelihood import EffectAxis
+
+    EI0, L = np.array([2.0, 3.5]), 0.8
+    for name, values in (
+        ("base_compliance", np.array([4.0, 40.0])),
+        ("rest_curvature", np.array([-0.3, 0.5])),
+        ("base_tilt", np.array([-0.1, 0.2])),
+        ("contact_friction", np.array([0.05, 0.4])),
+    ):
+        axis = EffectAxis(name, np.linspace(-0.5, 0.5, 5) if name != "base_compliance" else np.linspace(0, 0.9, 5))
+        u = axis.coordinate(values, EI0, L)
+        np.testing.assert_allclose(axis.value(u, EI0, L), values, rtol=1e-12)
+    spring = EffectAxis("base_compliance", np.linspace(0.0, 0.9, 5))
+    assert spring.value(0.0, 2.0, L) == np.inf
+    assert spring.coordinate(5.0, 2.0, L) == pytest.approx(0.5 / 1.5)  # c = EI0 / (k L) = 0.5
+    axis = EffectAxis("base_tilt", np.linspace(-0.3, 0.3, 5))
+    assert axis.between_nodes(0.01) == pytest.approx(0.075) and axis.between_nodes(-0.3) == pytest.approx(-0.225)
+    assert axis.between_nodes(0.3) == pytest.approx(0.225) and axis.between_nodes(0.9) == pytest.approx(0.225)
 
 
 def test_zoom_window_narrows_only_a_coarse_axis_and_stays_inside_it():

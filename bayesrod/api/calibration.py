@@ -89,13 +89,17 @@ def fit_for_calibration(
 def table_columns(doc: dict) -> dict:
     """A calibration row's record of the fit's table check (summary.json ``table_check``): ``table_shift_sd``,
     the largest |shift| [Laplace sd] at the posterior median (NaN where not checked); ``table_shift_worst``,
-    the parameter it moves most; ``table_shift_start_sd``, the same at the sampler's start, which decided the
-    zoom (NaN without an effect axis); ``effect_axis_zoom``: ``"none"`` (axis kept as built), ``"kept"``
+    the parameter it moves most; ``table_shift_start_sd``, the same at the sampler's start, the worse of the
+    check there and in the middle of its node interval, which decided the zoom (NaN without an effect axis);
+    ``effect_axis_zoom``: ``"none"`` (axis kept as built), ``"kept"``
     (narrowed around the start) or ``"refused"`` (narrowed, but the check at the start did not improve)."""
     check = doc.get("table_check") or {}
     shifts = {k: abs(float(v)) for k, v in (check.get("shift_in_sd") or {}).items()}
     worst = max(shifts, key=shifts.get) if shifts else ""
-    at_start = [abs(float(v)) for v in ((check.get("at_start") or {}).get("shift_in_sd") or {}).values()]
+    start = check.get("at_start") or {}
+    at_start = [
+        abs(float(v)) for c in (start, start.get("between_nodes") or {}) for v in (c.get("shift_in_sd") or {}).values()
+    ]
     zoom = check.get("effect_axis_zoom")
     return {
         "table_shift_sd": shifts[worst] if worst else float("nan"),

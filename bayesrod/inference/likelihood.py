@@ -88,6 +88,23 @@ class EffectAxis:
             return value * L
         return value
 
+    def value(self, u: NDArray, EI0: NDArray, L: float) -> NDArray:
+        """SI effect values at coordinates ``u`` (W,) and EI0 (W,): the inverse of :meth:`coordinate`
+        (a base spring's u = 0 is a clamp: an infinitely stiff spring)."""
+        u = np.asarray(u, float)
+        if self.name == "base_compliance":
+            with np.errstate(divide="ignore"):
+                return np.asarray(EI0, float) * (1.0 - u) / (u * L)
+        if self.name == "rest_curvature":
+            return u / L
+        return u
+
+    def between_nodes(self, u: float) -> float:
+        """The middle of the node interval that holds ``u`` (the end intervals for u outside the grid): where
+        the tables' interpolation in u is least exact (it is exact at the nodes)."""
+        i = int(np.clip(np.searchsorted(self.grid, u) - 1, 0, self.grid.size - 2))
+        return float(0.5 * (self.grid[i] + self.grid[i + 1]))
+
     @classmethod
     def from_prior(cls, name: str, prior, EI0_range: tuple[float, float], L: float, n: int = 13) -> EffectAxis:
         """Grid covering the prior's central 99.8% at any EI0 in ``EI0_range``."""
