@@ -190,6 +190,16 @@ def test_compare_reports_each_species_and_the_spread_between_specimens_from_its_
     }
     assert fit["rhat_max"] != fit_E["rhat_max"] and fit["ess_bulk_min"] != fit_E["ess_bulk_min"]
     assert min(fit["ess_bulk_min"], fit_E["ess_bulk_min"]) >= 1000  # both models reach the sampler's target ESS
+    # saved, it refuses to overwrite a non-empty directory unless asked (nothing lost)
+    from bayesrod.dataset.io import OutputExistsError
+
+    out = res.save(tmp_path / "cmp")
+    (out / "mine.txt").write_text("a user's note")
+    with pytest.raises(OutputExistsError):
+        res.save(out)
+    res.save(out, overwrite=True)
+    assert json.loads((out / "compare.json").read_text())["species"] == json.loads(json.dumps(doc["species"]))
+    assert not (out / "mine.txt").exists()
 
 
 def test_compare_expands_a_fit_many_output_and_a_fit_group_output_into_their_runs(tmp_path):
@@ -211,6 +221,7 @@ def test_compare_expands_a_fit_many_output_and_a_fit_group_output_into_their_run
     got = expand_inputs([many, str(group), plain])
     runs, groups = many / "runs", many / "groups"
     assert got == [runs / "a", runs / "b", groups / "m7", group / "stem_1", group / "s2", plain]
+    assert expand_inputs([plain, many]) == [plain, runs / "a", runs / "b", groups / "m7"]  # the paths before it kept
     assert expand_inputs([tmp_path / "many" / "runs"]) == [runs]  # without survey.csv: a path like any other
     (many / "survey.csv").unlink()
     assert expand_inputs([many]) == [many]

@@ -202,13 +202,12 @@ class Comparison(DocResult):
         """Write ``compare.json`` and ``figures/forest.png`` into the directory ``path`` (atomically)."""
         from ..dataset.io import atomic_dir, write_bytes_atomic, write_json
         from ..report.figures import render
-        from ..report.plots import plot_forest
 
         path = Path(path)
         n = len(self.specimens) + 2 * len(self.doc["groups"])
         with atomic_dir(path, overwrite) as tmp:
             write_json(tmp / "compare.json", self.to_dict())
-            png = render(lambda ax: plot_forest(dict(self.fit), list(self.specimens), ax=ax), 7, 1.2 + 0.45 * n)
+            png = render(lambda ax: self.plot(ax=ax), 7, 1.2 + 0.45 * n)
             write_bytes_atomic(tmp / "figures" / "forest.png", png)
         return path
 
