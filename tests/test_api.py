@@ -181,6 +181,22 @@ def test_dataset_from_arrays_and_frame():
     assert any("height_m" in p for p in probs) and any("force_N" in p and "row 2" in p for p in probs), probs
 
 
+def test_every_public_result_saves_without_overwriting_unless_asked():
+    """Nothing lost: each public result class with a ``save`` refuses a non-empty directory by default
+    (``overwrite=False``; the behaviour itself is tested per class: Posterior above, Design, Comparison)."""
+    import inspect
+
+    savers = [getattr(bayesrod, n) for n in bayesrod.__all__ if inspect.isclass(getattr(bayesrod, n))]
+    savers = [c for c in savers if callable(getattr(c, "save", None))]
+    assert {"Posterior", "Dataset", "Design", "Comparison", "Diagnosis", "GroupFit", "Extraction"} <= {
+        c.__name__ for c in savers
+    }
+    for cls in savers:
+        params = inspect.signature(cls.save).parameters
+        if "overwrite" in params:
+            assert params["overwrite"].default is False, cls.__name__
+
+
 def test_dataset_save_round_trips(tmp_path):
     ds = bayesrod.simulate("twig", seed=3, heights_m=[0.5], config_overrides={"n_frames_engaged": 2})
     ds.save(tmp_path / "ds")
