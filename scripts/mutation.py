@@ -172,6 +172,19 @@ TARGETS: dict[str, tuple[str, list[str], list[str] | None]] = {
         ["tests/test_inference.py::test_zoom_window_narrows_only_a_coarse_axis_and_stays_inside_it"],
         ["*.x_zoom_window__mutmut_*", "*.x_effect_axis_label__mutmut_*"],
     ),
+    "effect_axis_inverse": (  # added in session 67: an effect's value at a table coordinate, a node interval's middle
+        "bayesrod/inference/likelihood.py",
+        [
+            "tests/test_inference.py::test_an_effect_axis_maps_its_coordinate_back_to_the_effect",
+            "tests/test_inference.py::test_a_start_at_a_node_of_a_coarse_effect_axis_is_checked_between_nodes_too",
+        ],
+        ["*.xǁEffectAxisǁvalue__mutmut_*", "*.xǁEffectAxisǁbetween_nodes__mutmut_*"],
+    ),
+    "between_nodes": (  # added in session 67: the start's check also between nodes, the worse deciding
+        "bayesrod/api/fitting.py",
+        ["tests/test_inference.py::test_a_start_at_a_node_of_a_coarse_effect_axis_is_checked_between_nodes_too"],
+        ["*.x__worse__mutmut_*", "*.x__check_between_nodes__mutmut_*"],
+    ),
     "step_back": (  # added in session 31: the simulator's step back from a failed solve (session 30)
         "bayesrod/dataset/simulate.py",
         ["tests/test_simulate.py"],
