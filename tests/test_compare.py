@@ -137,6 +137,7 @@ def test_compare_needs_species(tmp_path, capsys):
     assert main(["compare", str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "species" in err and "Traceback" not in err
+    assert f"{tmp_path / 'a'}: field species" in err  # the run that lacks it
     assert not (tmp_path / "o").exists()  # nothing half-written
 
 
@@ -200,6 +201,45 @@ def test_compare_reports_each_species_and_the_spread_between_specimens_from_its_
     res.save(out, overwrite=True)
     assert json.loads((out / "compare.json").read_text())["species"] == json.loads(json.dumps(doc["species"]))
     assert not (out / "mine.txt").exists()
+
+
+def test_compare_takes_species_from_a_mapping_and_refuses_a_specimen_twice_or_a_folder_that_is_no_run(
+    tmp_path, monkeypatch
+):
+    """``compare({species: [runs]})``: the mapping's species, not the runs' own, group the specimens (what the
+    species model is handed is recorded and the run stopped there); a specimen given twice, or a folder
+    without summary.json and samples.npz, is refused with its field and the path."""
+    import importlib
+
+    import bayesrod
+
+    cmp_module = importlib.import_module("bayesrod.api.compare")
+    handed = []
+
+    class Stop(Exception):
+        pass
+
+    def record(per, **kw):
+        handed.append([(s.specimen, s.species) for s in per])
+        raise Stop
+
+    monkeypatch.setattr(cmp_module, "sample_species", record)
+    rng = np.random.default_rng(3)
+    runs = {}
+    for s in _species(rng, "oak", 5.0, 0.4, 2) + _species(rng, "reed", 1.0, 1.2, 2):
+        _fake_run(tmp_path / s.specimen, s.specimen, "unlabelled", s.draws)
+        runs[s.specimen] = tmp_path / s.specimen
+    with pytest.raises(Stop):
+        bayesrod.compare({"A": [runs["oak-0"], runs["reed-1"]], "B": [str(runs["oak-1"]), runs["reed-0"]]})
+    assert sorted(handed[0]) == [("oak-0", "A"), ("oak-1", "B"), ("reed-0", "B"), ("reed-1", "A")]
+    with pytest.raises(ValueError, match="specimen: expected each specimen once, got oak-0 more than once"):
+        bayesrod.compare({"A": [runs["oak-0"], runs["oak-1"]], "B": [runs["oak-0"], runs["reed-0"]]})
+    half = tmp_path / "half"  # a run that never finished: its summary without samples
+    half.mkdir()
+    (half / "summary.json").write_text(json.dumps({"specimen": "half", "species": "A", "length_m": 0.8}))
+    for bad in (half, tmp_path / "nothing"):
+        with pytest.raises(ValueError, match=f"{bad}: expected a bayesrod.Posterior"):
+            bayesrod.compare([runs["oak-0"], runs["reed-0"], bad])
 
 
 def test_compare_expands_a_fit_many_output_and_a_fit_group_output_into_their_runs(tmp_path):
