@@ -120,7 +120,10 @@ def test_compare_cli_writes_contract_json_and_warns(tmp_path, capsys):
     E = next(c for c in res["contrasts"] if c["parameter"] == "E")  # E ~ EI0 / d0^4: 5 x 0.6^4 = 0.65
     assert E["ratio_q05"] < 0.65 < E["ratio_q95"] and set(res["species"]["reed"]) >= {"E_Pa", "EI0"}
     assert "log_E" in res["between_specimen_sd"]
-    assert any("one specimen only" in w for w in res["warnings"])
+    lonely = [w for w in res["warnings"] if "one specimen only" in w]
+    assert len(lonely) == 1 and lonely[0].startswith("reed: "), res["warnings"]  # reed's, not oak's (3 specimens)
+    kt = [c for c in res["contrasts"] if c["parameter"] == "k_theta"]  # --height 0.3: k_theta contrasted there
+    assert len(kt) == 1 and kt[0]["height_m"] == 0.3 and kt[0]["ratio_q05"] > 1.0, kt
     import cv2
 
     forest = cv2.imread(str(out / "figures" / "forest.png")).astype(int)  # drawn, not an empty frame:
@@ -155,6 +158,7 @@ def test_compare_reports_each_species_and_the_spread_between_specimens_from_its_
     fits = []
 
     def spy(*a, **k):  # the log-E model's R-hat made the worse, so the report must take it from there
+        assert k["seed"] == 1 + len(fits), k  # the run's seed (and seed + 1) reaches both models: reproducible
         fits.append(sample_species(*a, **k))
         if len(fits) == 2:
             fits[-1] = fits[-1] | {"rhat_max": fits[-1]["rhat_max"] + 0.5}
