@@ -238,6 +238,12 @@ def test_compare_takes_species_from_a_mapping_and_refuses_a_specimen_twice_or_a_
     assert sorted(handed[0]) == [("oak-0", "A"), ("oak-1", "B"), ("reed-0", "B"), ("reed-1", "A")]
     with pytest.raises(ValueError, match="specimen: expected each specimen once, got oak-0 more than once"):
         bayesrod.compare({"A": [runs["oak-0"], runs["oak-1"]], "B": [runs["oak-0"], runs["reed-0"]]})
+    # without diameters only the (log EI0, p) model runs: its convergence is the run's (a stand-in fit, exact)
+    fake = {"species": ["A", "B"], "rhat_max": 1.004, "ess_bulk_min": 1234.0}
+    fake |= {"mu": rng.normal([[0.5, 0.4], [0.0, 1.2]], 0.05, (800, 2, 2)), "tau": np.full((800, 2), 0.1)}
+    monkeypatch.setattr(cmp_module, "sample_species", lambda per, **kw: fake)
+    doc = bayesrod.compare({"A": [runs["oak-0"], runs["oak-1"]], "B": [runs["reed-0"], runs["reed-1"]]}).to_dict()
+    assert doc["convergence"] == {"rhat_max": 1.004, "ess_bulk_min": 1234.0} and "E_Pa" not in doc["species"]["A"]
     half = tmp_path / "half"  # a run that never finished: its summary without samples
     half.mkdir()
     (half / "summary.json").write_text(json.dumps({"specimen": "half", "species": "A", "length_m": 0.8}))
