@@ -244,6 +244,11 @@ def test_compare_takes_species_from_a_mapping_and_refuses_a_specimen_twice_or_a_
     monkeypatch.setattr(cmp_module, "sample_species", lambda per, **kw: fake)
     doc = bayesrod.compare({"A": [runs["oak-0"], runs["oak-1"]], "B": [runs["reed-0"], runs["reed-1"]]}).to_dict()
     assert doc["convergence"] == {"rhat_max": 1.004, "ess_bulk_min": 1234.0} and "E_Pa" not in doc["species"]["A"]
+    # at the level it states: the EI0 contrast's interval is the 5% and 95% quantiles of the draws' ratio
+    assert doc["level"] == 0.9 and doc["method"].startswith("normal-normal hierarchical model")
+    ei0 = next(c for c in doc["contrasts"] if c["parameter"] == "EI0")
+    ratio = np.exp(fake["mu"][:, 0, 0] - fake["mu"][:, 1, 0])
+    assert [ei0["ratio_q05"], ei0["ratio_q95"]] == pytest.approx(np.quantile(ratio, [0.05, 0.95]), rel=1e-12)
     half = tmp_path / "half"  # a run that never finished: its summary without samples
     half.mkdir()
     (half / "summary.json").write_text(json.dumps({"specimen": "half", "species": "A", "length_m": 0.8}))
