@@ -249,6 +249,16 @@ def test_compare_takes_species_from_a_mapping_and_refuses_a_specimen_twice_or_a_
     ei0 = next(c for c in doc["contrasts"] if c["parameter"] == "EI0")
     ratio = np.exp(fake["mu"][:, 0, 0] - fake["mu"][:, 1, 0])
     assert [ei0["ratio_q05"], ei0["ratio_q95"]] == pytest.approx(np.quantile(ratio, [0.05, 0.95]), rel=1e-12)
+    # with diameters the log-E model runs too, on the mapping's species as well
+    seen = []
+    monkeypatch.setattr(
+        cmp_module, "sample_species", lambda per, **kw: seen.append({s.specimen: s.species for s in per}) or fake
+    )
+    for name in ("oak-0", "reed-0"):
+        s = _species(rng, name[:-2], 1.0, 0.5, 1)[0]
+        _fake_run(tmp_path / f"d-{name}", f"d-{name}", "unlabelled", s.draws, d0=np.full(len(s.draws), 0.008))
+    bayesrod.compare({"A": [tmp_path / "d-oak-0"], "B": [tmp_path / "d-reed-0"]})
+    assert seen == [{"d-oak-0": "A", "d-reed-0": "B"}] * 2  # the (log EI0, p) model's, then the log-E model's
     half = tmp_path / "half"  # a run that never finished: its summary without samples
     half.mkdir()
     (half / "summary.json").write_text(json.dumps({"specimen": "half", "species": "A", "length_m": 0.8}))
