@@ -182,7 +182,10 @@ TARGETS: dict[str, tuple[str, list[str], list[str] | None]] = {
     ),
     "between_nodes": (  # added in session 67: the start's check also between nodes, the worse deciding
         "bayesrod/api/fitting.py",
-        ["tests/test_inference.py::test_a_start_at_a_node_of_a_coarse_effect_axis_is_checked_between_nodes_too"],
+        [
+            "tests/test_inference.py::test_a_start_at_a_node_of_a_coarse_effect_axis_is_checked_between_nodes_too",
+            "tests/test_inference.py::test_the_between_nodes_check_moves_only_the_effect_to_the_middle_of_its_node_interval",
+        ],
         ["*.x__worse__mutmut_*", "*.x__check_between_nodes__mutmut_*"],
     ),
     "step_back": (  # added in session 31: the simulator's step back from a failed solve (session 30)

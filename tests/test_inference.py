@@ -683,6 +683,51 @@ def test_a_start_at_a_node_of_a_coarse_effect_axis_is_checked_between_nodes_too(
     assert g[1] < lo < 0.0 < hi < g[3]
 
 
+def test_the_between_nodes_check_moves_only_the_effect_to_the_middle_of_its_node_interval(monkeypatch):
+    """_check_between_nodes on a stand-in likelihood (a base spring's axis: its value depends on EI0 and L) with
+    the table check recorded: the second check is at the same point but for the effect, whose table coordinate
+    is the middle of the start's node interval; none where that lies outside the table or cannot be checked;
+    the worse of the two decides, whichever it is."""
+    import importlib
+    from types import SimpleNamespace
+
+    from bayesrod.inference.likelihood import EffectAxis
+
+    fitting = importlib.import_module("bayesrod.api.fitting")
+    axis, L = EffectAxis("base_compliance", np.linspace(0.0, 0.9, 7)), 0.8
+    inside = [True]
+    lik = SimpleNamespace(
+        axis=axis,
+        L=L,
+        effect_coordinate=lambda d: axis.coordinate(np.atleast_1d(d["base_compliance"]), np.atleast_1d(d["EI0"]), L),
+        in_table=lambda d: np.array(inside),
+    )
+    seen, shifts = [], [0.01, 0.3]
+
+    def check(lik_, point):
+        seen.append(point)
+        if isinstance(shifts[len(seen) - 1], Exception):
+            raise shifts[len(seen) - 1]
+        return {"shift_in_sd": {"p": shifts[len(seen) - 1]}}
+
+    monkeypatch.setattr(fitting, "table_check", check)
+    point = {"EI0": 2.0, "p": 0.4, "base_compliance": 10.0}
+    at, between, worse = fitting._check_between_nodes(lik, point)
+    um = axis.between_nodes(float(axis.coordinate(10.0, 2.0, L)))
+    assert seen[0] == point and set(seen[1]) == set(point) and seen[1]["p"] == 0.4 and seen[1]["EI0"] == 2.0
+    assert axis.coordinate(seen[1]["base_compliance"], 2.0, L) == pytest.approx(um, rel=1e-12)
+    assert between["u"] == um and worse is between and at["shift_in_sd"] == {"p": 0.01}
+    for second in (0.001, ValueError("no exact solve")):  # the start is the worse, or the middle unchecked
+        seen.clear()
+        shifts[:] = [0.01, second]
+        at, between, worse = fitting._check_between_nodes(lik, point)
+        assert worse is at and (between is None) == isinstance(second, Exception)
+    seen.clear()
+    inside[0] = False  # the middle lies outside the table: one check only
+    at, between, worse = fitting._check_between_nodes(lik, point)
+    assert len(seen) == 1 and between is None and worse is at
+
+
 def test_an_effect_axis_maps_its_coordinate_back_to_the_effect():
     """EffectAxis.value inverts EffectAxis.coordinate for each tabled effect (a base spring's u = 0: a clamp, an
     infinitely stiff spring); between_nodes is the middle of the node interval that holds u."""
