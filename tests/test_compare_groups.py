@@ -76,6 +76,9 @@ def test_genotypes_differ_at_the_cut_base_not_in_the_stem(stems, tmp_path, capsy
     assert ei0["ratio_q05"] < 1 < ei0["ratio_q95"]  # the same stem
     cut = res["anchorage"]["cut"]["contrasts"][0]
     assert (cut["a"], cut["b"], cut["condition"], cut["parameter"]) == ("A", "B", "cut", "base_compliance_rad_per_Nm")
+    for cond in ("intact", "cut"):  # each condition's model says how well it converged
+        conv = res["anchorage"][cond]["convergence"]
+        assert set(conv) == {"rhat_max", "ess_bulk_min"} and conv["rhat_max"] < 1.05 and conv["ess_bulk_min"] > 400
     # B's cut base is softer: A - B = -0.05 rad/(N m), covered, and excluding zero
     assert cut["difference_q05"] < -0.05 < cut["difference_q95"] < 0
     assert cut["prob_a_greater"] < 0.01
