@@ -64,7 +64,8 @@ def test_genotypes_differ_at_the_cut_base_not_in_the_stem(stems, tmp_path, capsy
     loaded = GroupFit.load(tmp_path / "groups" / "B1")
     assert loaded.species == "B" and loaded.conditions == ("intact", "cut")
     np.testing.assert_array_equal(loaded.samples["p"], stems[4].samples["p"])
-    assert main(["compare", str(tmp_path / "groups"), "--out", str(tmp_path / "cmp"), "--seed", "1"]) == 0
+    args = ["compare", str(tmp_path / "groups"), "--out", str(tmp_path / "cmp"), "--seed", "1", "--height", "0.4"]
+    assert main(args) == 0
     printed = capsys.readouterr().out
     res = json.loads((tmp_path / "cmp" / "compare.json").read_text())
     c = res["anchorage"]["cut"]["contrasts"][0]  # the printout is compare.json's, median then q05, q95
@@ -74,6 +75,8 @@ def test_genotypes_differ_at_the_cut_base_not_in_the_stem(stems, tmp_path, capsy
     assert res["groups"] == {"A": ["A0", "A1", "A2"], "B": ["B0", "B1", "B2"]}
     ei0 = next(c for c in res["contrasts"] if c["parameter"] == "EI0")
     assert ei0["ratio_q05"] < 1 < ei0["ratio_q95"]  # the same stem
+    kt = next(c for c in res["contrasts"] if c["parameter"] == "k_theta")  # at 0.4 m of the stems' 0.8 m length
+    assert kt["height_m"] == 0.4 and kt["ratio_q05"] < 1 < kt["ratio_q95"], kt
     cut = res["anchorage"]["cut"]["contrasts"][0]
     assert (cut["a"], cut["b"], cut["condition"], cut["parameter"]) == ("A", "B", "cut", "base_compliance_rad_per_Nm")
     for cond in ("intact", "cut"):  # each condition's model says how well it converged
