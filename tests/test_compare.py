@@ -312,3 +312,21 @@ def test_compare_says_why_it_leaves_the_anchorage_out():
     msg = "anchorage not compared: the stems fitted under several conditions are of one species"
     assert anchorage(alike, 0) == ({}, [msg])
     assert anchorage([(object(), "A")], 0) == ({}, [])  # no stem under several conditions: nothing to say
+
+
+def test_the_log_e_posteriors_are_checked_against_half_the_species_priors_sd(tmp_path):
+    """compare warns where a specimen's log-E posterior is not small against the prior: sd over 0.3 x half the
+    log-E species prior's sd (3.0 / 2 = 1.5: threshold 0.45). A specimen at sd 0.40 passes, one at 0.50 is named."""
+    from bayesrod.api.compare import _moduli
+    from bayesrod.api.group import load_run
+
+    z = np.random.default_rng(2).standard_normal(4000)
+    z = (z - z.mean()) / z.std()
+    fits = []
+    for name, sd in (("narrow", 0.40), ("wide", 0.50)):
+        draws = np.column_stack([np.full(z.size, np.log(2.0)), np.full(z.size, 0.5)])
+        _fake_run(tmp_path / name, name, "oak", draws, d0=0.01 * np.exp(-z * sd / 4))  # log E = ... - 4 log d0
+        fits.append((load_run(tmp_path / name), None))
+    moduli, warnings = _moduli(fits)
+    assert [float(np.sqrt(m.cov[0, 0])) for m in moduli] == pytest.approx([0.40, 0.50], rel=1e-3)
+    assert len(warnings) == 1 and warnings[0].startswith("wide: posterior sd of log E (0.5)"), warnings
