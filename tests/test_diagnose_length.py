@@ -139,3 +139,35 @@ def test_a_held_out_push_the_refit_cannot_reach_is_predicted_as_no_contact():
     np.testing.assert_allclose(
         _held_forces(held, ok, ("rest_curvature",)), held.forces(ok[None], ("rest_curvature",))[0]
     )
+
+
+def test_the_api_hands_its_settings_to_the_loop_and_records_them(monkeypatch):
+    """What the user asks of ``diagnose`` reaches the loop (the loop itself replaced by a recorder) and is what
+    diagnosis.json's ``settings`` say: the candidates, both levels, the held-out gain, the noise model, the
+    workers, the height error's sd; ``observations`` counts the model's data."""
+    import sys
+
+    api = sys.modules["bayesrod.api.diagnose"]
+    seen = {}
+
+    def record(model, **kw):
+        seen.update(kw, model=model)
+        return {"added_effects": [], "unexplained_structure": False, "_fit": None, "_plain": None}
+
+    monkeypatch.setattr(api, "diagnose_model", record)
+    ds = _pushes(sigma=0.0)
+    settings = dict(alpha=0.02, min_heldout_gain=0.2, heldout_alpha=0.07, force_noise="iid", n_workers=2)
+    d = bayesrod.diagnose(ds, candidates=("force_offset", "base_tilt"), use_shapes=False, height_sd_m=0.003, **settings)
+    kw = {k: seen[k] for k in ("alpha", "min_heldout_gain", "heldout_alpha", "force_noise", "workers", "candidates")}
+    assert kw["workers"] == 2 and kw["candidates"] == ("force_offset", "base_tilt")
+    assert {k: kw[k] for k in ("alpha", "min_heldout_gain", "heldout_alpha", "force_noise")} == {
+        k: settings[k] for k in ("alpha", "min_heldout_gain", "heldout_alpha", "force_noise")
+    }
+    model = seen["model"]
+    assert model.height_sd_m == 0.003 and not model.preload and model.length_bounds_m is None
+    doc = d.to_dict()
+    want = {k: settings[k] for k in ("alpha", "min_heldout_gain", "heldout_alpha", "force_noise")}
+    assert {k: doc["settings"][k] for k in want} == want
+    assert doc["settings"]["candidates"] == ["force_offset", "base_tilt"] and doc["settings"]["height_sd_m"] == 0.003
+    assert doc["observations"] == {"n_force": model.n_force, "n_shape_points": model.n_points} and model.n_force > 0
+    assert doc["length_m"] == ds.length_m and doc["specimen"] == ds.specimen
