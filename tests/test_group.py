@@ -66,6 +66,22 @@ def cut_pair():
     )
 
 
+def test_simulate_group_draws_condition_i_with_seed_plus_i():
+    """Each condition its own noise draws: condition i is simulated with seed + i (as the docstring says), so two
+    identical conditions differ only by their noise, and seed 4's second condition is seed 5's first."""
+    conds = {"a": math.inf, "b": math.inf}
+    a, b = bayesrod.simulate_group("twig", conditions=conds, heights_m=[0.55], seed=4, **QUIET)
+    (nxt, _) = bayesrod.simulate_group("twig", conditions=conds, heights_m=[0.55], seed=5, **QUIET)
+    fa, fb, fn = (d.pushes[0].force.force_N for d in (a, b, nxt))
+    assert not np.array_equal(fa, fb)
+    np.testing.assert_array_equal(fb, fn)
+
+
+def test_a_simulated_stem_is_pushed_at_0_56_0_69_and_0_81_of_its_length_by_default():
+    ds = bayesrod.simulate({"EI0": 2.0, "p": 0.4, "length_m": 1.2}, seed=1, config_overrides={"n_frames_engaged": 2})
+    np.testing.assert_allclose([p.height_m for p in ds.pushes], [0.672, 0.828, 0.972], rtol=1e-12)
+
+
 def test_simulate_group_gives_each_condition_its_own_noise_correlation_when_asked():
     """A rig whose noise differs between conditions: ``noise_rho`` by condition (unnamed: iid), recorded in each
     truth and seen in the noise (lag-1 correlation of the force residuals about the noiseless forces); a name that

@@ -102,7 +102,8 @@ def simulate(
     effects : Effects or mapping
         Model effects switched on (docs/model.md), e.g. ``{"base_compliance": 40.0}``.
     heights_m : sequence of float or None
-        Contact heights [m]; default the preset's.
+        Contact heights [m]; default the preset's (for a stem mapping without ``heights_m``: 0.56, 0.69 and
+        0.81 of its length).
     noise_rho : float
         Lag-1 correlation of AR(1) force noise (marginal sd as the preset's), in (-1, 1); 0 is independent.
     noise_model : bayesrod.dataset.simulate.NoiseModel or None
