@@ -158,15 +158,12 @@ def test_the_api_hands_its_settings_to_the_loop_and_records_them(monkeypatch):
     ds = _pushes(sigma=0.0)
     settings = dict(alpha=0.02, min_heldout_gain=0.2, heldout_alpha=0.07, force_noise="iid", n_workers=2)
     d = bayesrod.diagnose(ds, candidates=("force_offset", "base_tilt"), use_shapes=False, height_sd_m=0.003, **settings)
-    kw = {k: seen[k] for k in ("alpha", "min_heldout_gain", "heldout_alpha", "force_noise", "workers", "candidates")}
-    assert kw["workers"] == 2 and kw["candidates"] == ("force_offset", "base_tilt")
-    assert {k: kw[k] for k in ("alpha", "min_heldout_gain", "heldout_alpha", "force_noise")} == {
-        k: settings[k] for k in ("alpha", "min_heldout_gain", "heldout_alpha", "force_noise")
-    }
+    want = {k: settings[k] for k in ("alpha", "min_heldout_gain", "heldout_alpha", "force_noise")}
+    assert {k: seen[k] for k in want} == want
+    assert seen["workers"] == 2 and seen["candidates"] == ("force_offset", "base_tilt")
     model = seen["model"]
     assert model.height_sd_m == 0.003 and not model.preload and model.length_bounds_m is None
     doc = d.to_dict()
-    want = {k: settings[k] for k in ("alpha", "min_heldout_gain", "heldout_alpha", "force_noise")}
     assert {k: doc["settings"][k] for k in want} == want
     assert doc["settings"]["candidates"] == ["force_offset", "base_tilt"] and doc["settings"]["height_sd_m"] == 0.003
     assert doc["observations"] == {"n_force": model.n_force, "n_shape_points": model.n_points} and model.n_force > 0

@@ -91,20 +91,20 @@ def table_columns(doc: dict) -> dict:
     the largest |shift| [Laplace sd] at the posterior median (NaN where not checked); ``table_shift_worst``,
     the parameter it moves most; ``table_shift_start_sd``, the same at the sampler's start, the worse of the
     check there and in the middle of its node interval, which decided the zoom (NaN without an effect axis);
-    ``effect_axis_zoom``: ``"none"`` (axis kept as built), ``"kept"``
-    (narrowed around the start) or ``"refused"`` (narrowed, but the check at the start did not improve)."""
+    ``effect_axis_zoom``: ``"none"`` (axis kept as built), ``"kept"`` (narrowed around the start) or
+    ``"refused"`` (narrowed, but the check at the start did not improve)."""
     check = doc.get("table_check") or {}
     shifts = {k: abs(float(v)) for k, v in (check.get("shift_in_sd") or {}).items()}
     worst = max(shifts, key=shifts.get) if shifts else ""
     start = check.get("at_start") or {}
-    at_start = [
+    start_shifts = [
         abs(float(v)) for c in (start, start.get("between_nodes") or {}) for v in (c.get("shift_in_sd") or {}).values()
     ]
     zoom = check.get("effect_axis_zoom")
     return {
         "table_shift_sd": shifts[worst] if worst else float("nan"),
         "table_shift_worst": worst,
-        "table_shift_start_sd": max(at_start) if at_start else float("nan"),
+        "table_shift_start_sd": max(start_shifts) if start_shifts else float("nan"),
         "effect_axis_zoom": "none" if zoom is None else ("kept" if zoom.get("kept") else "refused"),
     }
 

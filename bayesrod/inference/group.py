@@ -46,7 +46,15 @@ from scipy.optimize import minimize
 from scipy.special import logsumexp
 
 from .diagnose import BLOCK_TRAIN
-from .likelihood import EffectAxis, PosteriorBase, RodLikelihood, _ident, force_scale_fit, one_height_stiffness
+from .likelihood import (
+    EffectAxis,
+    PosteriorBase,
+    RodLikelihood,
+    _ident,
+    base_stiffness,
+    force_scale_fit,
+    one_height_stiffness,
+)
 from .priors import ParamPrior, log_compliance_factor
 
 #: upper end of the base-compliance coordinate u = c/(1+c): c = EI0 C / L up to 9
@@ -290,13 +298,6 @@ def clamp_or_u(z: NDArray) -> NDArray:
 def z_of_u(u: NDArray) -> NDArray:
     """The sampled coordinate of a soft base u > 0 (inverse of :func:`clamp_or_u`)."""
     return np.asarray(u, float) / U_SCALE
-
-
-def base_stiffness(u: NDArray, EI0: NDArray, L: float) -> NDArray:
-    """k_b [N m/rad] from the table coordinate u = c/(1+c), c = EI0 / (k_b L); inf at u = 0 (a clamp)."""
-    u = np.asarray(u, float)
-    with np.errstate(divide="ignore"):
-        return np.where(u > 0, np.asarray(EI0, float) * (1.0 - u) / (np.maximum(u, 1e-300) * L), np.inf)
 
 
 def base_compliance(u: NDArray, EI0: NDArray, L: float) -> NDArray:

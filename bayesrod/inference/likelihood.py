@@ -59,6 +59,13 @@ FITTABLE_EFFECTS = CLOSED_EFFECTS + TABLE_EFFECTS
 # table node and height, so a fit would take about an hour.
 
 
+def base_stiffness(u: NDArray, EI0: NDArray, L: float) -> NDArray:
+    """k_b [N m/rad] from the table coordinate u = c/(1+c), c = EI0 / (k_b L); inf at u = 0 (a clamp)."""
+    u = np.asarray(u, float)
+    with np.errstate(divide="ignore"):
+        return np.where(u > 0, np.asarray(EI0, float) * (1.0 - u) / (np.maximum(u, 1e-300) * L), np.inf)
+
+
 @dataclass(frozen=True)
 class EffectAxis:
     """Second table axis for one effect: a bounded coordinate u, uniform grid, and the map to the solver.
@@ -93,8 +100,7 @@ class EffectAxis:
         (a base spring's u = 0 is a clamp: an infinitely stiff spring)."""
         u = np.asarray(u, float)
         if self.name == "base_compliance":
-            with np.errstate(divide="ignore"):
-                return np.asarray(EI0, float) * (1.0 - u) / (u * L)
+            return base_stiffness(u, EI0, L)
         if self.name == "rest_curvature":
             return u / L
         return u
