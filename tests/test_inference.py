@@ -751,6 +751,20 @@ def test_an_effect_axis_maps_its_coordinate_back_to_the_effect():
     assert axis.between_nodes(0.3) == pytest.approx(0.225) and axis.between_nodes(0.9) == pytest.approx(0.225)
 
 
+def test_a_fit_warns_exactly_when_its_tables_move_an_estimate_by_more_than_a_tenth_of_an_sd():
+    # docs/format.md: table_check.message "when a shift exceeds 0.1"; either sign, any parameter, 0.1 itself not
+    from bayesrod.api.fitting import TABLE_SHIFT_WARN_SD, table_warning
+
+    assert TABLE_SHIFT_WARN_SD == 0.1
+    assert table_warning({"shift_in_sd": {"log EI0": 0.1, "p": -0.1}}) is None
+    assert table_warning({"shift_in_sd": {"log EI0": 0.02, "p": 0.09, "mu": -0.099}}) is None
+    assert table_warning({"shift_in_sd": {}}) is None
+    for shifts in ({"log EI0": 0.02, "p": -0.11}, {"log EI0": 0.101, "p": 0.0}, {"log EI0": 0.0, "p": 0.0, "u": 1.8}):
+        message = table_warning({"shift_in_sd": shifts})
+        worst = max(abs(v) for v in shifts.values())
+        assert message and f"by {worst:.2g} sd" in message, (shifts, message)
+
+
 def test_zoom_window_narrows_only_a_coarse_axis_and_stays_inside_it():
     """zoom_window's rule on a made-up check: above TABLE_ZOOM_SD (0.05) on any parameter, u0 +- 60 Laplace sds
     within the axis; None at or below it, without the effect's sd, or when the window would span over 0.8 of the

@@ -659,6 +659,20 @@ def _two_stage(spec, use_shapes: bool) -> tuple[dict | None, object]:
 TABLE_SHIFT_WARN_SD = 0.1
 
 
+def table_warning(check: dict) -> str | None:
+    """The warning a fit gives (summary.json ``table_check.message``) when its table check ``check``
+    (:func:`~bayesrod.inference.likelihood.table_check` at the posterior median) moves some parameter's estimate
+    by more than :data:`TABLE_SHIFT_WARN_SD` Laplace sd; None where none does."""
+    worst = max((abs(v) for v in check["shift_in_sd"].values()), default=0.0)
+    if worst <= TABLE_SHIFT_WARN_SD:
+        return None
+    return (
+        f"the likelihood tables, against exact solves at the posterior median, would move the estimate "
+        f"by {worst:.2g} sd (at most {TABLE_SHIFT_WARN_SD:g} expected): the intervals are "
+        "less exact than they look; report it (docs/validation.md, 'Likelihood tables against exact solves')"
+    )
+
+
 def sampling_coordinates(force_noise: str, effects, one_height: bool = False) -> dict:
     """The coordinates the sampler moves the force noise, a base spring and EI0 in (ParameterSpace): an AR(1)
     noise by its innovation sd (since 2026-11-26), a base spring on forces alone by its table coordinate u
@@ -1110,14 +1124,10 @@ def fit(
         extra["table_check"] = {"message": f"not checked: {err}"}
     if tables is not None:
         extra["table_check"] = tables
-        worst = max(abs(v) for v in tables["shift_in_sd"].values())
-        if worst > TABLE_SHIFT_WARN_SD:
-            tables["message"] = (
-                f"the likelihood tables, against exact solves at the posterior median, would move the estimate "
-                f"by {worst:.2g} sd (at most {TABLE_SHIFT_WARN_SD:g} expected): the intervals are "
-                "less exact than they look; report it (docs/validation.md, 'Likelihood tables against exact solves')"
-            )
-            log.warning("warning: %s: %s", spec.specimen, tables["message"])
+        message = table_warning(tables)
+        if message:
+            tables["message"] = message
+            log.warning("warning: %s: %s", spec.specimen, message)
     if at_start:  # the check the zoom decision read, beside the check at the median
         extra.setdefault("table_check", {})["at_start"] = at_start
     if zoom is not None:  # beside the check's result, or its "not checked" message
