@@ -56,6 +56,24 @@ def test_summary_frame_matches_summary_json(post):
     assert {"q25", "q75"} <= set(wide.columns) and wide.attrs["level"] == 0.5
 
 
+def test_the_summarys_sampler_and_data_records_are_the_run_the_draws_came_from(post):
+    # summary.json's sampler section describes the chains the posterior holds: its walkers make the chains, its
+    # steps less its burn-in make the draws, one autocorrelation time per sampled parameter, and the burn-in is
+    # the rule the sampler states (a third of the steps, at least 5 autocorrelation times, at most half)
+    data = post.to_dict()["data"]  # forces only: every engaged force sample counted, no centerline, no weight
+    assert data["n_force"] == sum(d.F_N.size for d in post.likelihood.force_data) > 0
+    assert data["n_shape_points"] == 0 and "shape_weight" not in data
+    rec = post.to_dict()["sampler"]
+    n_chains, n_draws = (post.idata.posterior.sizes[k] for k in ("chain", "draw"))
+    assert rec["ensembles"] * rec["walkers_per_ensemble"] == n_chains
+    assert rec["steps"] - rec["burn_in"] == n_draws
+    assert len(rec["autocorr_time"]) == len(post.samples)  # EI0, p and the noise sd, each sampled
+    steps, tau = rec["steps"], max(rec["autocorr_time"])
+    assert rec["burn_in"] == int(min(max(steps // 3, 5 * tau), steps // 2))
+    assert 0 < rec["acceptance"] < 1 and rec["burn_in"] > 0
+    assert post.to_dict()["convergence"]["walkers_restarted"] == 0  # a healthy run moves no walker
+
+
 @pytest.mark.parametrize("level", [0.5, 0.9, 0.99])
 def test_bands_use_the_level_they_state(post, level):
     """Every band's lower/upper are the (1 -/+ level)/2 quantiles of the quantity over the draws."""
@@ -392,6 +410,47 @@ def test_a_table_check_that_cannot_solve_is_reported_not_raised(twig_noisy, monk
     assert post.to_dict()["table_check"] == {
         "message": "not checked: height_m: expected a height the unloaded stem reaches, got h/L = 0.9"
     }
+
+
+def test_fit_hands_its_seed_budget_and_checkpoint_to_the_sampler(twig_noisy, monkeypatch, tmp_path):
+    # the sampler's own stopping rule and seeding: tests/test_sampler.py; here that fit passes the user's on
+    from bayesrod.inference import sampler
+
+    class Sampled(Exception):
+        pass
+
+    asked, starts = {}, []
+
+    def record(post, theta0, **options):
+        asked.update(options)
+        raise Sampled
+
+    def start(post, rng, **kw):
+        starts.append(rng.bit_generator.state["state"])
+        return sampler.find_start(post, rng, **kw)
+
+    monkeypatch.setattr("bayesrod.api.fitting.run_ensembles", record)
+    monkeypatch.setattr("bayesrod.api.fitting.find_start", start)
+    ckpt = tmp_path / "chains.h5"
+    with pytest.raises(Sampled):
+        bayesrod.fit(
+            twig_noisy, use_shapes=False, progress=False, seed=7, max_steps=1234, target_ess=321.0, checkpoint=ckpt
+        )
+    assert asked == {"seed": 7, "backend_path": ckpt, "progress": False, "max_steps": 1234, "target_ess": 321.0}
+    assert starts == [np.random.default_rng(7).bit_generator.state["state"]]  # the start drawn with the seed
+
+
+def test_a_table_check_past_a_tenth_of_an_sd_reaches_the_summary_and_the_warnings(twig_noisy, monkeypatch, caplog):
+    # the threshold itself: tests/test_inference.py (table_warning); here that its message is what the user reads
+    from bayesrod.api.fitting import table_warning
+
+    check = {"max_error_over_sigma": 0.5, "shift_in_sd": {"log EI0": 0.3, "p": -0.02}, "n_samples": 10}
+    monkeypatch.setattr("bayesrod.api.fitting.table_check", lambda lik, point: dict(check))
+    with caplog.at_level("WARNING"):
+        post = bayesrod.fit(twig_noisy, use_shapes=False, progress=False, seed=1, max_steps=300, target_ess=50)
+    got = post.to_dict()["table_check"]
+    assert got == check | {"message": table_warning(check)} and "by 0.3 sd" in got["message"]
+    assert got["message"] in caplog.text
 
 
 def test_the_fit_commands_printout_is_the_summarys_numbers(capsys):

@@ -196,6 +196,55 @@ def test_per_push_offsets_are_recovered_and_keep_EI0_honest():
     assert not plain.loc["EI0", "q05"] <= EI0 <= plain.loc["EI0", "q95"], plain
 
 
+def test_fit_resolves_the_length_option_before_it_builds_its_tables(monkeypatch, caplog):
+    """length="auto" samples a length the dataset marks approximate, where the tables allow it, and says when
+    they do not (the fits themselves: the slow test above); the assumptions name what was done."""
+    from types import SimpleNamespace
+
+    from bayesrod.api.fitting import _assumptions
+
+    class Built(Exception):
+        pass
+
+    asked = []
+
+    def record(spec, prior, effects, **options):
+        asked.append(options["length"])
+        raise Built
+
+    monkeypatch.setattr("bayesrod.api.fitting.build_likelihood", record)
+    approx, exact = _dataset(1.0, approximate=True), _dataset(1.0)
+    cases = [
+        (approx, {}, "unknown"),
+        (approx, {"length": "known"}, "known"),
+        (exact, {}, "known"),
+        (exact, {"length": "unknown"}, "unknown"),
+        (approx, {"effects": ("base_compliance",)}, "known"),  # the effect takes the one extra table axis
+        (approx, {"preload": True}, "known"),
+    ]
+    for ds, kw, want in cases:
+        caplog.clear()
+        with caplog.at_level("WARNING"), pytest.raises(Built):
+            bayesrod.fit(ds, use_shapes=False, progress=False, **kw)
+        assert asked[-1] == want, (kw, asked)
+        blocked = ds is approx and want == "known" and "length" not in kw
+        assert ("marked approximate but stays fixed" in caplog.text) == blocked, (kw, caplog.text)
+    # what summary.json's assumptions say of the length and the other nuisances
+    plain = SimpleNamespace(length_prior=None, height_sd_m=0.0, force_offsets=False)
+    base = _assumptions(exact, plain)
+    assert base[-1] == "stem length L = 1 m" and len(base) == 7
+    held = _assumptions(approx, plain)
+    assert held[-1] == "stem length L = 1 m (marked approximate, held fixed in this fit)" and len(held) == 7
+    sampled = SimpleNamespace(length_prior=default_length_prior(approx), height_sd_m=0.002, force_offsets=True)
+    lo, hi = sampled.length_prior.bounds()
+    got = _assumptions(approx, sampled)
+    assert got[6] == f"stem length L sampled: prior {sampled.length_prior.dist} on [{lo:.3g}, {hi:.3g}] m (given 1 m)"
+    assert got[7:] == [
+        "contact height of each push uncertain: error N(0, 2 mm) sampled",
+        "load-cell offset per push sampled: N(0, 5% of the push's peak force)",
+    ]
+
+
 def test_force_curve_cache_survives_eviction_within_one_batch(monkeypatch):
     """A batch mixing cached and new heights, larger than the cache: every curve comes back (a KeyError once
     stopped the blueberry length study when new curves evicted cached ones of the same batch)."""
