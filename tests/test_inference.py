@@ -681,6 +681,21 @@ def test_a_start_at_a_node_of_a_coarse_effect_axis_is_checked_between_nodes_too(
     assert worse is between and _worse(None, at) is at and _worse(None, None) is None
     lo, hi = LK.zoom_window(lik, point, between)
     assert g[1] < lo < 0.0 < hi < g[3]
+    # and so the fit narrows the axis there: the narrowed likelihood keeps the centerlines' weight the fit chose
+    # (with centerlines, n_eff/n; the narrowed tables are built anew), the start stays, the window is recorded
+    from bayesrod.api.fitting import _zoom_effect_axis
+    from bayesrod.inference.likelihood import LogPosterior
+
+    lik.shape_weight = 0.37
+    post = LogPosterior(lik, load_prior("woody"))
+    config = {"use_shapes": False}
+    at_start, (record, zlik, zpost, ztheta) = _zoom_effect_axis(
+        as_dataset(ds), load_prior("woody"), ("base_tilt",), config, post, post.to_sample(point)[0]
+    )
+    assert record["kept"] and config["effect_window"] == pytest.approx([lo, hi], rel=1e-9)
+    assert at_start["u"] == pytest.approx(0.0, abs=1e-12)
+    assert zlik.shape_weight == 0.37 and zpost.likelihood is zlik
+    np.testing.assert_allclose(zpost.to_natural(ztheta[None])["base_tilt"], point["base_tilt"], rtol=1e-12)
 
 
 def test_the_between_nodes_check_moves_only_the_effect_to_the_middle_of_its_node_interval(monkeypatch):
