@@ -139,3 +139,45 @@ def test_a_calibration_row_records_the_fits_worst_table_shift_and_its_zoom():
     unchecked = table_columns({"table_check": {"message": "not checked: x", "effect_axis_zoom": {"kept": True}}})
     assert np.isnan(unchecked["table_shift_sd"]) and unchecked["table_shift_worst"] == ""
     assert unchecked["effect_axis_zoom"] == "kept"
+
+
+def test_an_sbc_row_ranks_the_truth_among_random_draws_and_covers_it_by_the_90_interval(monkeypatch):
+    """The SBC's statistics (scripts/sbc*.py, docs/validation.md): the rank is the number of thinned draws
+    below the truth (so a posterior sitting above the truth ranks low), the 90% interval holds its ends, and
+    the draws are a random thinning of the whole chain, not its first draws (which are correlated)."""
+    from types import SimpleNamespace
+
+    from bayesrod.api import calibration
+
+    res = {"draws": np.array([0.1, 0.2, 0.3, 0.4]), "q": np.array([0.12, 0.25, 0.38])}
+    row = calibration.rank_columns(res, 0.25, "EI0")
+    assert row == {"EI0_true": 0.25, "EI0_median": 0.25, "EI0_rank": 2, "EI0_covered": True}
+    assert [calibration.rank_columns(res, t, "p")["p_rank"] for t in (0.05, 0.15, 0.35, 0.45)] == [0, 1, 3, 4]
+    covered = {t: calibration.rank_columns(res, t, "p")["p_covered"] for t in (0.11, 0.12, 0.38, 0.39)}
+    assert covered == {0.11: False, 0.12: True, 0.38: True, 0.39: False}
+    # fit_for_calibration on a stand-in fit: a chain of 10000 draws in order
+    chain = np.arange(10_000.0)
+    doc = {"convergence": {"rhat_max": 1.004}, "parameters": {"EI0": {}}, "sampler": {"steps": 1234}}
+    monkeypatch.setattr(calibration, "fit", lambda *a, **kw: SimpleNamespace(samples={"EI0": chain}, doc=doc))
+    out = calibration.fit_for_calibration("data", "woody", seed=3, n_rank=99)
+    draws = out["EI0"]["draws"]
+    assert draws.size == np.unique(draws).size == 99 and np.isin(draws, chain).all()
+    assert draws.min() < 1000 and draws.max() > 9000  # spread over the chain
+    np.testing.assert_array_equal(out["EI0"]["q"], np.quantile(chain, [0.05, 0.5, 0.95]))
+    assert out["rhat_max"] == 1.004 and out["steps"] == 1234 and out["names"] == ["EI0"]
+
+
+def test_an_sbc_truth_is_a_draw_from_the_prior_and_the_data_carry_its_noise():
+    """simulate_from_prior: EI0, p and the noise terms are, in this order, draws of the prior with the replicate's
+    seed (an SBC whose truths came from elsewhere would be miscalibrated with a calibrated fit)."""
+    from bayesrod.api.calibration import NOMINAL_SHAPE_SD_M, simulate_from_prior
+    from bayesrod.inference.priors import load_prior
+
+    ds, truth = simulate_from_prior(PRIOR, 5, use_shapes=False)
+    pr, rng = load_prior(PRIOR), np.random.default_rng(10_005)
+    names = ("EI0", "p", "sigma_force_N", "shape_sd_scale")
+    assert [truth[k] for k in names] == [float(pr.get(k).draw(rng, 1)[0]) for k in names]
+    recorded = ds.extra["truth"]  # what the simulator drew the data with
+    assert (recorded["EI0"], recorded["p"]) == (truth["EI0"], truth["p"])
+    assert recorded["noise"]["force_sd_N"] == truth["sigma_force_N"]
+    assert recorded["noise"]["shape_sd_m"] == NOMINAL_SHAPE_SD_M * truth["shape_sd_scale"]
