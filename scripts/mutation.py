@@ -262,6 +262,30 @@ TARGETS["moment_search"] = (
     [f"*.x_{f}__mutmut_*" for f in ("_march", "_balance_base_moment")],
 )
 
+# added in session 68: the rest of the sampler (the convergence criteria of session 57: R-hat with the ensembles as
+# chains, the walkers' R-hat, the targets missed and the message; the start; stuck walkers; the checkpoint)
+TARGETS["sampler_rest"] = (
+    "bayesrod/inference/sampler.py",
+    ["tests/test_sampler.py", "tests/test_inference.py::test_sampler_resumes_from_checkpoint"],
+    [
+        f"*.x_{f}__mutmut_*"
+        for f in (
+            "diagnostics",
+            "missed_targets",
+            "convergence_message",
+            "steps_needed",
+            "stuck_walkers",
+            "rhat_walkers_max",
+            "count_stuck",
+            "ensemble_seeds",
+            "_ball",
+            "find_start",
+            "_profile_preloads",
+        )
+    ]
+    + ["*.xǁCheckpointBackendǁ*"],
+)
+
 # added in session 35: the joint posterior of one stem under several conditions (issue 23) and its summary
 TARGETS["group"] = ("bayesrod/inference/group.py", ["tests/test_group.py"], None)
 TARGETS["group_summary"] = (
