@@ -63,6 +63,7 @@ def test_the_summarys_sampler_and_data_records_are_the_run_the_draws_came_from(p
     data = post.to_dict()["data"]  # forces only: every engaged force sample counted, no centerline, no weight
     assert data["n_force"] == sum(d.F_N.size for d in post.likelihood.force_data) > 0
     assert data["n_shape_points"] == 0 and "shape_weight" not in data
+    assert post.to_dict()["truth"] == json.loads(json.dumps(post.dataset.extra["truth"]))  # simulated: the truth
     rec = post.to_dict()["sampler"]
     n_chains, n_draws = (post.idata.posterior.sizes[k] for k in ("chain", "draw"))
     assert rec["ensembles"] * rec["walkers_per_ensemble"] == n_chains
