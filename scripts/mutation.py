@@ -589,8 +589,8 @@ def _configure(dest: Path, module: str, tests: list[str]) -> None:
         "\n[tool.mutmut]\n"
         'source_paths = ["bayesrod"]\n'
         f'only_mutate = ["{module}"]\n'
-        # data files some tests read from the checkout (the SBC's prior, the prior folder)
-        'also_copy = ["scripts", "priors"]\n'
+        # data files some tests read from the checkout (the SBC's prior, the prior folder, the documented defaults)
+        'also_copy = ["scripts", "priors", "docs"]\n'
         # one process per mutant run (the default addopts ask xdist for 2), no cache writes
         'pytest_add_cli_args = ["-n0", "-p", "no:cacheprovider"]\n'
         f"pytest_add_cli_args_test_selection = {json.dumps(tests)}\n"
