@@ -583,3 +583,27 @@ def test_load_unload_cycles_share_the_recordings_clock_the_contact_origin_and_th
         assert u["time_s"][[0, -1]] == pytest.approx([start + 5.0, start + 11.0], abs=1e-9)
         assert u["robot_x_m"][[0, -1]] == pytest.approx([0.05, -0.01], abs=1e-3)
         assert u["force_N"][[0, -1]] == pytest.approx([1.25 + offset, offset], abs=2e-3)
+
+
+def test_the_reader_skips_non_finite_cells_and_rows_of_another_width_and_reads_decimal_commas_anywhere():
+    """A cell reading nan or inf is no measurement; a row with more fields than the header is not read by position;
+    the decimal mark is read from up to 200 rows (a table whose first rows are whole numbers still has its commas
+    read); a tie between comma and dot decimals reads commas (a dot decimal parses either way); a header naming a
+    column twice is refused."""
+    from bayesrod.dataset.tables import read_table
+
+    t = read_table("t;F\n0;0\n1;nan\n2;inf\n3;1;9\n4;2\n", ["t", "F"], name="rig.csv")
+    np.testing.assert_array_equal(t.columns["t"], [0.0, 4.0])
+    assert t.skipped == (
+        (3, "column 'F': 'nan' is not a finite number"),
+        (4, "column 'F': 'inf' is not a finite number"),
+        (5, "3 fields, the header has 2"),
+    )
+    rows = "".join(f"{k};{k}\n" for k in range(5)) + "5;2,5\n6;3,25\n"  # whole numbers first, then commas
+    t = read_table("t;F\n" + rows, ["t", "F"], name="rig.csv")
+    assert t.decimal == "," and t.columns["F"][-2:].tolist() == [2.5, 3.25] and not t.skipped
+    t = read_table("t;F\n0,5;1.5\n", ["t", "F"], name="rig.csv")  # one of each: both read
+    assert t.decimal == "," and (t.columns["t"][0], t.columns["F"][0]) == (0.5, 1.5)
+    assert read_table("t;F\n0;1\n1;2\n", ["t", "F"], name="rig.csv").decimal == "."  # whole numbers say nothing
+    with pytest.raises(ValueError, match=r"rig.csv, line 1: column 'F': expected each column once, got it twice"):
+        read_table("t;F;F\n0;1;2\n", ["t", "F"], name="rig.csv")
