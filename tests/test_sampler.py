@@ -1,5 +1,7 @@
 """The sampler's repair of walkers left in a far worse optimum (``replace_stuck_walkers``)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -416,3 +418,78 @@ def test_a_run_with_a_walker_stuck_at_its_end_has_not_converged(monkeypatch):
     res = run_ensembles(_Gauss(1), np.zeros(1), seed=0, **kw)
     assert res.converged is False and res.n_steps == 400 and sampler.count_stuck(res) == 2
     assert "2 walker(s) stuck" in sampler.convergence_message(res, 400, 1.0)
+
+
+def test_steps_needed_at_its_edges():
+    """The advice's step count (the not-converged message): one step more than was run, rounded up to 1000; the
+    ESS target's default 1000; a NaN or infinite R-hat or tau, and an ESS of 0, leave their term out (ArviZ gives
+    them for chains that never moved); an ESS below 1 still counts."""
+    assert sampler.steps_needed(999, 1.0, 5000.0, 1.0) == 1000
+    assert sampler.steps_needed(1000, 1.0, 500.0, 1.0) == 2000  # 1000 x 1000 / 500
+    assert sampler.steps_needed(1000, 1.0, 5000.0, float("nan")) == 2000
+    assert sampler.steps_needed(1000, float("inf"), 5000.0, 1.0) == 2000
+    assert sampler.steps_needed(1000, 1.0, 0.0, 1.0) == 2000
+    assert sampler.steps_needed(1000, 1.0, 0.5, 1.0) == 2_000_000
+
+
+def test_the_not_converged_message_names_each_missed_target_and_the_steps_they_need():
+    """convergence_message on a result made by hand: the targets' numbers as missed_targets words them, the ESS
+    of the first two parameters only (the ones run_ensembles targets), R-hat against 1.01 by default, and the
+    steps steps_needed gives for this run's own numbers; a converged run, none; a run stopped with nothing
+    missed, the targets themselves."""
+    n_walkers, n_draws = 8, 50
+    diag = {
+        "rhat": {"EI0": 1.02, "p": 1.0, "sigma": 1.0},
+        "rhat_walkers": {"EI0": 1.5, "p": 1.0, "sigma": 1.0},
+        "ess_bulk": {"EI0": 500.0, "p": 800.0, "sigma": 100.0},
+    }
+    res = sampler.SamplingResult(
+        chain=np.zeros((n_walkers, n_draws, 3)),
+        log_prob=np.zeros((n_walkers, n_draws)),
+        n_steps=2000,
+        burn=500,
+        tau=np.array([10.0, 20.0, 45.0]),
+        acceptance=0.3,
+        n_ensembles=2,
+        diagnostics=diag,
+        converged=False,
+    )
+    msg = sampler.convergence_message(res, 2000, 1000.0)
+    need = sampler.steps_needed(2000, 1.02, 500.0, 45.0, 1.01, 1000.0, 1.5)
+    assert need == 12000  # the walkers' R-hat decides: 2000 x (1.5^2 - 1) / (1.1^2 - 1) = 11905 (R-hat: 4020)
+    assert msg == (
+        "not converged within 2000 steps (R-hat max 1.0200 with the ensembles as chains, target 1.01; R-hat over "
+        "walkers 1.500, above 1.1: walkers disagree; bulk ESS of EI0 and p 500, target 1000; 2000 steps, fewer "
+        "than 50 autocorrelation times (2250)): treat the intervals as provisional and rerun with more steps (at "
+        "this run's rate, at least about 12000 in all)"
+    )
+    assert sampler.convergence_message(dataclasses.replace(res, converged=True), 2000, 1000.0) is None
+    met = {"rhat": dict.fromkeys(diag["rhat"], 1.0), "ess_bulk": dict.fromkeys(diag["rhat"], 1e4)}  # no walkers' R-hat
+    short = dataclasses.replace(res, diagnostics=met, tau=np.array([1.0, 1.0, 1.0]))
+    assert sampler.convergence_message(short, 2000, 1000.0) == (
+        "not converged within 2000 steps (R-hat target 1.01, bulk ESS target 1000): treat the intervals as "
+        "provisional and rerun with more steps (at this run's rate, at least about 3000 in all)"
+    )
+
+
+def test_stuck_walkers_are_read_over_the_second_half_and_counted_in_every_ensemble():
+    lp = np.zeros((100, 10))  # (steps, walkers)
+    lp[:50, 0] = -1000.0  # far below early on, with the others since: not stuck
+    lp[:, 7] = -1000.0
+    assert np.flatnonzero(sampler.stuck_walkers(lp, 2)).tolist() == [7]
+    # count_stuck: the result's (chains, draws), each ensemble's walkers contiguous; one stuck in each of two
+    chains = np.zeros((2 * 10, 100))
+    chains[3] = chains[15] = -1000.0
+    res = sampler.SamplingResult(np.zeros((20, 100, 2)), chains, 300, 200, np.ones(2), 0.3, n_ensembles=2)
+    assert sampler.count_stuck(res) == 2
+
+
+def test_the_start_ball_keeps_walkers_nudged_inside_a_half_space_and_within_a_few_thousandths():
+    class HalfSpace:
+        def log_prob(self, theta):
+            return 0.0 if theta[0] >= 0.0 else -np.inf
+
+    out = sampler._ball(np.zeros(3), 64, np.random.default_rng(1), HalfSpace())
+    assert np.all(out[:, 0] >= 0.0)
+    assert np.sum(np.all(out == 0.0, axis=1)) == 0  # half the nudges land inside: none falls back to the start
+    assert 5e-4 < np.std(out[:, 1:]) < 2e-3 and np.abs(out).max() < 1e-2  # N(0, 1e-3) per coordinate
