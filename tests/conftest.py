@@ -1,4 +1,5 @@
 import functools
+import logging
 import os
 import shutil
 from pathlib import Path
@@ -75,3 +76,16 @@ def twig_copy(twig_noisy, tmp_path) -> Path:
     dst = tmp_path / "copy"
     shutil.copytree(twig_noisy, dst)
     return dst
+
+
+@pytest.fixture()
+def bayesrod_warnings():
+    """The messages the package's logger emits at WARNING and above during a test, read by a handler on that
+    logger (a CLI test earlier in the same process stops its propagation to pytest's caplog)."""
+    seen = []
+    handler = logging.Handler(logging.WARNING)
+    handler.emit = lambda record: seen.append(record.getMessage())
+    logger = logging.getLogger("bayesrod")
+    logger.addHandler(handler)
+    yield seen
+    logger.removeHandler(handler)
