@@ -144,13 +144,19 @@ def test_batching_matches_single_solves():
             np.testing.assert_allclose(batch.force_N[i, j], one.force_N, rtol=1e-12, atol=1e-15)
 
 
-def test_shape_grid_matches_reference():
+@pytest.mark.parametrize("eff", [None, {"kappa0": 0.3}, {"c_base": 0.05}, {"tilt": 0.05}])
+def test_shape_grid_matches_reference(eff):
+    # with each effect the reference's centerline (what the SBC simulates frames from) is the fast one: its rest
+    # curvature and its base rotation under the moment f eta were untested (session 68)
     f, eta, p = 1.5, 0.5625, 0.43
-    res = contact_from_force_nd(f, eta, p, n_steps=64, keep_shape=True)
+    res = contact_from_force_nd(f, eta, p, eff, n_steps=64, keep_shape=True)
     sig = np.linspace(0, 1, 65)
-    ref = R.shape_at_force(f, eta, p, sig)
+    ref = R.shape_at_force(f, eta, p, sig, eff)
     np.testing.assert_allclose(res["grid"][:, 0], ref[0], atol=1e-8)
     np.testing.assert_allclose(res["grid"][:, 1], ref[1], atol=1e-8)
+    if eff:  # the effect moves the centerline by far more than the tolerance
+        plain = R.shape_at_force(f, eta, p, sig)
+        assert np.max(np.abs(ref[0] - plain[0])) > 1e-3
 
 
 def test_the_reference_shape_refuses_the_force_of_a_push_past_its_slip():
@@ -630,3 +636,13 @@ def test_forces_without_an_equilibrium_return_no_moment_and_no_shape(effects):
     assert np.all(np.isfinite(sol.base_moment_Nm[sol.found])) and np.all(np.isnan(sol.base_moment_Nm[~sol.found]))
     assert np.all(np.isfinite(sol.shape_xz_m[..., sol.found]))
     assert np.all(np.isnan(sol.shape_xz_m[..., ~sol.found]))
+
+
+def test_a_nearly_uniform_stem_is_solved_alike_by_the_reference():
+    """p = 0.005 (the default prior reaches p = 0): EI = (1 - s)^0.02, 1% below EI0 at s = 0.4; the reference's
+    taper must not fall back to a uniform stem."""
+    f, eta, p = 1.5, 0.5625, 0.005
+    ref, fast = R.solve_force(f, eta, p), contact_from_force_nd(f, eta, p)
+    assert ref["xi_c"] == pytest.approx(float(fast["xi_c"]), rel=1e-8)
+    uniform = R.solve_force(f, eta, 0.0)
+    assert abs(uniform["xi_c"] - ref["xi_c"]) > 1e-4 * ref["xi_c"]
