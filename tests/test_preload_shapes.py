@@ -81,6 +81,30 @@ def test_the_start_of_a_preloaded_fit_with_centerlines_reads_the_preloads_from_t
     np.testing.assert_allclose([nat[n] for n in lik.preload_names], DELTAS, atol=5e-4)
 
 
+def test_the_preload_profile_alone_finds_each_push_preload_and_refits_the_force_scale(case, monkeypatch):
+    """The profile's own answer, without the Nelder-Mead polish after it (switched off here): each preload on
+    its grid node nearest the truth, EI0 and the force noise refitted in closed form there (session 69: with
+    the profile switched off the test above still passed, the polish alone finding the preloads)."""
+    import bayesrod.inference.sampler as sampler
+
+    class Failed:
+        fun, x = np.inf, None
+
+    monkeypatch.setattr(sampler, "minimize", lambda *a, **k: Failed())
+    _, _, lik = case
+    prior = load_prior("woody")
+    prior = dataclasses.replace(prior, params={**prior.params, "p": ParamPrior("p", "uniform", TABLE["p_range"], "1")})
+    post = LogPosterior(lik, prior)
+    nat = {k: float(v[0]) for k, v in post.to_natural(find_start(post, np.random.default_rng(0))[None]).items()}
+    lo, hi = post.priors[post.names.index(lik.preload_names[0])].bounds()
+    grid = np.linspace(lo, hi, 81)  # the profile's grid: 81 nodes over the prior
+    found = np.array([nat[n] for n in lik.preload_names])
+    assert np.abs(found[:, None] - grid[None, :]).min(axis=1).max() < 1e-9 * hi  # each on a node
+    np.testing.assert_allclose(found, DELTAS, atol=0.6 * (grid[1] - grid[0]))
+    assert nat["EI0"] == pytest.approx(EI0, rel=0.03)
+    assert nat["sigma_force_N"] < 0.1
+
+
 @pytest.mark.slow
 def test_a_preloaded_push_with_centerlines_is_fitted_end_to_end():
     """bayesrod.fit(preload=True) on the whole simulated twig with its frames (about 4 min on 2 cores)."""
