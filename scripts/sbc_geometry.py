@@ -192,6 +192,18 @@ def reference_dataset(ds, case: dict):
     return replace(ds, pushes=tuple(pushes)), worst, n_fallback
 
 
+#: the sampler's budget of every replicate's fit (scripts/table_check_line.py stops the same fit at its start)
+FIT_BUDGET = {"target_ess": 400, "max_steps": 8000}
+
+
+def replicate_dataset(seed: int, case: dict, step_l: float | None = 0.01, cap_l: float | None = None) -> tuple:
+    """A replicate's data as its fit reads them: simulated (``step_l``, ``cap_l`` as :func:`replicate`; the
+    default step is the command line's), then re-solved by the reference solver; returns (dataset, the largest
+    |reference - fast| force [N], the samples the reference left to the fast solver)."""
+    ds = simulate_case(seed, case, frames=None if case["shapes"] else 2, step_l=step_l, cap_l=cap_l)
+    return reference_dataset(ds, case)
+
+
 def replicate(
     seed: int, cap_l: float | None = None, slip: bool = False, step_l: float | None = None, effects: tuple = EFFECTS
 ) -> dict:
@@ -203,18 +215,16 @@ def replicate(
     row = {"seed": seed, "length_m": case["length_m"], "n_heights": len(case["heights_m"])}
     row |= {"shapes": case["shapes"], "effect": case["effect"] or "none"}
     try:
-        ds = simulate_case(seed, case, frames=None if case["shapes"] else 2, step_l=step_l, cap_l=cap_l)
-        ds, worst, n_fallback = reference_dataset(ds, case)
+        ds, worst, n_fallback = replicate_dataset(seed, case, step_l=step_l, cap_l=cap_l)
         res = fit_for_calibration(
             ds,
             PRIOR,
             seed=seed,
             use_shapes=case["shapes"],
-            target_ess=400,
             n_rank=N_RANK,
             effects=(case["effect"],) if case["effect"] else (),
-            max_steps=8000,
             slip=slip,
+            **FIT_BUDGET,
         )
     except Exception as e:  # a failed replicate is recorded (a row without numbers), never dropped
         print(f"seed {seed}: {type(e).__name__}: {e}", file=sys.stderr)

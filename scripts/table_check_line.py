@@ -30,8 +30,7 @@ class _Stop(Exception):
 def fit_start(seed: int, effects: tuple) -> tuple:
     """The fit's likelihood, posterior and start for SBC replicate ``seed`` (the fit stopped before its zoom)."""
     case = S.draw_case(seed, (None, *effects))
-    ds = S.simulate_case(seed, case, frames=None if case["shapes"] else 2)
-    ds, _, _ = S.reference_dataset(ds, case)
+    ds, _, _ = S.replicate_dataset(seed, case)
     seen = {}
 
     def stop(spec, pr, eff, config, post, theta0):
@@ -48,8 +47,7 @@ def fit_start(seed: int, effects: tuple) -> tuple:
             seed=seed,
             progress=False,
             use_shapes=case["shapes"],
-            target_ess=400,
-            max_steps=8000,
+            **S.FIT_BUDGET,
         )
     except _Stop:
         pass

@@ -89,3 +89,15 @@ def bayesrod_warnings():
     logger.addHandler(handler)
     yield seen
     logger.removeHandler(handler)
+
+
+@pytest.fixture()
+def no_polish(monkeypatch):
+    """The sampler's start without its Nelder-Mead polish (``minimize`` returning no finite value): what
+    ``find_start`` returns is then its best candidate, after the preload profile."""
+    import bayesrod.inference.sampler as sampler
+
+    class Failed:
+        fun, x = float("inf"), None
+
+    monkeypatch.setattr(sampler, "minimize", lambda *a, **k: Failed())

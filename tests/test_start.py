@@ -14,8 +14,7 @@ import pytest
 from scipy.optimize import minimize
 
 import bayesrod
-import bayesrod.inference.sampler as sampler
-from bayesrod.inference.likelihood import LogPosterior, build_likelihood
+from bayesrod.inference.likelihood import LogPosterior, build_likelihood, force_scale_fit
 from bayesrod.inference.priors import load_prior
 from bayesrod.inference.sampler import find_start
 
@@ -51,8 +50,8 @@ def test_the_start_is_the_posterior_mode_and_beats_every_candidate(twig):
     candidates = [float(twig.log_prob(twig.to_sample(pt)[0])) for pt in rec.points]
     assert len(candidates) == twig.likelihood.p_grid.size - 2  # one per inner node of the p grid
     assert lp >= max(candidates)
-    # an independent optimiser from the start: no better point within reach (a start left unpolished, or
-    # polished with a few hundred evaluations, reads 1-100 nats below)
+    # an independent optimiser from the start: no better point within reach (measured in session 69: 1.8e-12
+    # nats; the start unpolished 216 nats below, polished to xatol = fatol = 1e-2 1.1 below)
     ref = minimize(lambda t: -twig.log_prob(t), theta, method="Powell", options={"xtol": 1e-8, "ftol": 1e-12})
     assert -ref.fun - lp < 0.05
 
@@ -69,16 +68,10 @@ def test_the_two_stage_estimate_is_tried_clipped_to_the_inner_grid(twig):
     assert len(rec.points) == g.size - 2  # a failed two-stage estimate adds no candidate
 
 
-def test_candidates_start_at_a_stiff_base_and_the_closed_form_scale_and_noise(twig, monkeypatch):
+def test_candidates_start_at_a_stiff_base_and_the_closed_form_scale_and_noise(twig, no_polish):
     """Before the polish (here switched off: Nelder-Mead returning no finite value), the best candidate: EI0
     the forces' least-squares scale at its p, the force noise their RMS residual, the centerline sd scale
     their RMS offset over the reported sd, the base spring at its prior's 99% quantile (stiff)."""
-    from bayesrod.inference.likelihood import force_scale_fit
-
-    class Failed:
-        fun, x = np.inf, None
-
-    monkeypatch.setattr(sampler, "minimize", lambda *a, **k: Failed())
     lik = twig.likelihood
     nat = {k: float(v[0]) for k, v in twig.to_natural(find_start(twig, np.random.default_rng(0))[None]).items()}
     EI0, rms = force_scale_fit(lik, nat["p"])
