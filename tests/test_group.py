@@ -454,13 +454,79 @@ def test_at_one_height_the_soft_bases_are_sampled_relative_to_the_stem(cut_pair)
     assert 1.0 / float(k_x(H_REF, moved["EI0"][0], 0.9, L)) + cb * H_REF**2 != pytest.approx(ref, rel=0.01)
 
 
+def _sampler_returns(natural: dict, n: int, monkeypatch) -> dict:
+    """Replace fit_group's sampler by one that returns the draws ``natural`` (n per parameter, 4 walkers) with
+    R-hat 1.001, ESS 5000, 2000 steps of which 1000 burn-in (``seen["converged"] = False`` makes it report a spent
+    budget), and its start by the first draw; returns ``seen``, where it records the posterior and its arguments."""
+    import bayesrod.api.group as api_group
+    from bayesrod.inference.sampler import SamplingResult
+
+    seen = {}
+
+    def run(post, theta0, **kw):
+        seen["kw"], seen["theta0"] = kw, theta0
+        chain = post.to_sample({k: natural[k] for k in post.names}).reshape(4, n // 4, post.ndim)
+        diag = {"rhat": dict.fromkeys(post.names, 1.001), "ess_bulk": dict.fromkeys(post.names, 5000.0)}
+        diag["rhat_walkers"] = dict.fromkeys(post.names, 1.02)
+        seen["post"] = post
+        ok = seen.get("converged", True)
+        return SamplingResult(chain, np.zeros((4, n // 4)), 2000, 1000, np.ones(post.ndim), 0.3, 4, diag, ok, (0,))
+
+    monkeypatch.setattr(api_group, "run_ensembles", run)
+    monkeypatch.setattr(
+        api_group, "start_point", lambda post: post.to_sample({k: natural[k][:1] for k in post.names})[0]
+    )
+    return seen
+
+
+def test_a_group_of_three_conditions_contrasts_every_ordered_pair_and_spreads_three_correlations(monkeypatch):
+    """Three conditions (intact, one and two whorls cut): six contrasts, one per ordered pair (b minus a, P(b
+    softer)), in the order of the conditions; the pooled correlations' spread is the sd of three Fisher z."""
+    dss = bayesrod.simulate_group(
+        "twig",
+        conditions={"intact": math.inf, "cut1": _kb(0.88), "cut2": _kb(0.64)},
+        heights_m=[0.55],
+        seed=3,
+        stem_id="s3",
+        **QUIET,
+    )
+    rng = np.random.default_rng(8)
+    n = 4000
+    EI = EI0 * np.exp(0.02 * rng.standard_normal(n))
+    C = {
+        "intact": np.zeros(n),
+        "cut1": 0.004 + 0.001 * rng.standard_normal(n),
+        "cut2": 0.02 + 0.002 * rng.standard_normal(n),
+    }
+    C["cut1"][: n // 10] = 0.0  # a tenth of cut1's draws a clamp: ties with intact
+    rho = {"intact": 0.7, "cut1": 0.8, "cut2": 0.9}
+    natural = {"EI0": EI, "p": P + 0.02 * rng.standard_normal(n)}
+    for c in C:
+        natural[f"z_base__{c}"] = _z_base(C[c], EI)
+        natural[f"sigma_force_N__{c}"] = 0.02 + 0.001 * rng.standard_normal(n)
+        natural[f"rho_force__{c}"] = rho[c] + 0.01 * rng.standard_normal(n)
+    _sampler_returns(natural, n, monkeypatch)
+    s = bayesrod.fit_group(dss, prior="woody", progress=False, sharing=False).doc
+    assert s["conditions_order"] == ["intact", "cut1", "cut2"]
+    want = [(a, b) for a in C for b in C if a != b]
+    assert [(k["a"], k["b"]) for k in s["contrasts"]] == want
+    for k, (a, b) in zip(s["contrasts"], want, strict=True):
+        q05, q50, q95 = np.quantile(C[b] - C[a], [0.05, 0.5, 0.95])
+        got = k["compliance_difference_rad_per_Nm"]
+        assert [got["q05"], got["median"], got["q95"]] == pytest.approx([q05, q50, q95], rel=1e-9, abs=1e-15)
+        assert k["prob_b_softer"] == pytest.approx(np.mean(C[b] > C[a]))
+    assert s["contrasts"][0]["prob_b_softer"] == pytest.approx(0.9)  # cut1 softer than intact but where it is a clamp
+    medians = [np.median(natural[f"rho_force__{c}"]) for c in C]
+    spread = s["pooled"]["rho_force"]["conditions_spread_fisher_z"]
+    assert spread == pytest.approx(np.std(np.arctanh(medians), ddof=1), rel=1e-12)
+
+
 def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     """Every number of a group summary a user reads, from draws set here (the sampler replaced): the shared EI0
     and p, each condition's base compliance C (zero on the clamp's draws) and its probability of a clamp,
     k_theta at the pushed height with the base spring 1/C in series, the noise, and each ordered contrast's
     difference (b minus a) and P(b softer), against the same quantities computed here from the draws."""
     import bayesrod.api.group as api_group
-    from bayesrod.inference.sampler import SamplingResult
     from bayesrod.physics import k_theta
 
     rng = np.random.default_rng(5)
@@ -478,21 +544,7 @@ def test_fit_group_summarises_known_draws(cut_pair, monkeypatch):
     natural = {"EI0": EI, "p": p, "z_base__a": z(C_a), "z_base__b": z(C_b)}
     for c in "ab":
         natural[f"sigma_force_N__{c}"], natural[f"rho_force__{c}"] = sig[c], rho[c]
-    seen = {}
-
-    def run(post, theta0, **kw):
-        seen["kw"], seen["theta0"] = kw, theta0
-        chain = post.to_sample({k: natural[k] for k in post.names}).reshape(4, n // 4, post.ndim)
-        diag = {"rhat": dict.fromkeys(post.names, 1.001), "ess_bulk": dict.fromkeys(post.names, 5000.0)}
-        diag["rhat_walkers"] = dict.fromkeys(post.names, 1.02)
-        seen["post"] = post
-        ok = seen.get("converged", True)
-        return SamplingResult(chain, np.zeros((4, n // 4)), 2000, 1000, np.ones(post.ndim), 0.3, 4, diag, ok, (0,))
-
-    monkeypatch.setattr(api_group, "run_ensembles", run)
-    monkeypatch.setattr(
-        api_group, "start_point", lambda post: post.to_sample({k: natural[k][:1] for k in post.names})[0]
-    )
+    seen = _sampler_returns(natural, n, monkeypatch)
     fit = bayesrod.fit_group(list(cut_pair), prior="woody", progress=False, sharing=False)
     s = fit.doc
     assert seen["post"].relative_bases  # the draws went through the one-height coordinates and back
