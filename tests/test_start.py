@@ -3,8 +3,8 @@
 Every fit and SBC replicate starts here, so a wrong line of it shows only as a slower or stuck run, not as a
 failing fit test (session 69: ``find_start`` sat outside every mutmut target's tests). Checked here directly:
 the start is the mode an independent optimiser finds, better than every candidate it began from; the seed's
-two-stage estimate is tried as a candidate; an effect starts at its neutral value (a stiff base) before the
-polish; a posterior with no finite point says so.
+two-stage estimate is tried as a candidate; the candidates hold an effect at its neutral value (a stiff base)
+and the effect's profile over its axis finds a strong one they miss; a posterior with no finite point says so.
 """
 
 from __future__ import annotations
@@ -29,16 +29,20 @@ def twig():
 
 
 class _Recorder:
-    """The posterior, recording every natural point ``find_start`` maps to the sampler's coordinates."""
+    """The posterior, recording every natural point ``find_start`` maps to the sampler's coordinates: one at a
+    time (the candidates) in ``points``, batches (the effect's and the preloads' profiles) in ``rows``."""
 
     def __init__(self, post):
-        self.post, self.points = post, []
+        self.post, self.points, self.rows = post, [], []
 
     def __getattr__(self, name):
         return getattr(self.post, name)
 
     def to_sample(self, nat):
-        self.points.append({k: float(np.atleast_1d(v)[0]) for k, v in nat.items()})
+        if all(np.size(v) == 1 for v in nat.values()):
+            self.points.append({k: float(np.atleast_1d(v)[0]) for k, v in nat.items()})
+        else:
+            self.rows.append({k: np.array(v, float) for k, v in nat.items()})
         return self.post.to_sample(nat)
 
 
@@ -81,6 +85,47 @@ def test_candidates_start_at_a_stiff_base_and_the_closed_form_scale_and_noise(tw
     assert nat["shape_sd_scale"] == pytest.approx(scale, rel=1e-9)
     q99 = twig.priors[twig.names.index("base_compliance")].quantile(0.99)
     assert nat["base_compliance"] == pytest.approx(q99, rel=1e-9)
+
+
+@pytest.fixture(scope="module")
+def soft_base():
+    """Forces only of a twig on a soft base spring (c = EI0 / (k L) = 1: u = c / (1 + c) = 0.5), three heights:
+    its posterior with the base spring fitted, and u of the truth."""
+    ds = bayesrod.simulate(
+        "twig", seed=12, effects={"base_compliance": 2.63 / 0.8}, config_overrides={"n_frames_engaged": 2}
+    )
+    prior = load_prior("woody")
+    lik = build_likelihood(ds, prior, ("base_compliance",), use_shapes=False, n_effect=7)
+    return LogPosterior(lik, prior), 0.5
+
+
+def test_the_effect_profile_finds_a_soft_base_every_neutral_candidate_misses(soft_base, no_polish):
+    """The candidates hold the base stiff (its prior's 99% quantile); the effect's profile, p on the inner p
+    nodes by u at 25 points inside the axis, EI0 and the force noise in closed form at each, finds the soft base
+    (u 0.5) and starts there, far above every candidate (polish off: the profile's own point)."""
+    post, u_true = soft_base
+    lik = post.likelihood
+    rec = _Recorder(post)
+    theta = find_start(rec, np.random.default_rng(0))
+    q99 = post.priors[post.names.index("base_compliance")].quantile(0.99)
+    assert len(rec.points) == lik.p_grid.size - 2
+    assert all(pt["base_compliance"] == pytest.approx(q99, rel=1e-12) for pt in rec.points)
+    best_candidate = max(float(post.log_prob(post.to_sample(pt)[0])) for pt in rec.points)
+    lp = float(post.log_prob(theta))
+    assert lp > best_candidate + 50.0  # measured: 376.7 against 106.7 (polished without the profile: 128.7)
+    # the profile: one batch per inner p node, each the axis's 25 inner points with EI0 and noise in closed form
+    assert len(rec.rows) == lik.p_grid.size - 2
+    us = np.linspace(lik.axis.grid[0], lik.axis.grid[-1], 27)[1:-1]
+    for rows, p in zip(rec.rows, lik.p_grid[1:-1], strict=True):
+        np.testing.assert_allclose(lik.effect_coordinate(rows), us, rtol=1e-9)
+        assert np.all(rows["p"] == p)
+    nat = {k: float(v[0]) for k, v in post.to_natural(theta[None]).items()}
+    u0 = float(lik.effect_coordinate(nat)[0])
+    assert np.min(np.abs(us - u0)) < 1e-9 and abs(u0 - u_true) < 0.1
+    g = lik.predict_nd_force(np.array([nat["p"]]), np.array([u0])) / lik.L**2
+    EI0 = float(g[0] @ lik.F_obs / (g[0] @ g[0]))
+    rms = float(np.sqrt(np.mean((lik.F_obs - EI0 * g[0]) ** 2)))
+    assert nat["EI0"] == pytest.approx(EI0, rel=1e-9) and nat["sigma_force_N"] == pytest.approx(rms, rel=1e-9)
 
 
 def test_a_posterior_without_a_finite_point_on_the_grid_is_an_error(twig, monkeypatch):
