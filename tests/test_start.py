@@ -127,6 +127,15 @@ def test_the_effect_profile_finds_a_soft_base_every_neutral_candidate_misses(sof
     rms = float(np.sqrt(np.mean((lik.F_obs - EI0 * g[0]) ** 2)))
     assert nat["EI0"] == pytest.approx(EI0, rel=1e-9) and nat["sigma_force_N"] == pytest.approx(rms, rel=1e-9)
 
+    # a point of the profile without a density (NaN) costs only that point, not its row of u
+    def first_of_each_batch_nan(t):
+        lp = post.log_prob(t)
+        return np.where(np.arange(len(t)) == 0, np.nan, lp) if np.ndim(t) == 2 else lp
+
+    holed = _Recorder(post)
+    holed.log_prob = first_of_each_batch_nan
+    np.testing.assert_array_equal(find_start(holed, np.random.default_rng(0)), theta)
+
 
 def test_a_posterior_without_a_finite_point_on_the_grid_is_an_error(twig, monkeypatch):
     monkeypatch.setattr(twig, "log_prob", lambda theta: -np.inf)
