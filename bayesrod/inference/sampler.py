@@ -131,6 +131,16 @@ def find_start(post, rng: np.random.Generator, init: dict | None = None) -> np.n
     return res.x if np.isfinite(res.fun) and -res.fun >= best_lp else best
 
 
+def _scale_and_noise(g: NDArray, F: NDArray, fallback: float) -> tuple[NDArray, NDArray]:
+    """EI0 [N m^2] and the force noise [N] (G,) that fit forces ``F`` (N,) [N] best for unit-EI0 predictions
+    ``g`` (G, N): the least-squares scale (``fallback`` where a row predicts no force), floored at 1e-6, and
+    the RMS residual at it, floored at 1e-4 N."""
+    EI0, _ = scale_fit_rows(g, F)
+    EI0 = np.maximum(np.where(np.isfinite(EI0), EI0, fallback), 1e-6)
+    _, rms = scale_fit_rows(g, F, EI0)
+    return EI0, np.maximum(rms, 1e-4)
+
+
 def _shape_noise(lik, p: NDArray, u: NDArray | None = None) -> dict:
     """The centerline noise that fits the shapes at taper exponents ``p`` (G,) (and effect coordinates ``u``):
     the RMS offset of every point, as ``sigma_shape_m`` [m] or, where the points carry their own sd, as
@@ -147,10 +157,10 @@ def _profile_effect(post, theta: NDArray, lp: float, n_grid: int = 25) -> tuple:
     scale of EI0); the best point, where it beats ``lp``.
 
     :func:`find_start`'s p candidates hold every effect at its neutral value (no friction, a stiff base), where
-    a strong one leaves the plain rod no fit: on friction SBC seed 7 (mu 0.51, three heights, centerlines) the
-    start sat in the mode where the forces are all noise (force noise 3.6 N for 0.054, EI0 6.4 for 2.7, mu
-    1e-5), the table check that decides the effect axis's zoom read there, and the fit's tables were 6.6
-    sigma off at its median (docs/validation.md, "Session 69").
+    a strong one leaves the plain rod no fit: on a twig on a soft base (u 0.5, forces only) the polished start
+    sat 248 nats below the mode (EI0 0.46 for 2.63, p 0; docs/validation.md, "Session 70"); on friction SBC
+    seed 7 (mu 0.51, three heights, centerlines) in the mode where the forces are all noise (force noise 3.6 N
+    for 0.054, mu 1e-5), where the table check that decides the effect axis's zoom then read ("Session 69").
     """
     lik = post.likelihood
     nat = {k: float(v[0]) for k, v in post.to_natural(theta[None]).items()}
@@ -161,10 +171,7 @@ def _profile_effect(post, theta: NDArray, lp: float, n_grid: int = 25) -> tuple:
         rows["p"] = np.full(n_grid, p)
         if lik.n_force:
             g = lik.predict_nd_force(rows["p"], us) / lik.L**2
-            EI0, _ = scale_fit_rows(g, lik.F_obs)
-            rows["EI0"] = np.maximum(np.where(np.isfinite(EI0), EI0, nat["EI0"]), 1e-6)
-            _, rms = scale_fit_rows(g, lik.F_obs, rows["EI0"])
-            rows["sigma_force_N"] = np.maximum(rms, 1e-4)
+            rows["EI0"], rows["sigma_force_N"] = _scale_and_noise(g, lik.F_obs, nat["EI0"])
         if lik.n_points:
             rows.update(_shape_noise(lik, rows["p"], us))
         rows[lik.axis.name] = lik.axis.value(us, rows["EI0"], lik.L)
@@ -197,10 +204,7 @@ def _profile_preloads(post, theta: np.ndarray, lp: float, n_grid: int = 81, swee
             if lik.n_force:
                 pre = lik._per_push(rows, lik.preload_names, n_grid)
                 g = lik.predict_nd_force_preloaded(np.full(n_grid, nat["p"]), pre) / lik.L**2  # (G, N)
-                EI0, _ = scale_fit_rows(g, lik.F_obs)
-                rows["EI0"] = np.maximum(np.where(np.isfinite(EI0), EI0, nat["EI0"]), 1e-6)
-                _, rms = scale_fit_rows(g, lik.F_obs, rows["EI0"])
-                rows["sigma_force_N"] = np.maximum(rms, 1e-4)
+                rows["EI0"], rows["sigma_force_N"] = _scale_and_noise(g, lik.F_obs, nat["EI0"])
             lps = np.asarray(post.log_prob(post.to_sample(rows)))
             k = int(np.argmax(lps))
             if lps[k] > lp:
