@@ -2,6 +2,7 @@
 
     python scripts/start_profile.py                 # the soft base (about 1 min)
     python scripts/start_profile.py --friction      # and the friction case (its 9-node tables: about 20 min)
+    python scripts/start_profile.py --base-seed 11  # and a base-compliance case of scripts/sbc_geometry.py
 
 For each case: the likelihood as a fit builds it, then ``find_start`` with and without
 ``_profile_effect`` (replaced by the identity) and with and without its Nelder-Mead polish (``minimize``
@@ -47,6 +48,13 @@ def starts(post) -> None:
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--friction", action="store_true", help="also the friction case (about 20 min)")
+    ap.add_argument(
+        "--base-seed",
+        type=int,
+        nargs="*",
+        default=[],
+        help="base-compliance SBC seeds (1 mod 5), fitted as scripts/base_spring_mixing.py fits them",
+    )
     args = ap.parse_args(argv)
     prior = load_prior("woody")
     print("twig on a soft base (c = 1, u 0.5), seed 12, forces only, base spring on 7 nodes:")
@@ -54,6 +62,19 @@ def main(argv=None) -> None:
         "twig", seed=12, effects={"base_compliance": 2.63 / 0.8}, config_overrides={"n_frames_engaged": 2}
     )
     starts(LogPosterior(build_likelihood(ds, prior, ("base_compliance",), use_shapes=False, n_effect=7), prior))
+    for seed in args.base_seed:
+        import sbc_geometry as S
+
+        case = S.draw_case(seed, (None, "base_compliance", "rest_curvature", "force_offset", "base_tilt"))
+        if case["effect"] != "base_compliance":
+            ap.error(f"--base-seed: expected a base-compliance case (1 mod 5), got {case['effect']} for {seed}")
+        print(
+            f"SBC seed {seed}: EI0 {case['EI0']:.4g}, p {case['p']:.4g}, k {case['effect_value']:.4g} N m/rad, "
+            f"{len(case['heights_m'])} heights, forces only (the SBC's prior):"
+        )
+        ds = S.simulate_case(seed, case, frames=2)
+        sbc_prior = load_prior(S.PRIOR)
+        starts(LogPosterior(build_likelihood(ds, sbc_prior, ("base_compliance",), use_shapes=False), sbc_prior))
     if args.friction:
         print("twig with contact friction 0.5, seed 1, forces only (sd 0.05 N), friction on 9 nodes:")
         noise = NoiseModel(force_sd_N=0.05, shape_sd_m=0.0015, shape_sd_reported_m=0.0015)
