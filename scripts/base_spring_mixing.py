@@ -32,7 +32,7 @@ def main(argv=None) -> None:
     ap.add_argument("--target-ess", type=float, default=400.0)
     ap.add_argument("--fit-seed", type=int, default=None, help="the sampler's seed (default: the case's + 1000)")
     a = ap.parse_args(argv)
-    case = S.draw_case(a.seed, (None, "base_compliance", "rest_curvature", "force_offset", "base_tilt"))
+    case = S.draw_case(a.seed, S.EFFECTS_BEFORE_FRICTION)
     if case["effect"] != "base_compliance":
         ap.error(f"--seed: expected a base-compliance case (seed = 1 mod 5), got {case['effect']} for seed {a.seed}")
     if a.coordinates == "log_k":

@@ -59,6 +59,9 @@ from bayesrod.physics import reference as R  # noqa: E402
 
 PRIOR = str(Path(__file__).with_name("sbc_prior.json"))
 EFFECTS = (None, "base_compliance", "rest_curvature", "force_offset", "base_tilt", "contact_friction")
+#: the cycle before contact friction joined it: the base-spring and table studies of docs/validation.md draw their
+#: cases from it (its base-compliance seeds are 1 mod 5)
+EFFECTS_BEFORE_FRICTION = EFFECTS[:-1]
 #: every effect ``--effects`` accepts: the default cycle (EFFECTS, kept so earlier seeds draw the same cases) and yield
 ALL_EFFECTS = EFFECTS + ("yield",)
 PARAMS = ("EI0", "p", "sigma_force_N", "effect")

@@ -35,7 +35,7 @@ from bayesrod.inference.likelihood import build_likelihood  # noqa: E402
 from bayesrod.inference.priors import load_prior  # noqa: E402
 
 #: the effects the SBC runs of docs/validation.md cycled through (its --effects, after 'none')
-EFFECTS = (None, "base_compliance", "rest_curvature", "force_offset", "base_tilt")
+EFFECTS = S.EFFECTS_BEFORE_FRICTION
 
 
 def check(seed: int, prior) -> dict:

@@ -1,8 +1,11 @@
 """The sampler's start with and without the effect's profile (issue 21, docs/validation.md "Session 70").
 
-    python scripts/start_profile.py                 # the soft base (about 1 min)
-    python scripts/start_profile.py --friction      # and the friction case (its 9-node tables: about 20 min)
+    python scripts/start_profile.py                 # the soft base
     python scripts/start_profile.py --base-seed 11  # and a base-compliance case of scripts/sbc_geometry.py
+    python scripts/start_profile.py --friction      # and the friction case
+
+Measured (session 70): the soft base with ``--base-seed 11`` 64 s on an otherwise idle core; the friction
+case's 9-node tables took 21 min on a busy core.
 
 For each case: the likelihood as a fit builds it, then ``find_start`` with and without
 ``_profile_effect`` (replaced by the identity) and with and without its Nelder-Mead polish (``minimize``
@@ -15,6 +18,7 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
+import sbc_geometry as S
 
 import bayesrod
 import bayesrod.inference.sampler as sampler
@@ -47,7 +51,9 @@ def starts(post) -> None:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--friction", action="store_true", help="also the friction case (about 20 min)")
+    ap.add_argument(
+        "--friction", action="store_true", help="also the friction case (its 9-node friction tables: 21 min measured)"
+    )
     ap.add_argument(
         "--base-seed",
         type=int,
@@ -63,9 +69,7 @@ def main(argv=None) -> None:
     )
     starts(LogPosterior(build_likelihood(ds, prior, ("base_compliance",), use_shapes=False, n_effect=7), prior))
     for seed in args.base_seed:
-        import sbc_geometry as S
-
-        case = S.draw_case(seed, (None, "base_compliance", "rest_curvature", "force_offset", "base_tilt"))
+        case = S.draw_case(seed, S.EFFECTS_BEFORE_FRICTION)
         if case["effect"] != "base_compliance":
             ap.error(f"--base-seed: expected a base-compliance case (1 mod 5), got {case['effect']} for {seed}")
         print(
