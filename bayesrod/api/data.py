@@ -111,7 +111,7 @@ def simulate(
     config_overrides : mapping or None
         Further :class:`~bayesrod.dataset.simulate.SimConfig` fields (samples per push, frames, ...).
     """
-    from ..dataset.simulate import WIRE_LENGTH, SimConfig, sensor_range
+    from ..dataset.simulate import WIRE_LENGTH, SimConfig, sensor_range, truth_record
     from ..dataset.simulate import simulate as simulate_pushes
     from ..physics.lumped import wire_dx_from_elongation
     from ._common import progress_enabled
@@ -174,18 +174,7 @@ def simulate(
                 )
             )
         pushes.append(Push(sp.id, float(sp.height_m), force, 1, tuple(frames)))
-    truth = {
-        "EI0": cfg.EI0,
-        "p": cfg.p,
-        "effects": cfg.effects.to_mapping(),
-        "noise": {
-            "force_sd_N": cfg.noise.force_sd_N,
-            "shape_sd_m": cfg.noise.shape_sd_m,
-            # as the dataset's files record it (dataset/simulate.py): the AR(1) correlation where there is one
-            **({"force_rho": cfg.noise.force_rho} if cfg.noise.force_rho else {}),
-        },
-        "seed": cfg.seed,
-    }
+    truth = truth_record(cfg)  # as the dataset's files record it
     pushes = tuple(pushes)
     return SimulatedDataset(
         specimen=cfg.specimen,

@@ -375,6 +375,16 @@ def sensor_range(cfg: SimConfig, pushes: list[SimulatedPush]) -> tuple[float, fl
     return (0.05, top if top is not None else float(10 ** np.ceil(np.log10(peak))))
 
 
+def truth_record(cfg: SimConfig) -> dict:
+    """What a simulated dataset records of its truth (specimen.json ``truth``; the API's ``extra["truth"]``):
+    EI0 [N m^2], p, the effects, the noise (the AR(1) correlation ``force_rho`` only where there is one) and the
+    seed."""
+    noise = {"force_sd_N": cfg.noise.force_sd_N, "shape_sd_m": cfg.noise.shape_sd_m}
+    if cfg.noise.force_rho:
+        noise["force_rho"] = cfg.noise.force_rho
+    return {"EI0": cfg.EI0, "p": cfg.p, "effects": cfg.effects.to_mapping(), "noise": noise, "seed": cfg.seed}
+
+
 def write_simulated(
     cfg: SimConfig,
     pushes: list[SimulatedPush],
@@ -397,18 +407,7 @@ def write_simulated(
         "length_m": cfg.length_m,
         "sensor": {"type": "wire", "wire_length_m": WIRE_LENGTH, "force_range_N": list(sensor_range(cfg, pushes))},
         "pushes": [],
-        "truth": {
-            "EI0": cfg.EI0,
-            "p": cfg.p,
-            "effects": cfg.effects.to_mapping(),
-            "noise": {
-                "force_sd_N": cfg.noise.force_sd_N,
-                "shape_sd_m": cfg.noise.shape_sd_m,
-                **({"force_rho": cfg.noise.force_rho} if cfg.noise.force_rho else {}),
-            },
-            "seed": cfg.seed,
-            "generator": f"bayesrod simulate {__version__}",
-        },
+        "truth": {**truth_record(cfg), "generator": f"bayesrod simulate {__version__}"},
     }
     if frames:  # the drawn stem's diameter and the Young's modulus it implies (E0 = 64 EI0 / (pi d0^4))
         d0, q = cfg.rendered_diameter
