@@ -8,7 +8,8 @@ where its start is a stiff spring (u <= 0.5), else in log k (bayesrod.inference.
 ``settle_base_coordinates``; docs/inference.md "Sampling"): ``--coordinates fit``. ``u`` and ``log_k``
 force one or the other: the same posterior, other coordinates. The case is scripts/sbc_geometry.py's
 (``draw_case``: stem, heights, effect value, noise; forces only, the fixed robot step of 0.01 L) on the
-simulator's data; the script prints the convergence and the 5/50/95% quantiles (docs/validation.md,
+simulator's data; the script prints the convergence (with the steps the sampler took: the bulk ESS grows with
+them, so compare ESS per step) and the 5/50/95% quantiles (docs/validation.md,
 "Sampling a base spring").
 """
 
@@ -61,10 +62,11 @@ def main(argv=None) -> None:
         target_ess=a.target_ess,
         max_steps=a.max_steps,
     )
-    c = post.doc["convergence"]
+    c, smp = post.doc["convergence"], post.doc["sampler"]
     print(
         f"{a.coordinates}: {time.perf_counter() - t:.0f} s, R-hat max {c['rhat_max']:.4f}, "
-        f"bulk ESS min {c['ess_bulk_min']:.0f}, converged {c['converged']}"
+        f"bulk ESS min {c['ess_bulk_min']:.0f}, converged {c['converged']}; {smp['steps']} steps "
+        f"(burn-in {smp['burn_in']}), autocorrelation time by ensemble {np.round(smp['autocorr_time'], 1)}"
     )
     for k, v in post.samples.items():
         print(f"  {k}: 5/50/95% {np.round(np.quantile(v, [0.05, 0.5, 0.95]), 5)}")
