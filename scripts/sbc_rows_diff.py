@@ -6,8 +6,9 @@ Reads two CSVs written by ``scripts/sbc_geometry.py`` (the same seeds fitted by 
 prints, for the seeds in both whose effect is fitted in each, every coverage that flipped and every rank that moved
 by more than ``--rank-tol`` (of 99 posterior draws), then per parameter the count covered in each file and the
 median |rank change| over the seeds refitted (rows where any parameter's median differs between the files;
-identical rows, e.g. carried over from the old file, are counted apart). A rank among 99 draws scatters by
-about 5 between two runs of the same posterior (binomial), so moves of 10 are not yet evidence.
+identical rows, e.g. carried over from the old file, are counted apart). Two runs of the same posterior move a
+rank among 99 independent draws by sd sqrt(2 x 99 F (1 - F)) (F the truth's posterior CDF): 7 at the centre, 4 at
+F = 0.1, so moves of 10 are not yet evidence.
 """
 
 from __future__ import annotations
