@@ -271,3 +271,26 @@ def test_step_back_moves_each_failed_displacement_back_by_1e6_L_then_4x_more_per
     np.testing.assert_array_equal(sol > limit, [False, False, True, True])
     assert len(calls) == 13  # the first solve and 12 tries
     assert all(c[0] == 0.10 for c in calls)
+
+
+def test_a_simulated_dataset_records_one_truth_on_disk_and_in_memory(twig_noisy):
+    """specimen.json's ``truth`` (``bayesrod simulate``) and the in-memory dataset's (``bayesrod.simulate``) are the
+    same record: the preset's EI0 and p, its effects, its noise (the AR(1) correlation only where there is one)
+    and the seed; the file adds the generator."""
+    import bayesrod
+    from bayesrod.dataset.simulate import SimConfig
+
+    written = json.loads((twig_noisy / "specimen.json").read_text())["truth"]
+    assert written.pop("generator").startswith("bayesrod simulate ")
+    cfg = SimConfig.from_preset("twig", seed=2)
+    mem = bayesrod.simulate("twig", seed=2).extra["truth"]
+    assert written == json.loads(json.dumps(mem))
+    assert mem == {
+        "EI0": cfg.EI0,
+        "p": cfg.p,
+        "effects": {},
+        "noise": {"force_sd_N": cfg.noise.force_sd_N, "shape_sd_m": cfg.noise.shape_sd_m},
+        "seed": 2,
+    }
+    rho = bayesrod.simulate("twig", seed=3, heights_m=[0.5], noise_rho=0.5).extra["truth"]
+    assert rho["noise"]["force_rho"] == 0.5 and rho["seed"] == 3
