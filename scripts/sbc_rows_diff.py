@@ -17,7 +17,7 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from sbc_geometry import PARAMS
+from sbc_geometry import PARAMS, _num
 
 from bayesrod.dataset.io import read_rows
 
@@ -28,10 +28,7 @@ def _covered(r: dict, k: str) -> bool | None:
 
 
 def _rank(r: dict, k: str) -> float:
-    try:
-        return float(r.get(f"{k}_rank", "nan"))
-    except ValueError:
-        return float("nan")
+    return _num(r.get(f"{k}_rank"))
 
 
 def diff(old: list[dict], new: list[dict], rank_tol: float = 10.0) -> str:
