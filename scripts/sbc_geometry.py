@@ -22,7 +22,8 @@ fast path the fit uses) and the simulator's noise is added back to the reference
 the truth among 99 thinned posterior draws and whether the 90% interval covers it, and from the fit's own
 ``table_check`` the largest shift its tables would cause at the posterior median (``table_shift_sd``, Laplace
 sds; ``table_shift_worst``, the parameter it moves most) and whether it narrowed its effect axis
-(``effect_axis_zoom``: none, kept or refused), decided by the check at the sampler's start
+and its p grid (``effect_axis_zoom``, ``p_axis_zoom``: none, kept or refused), decided by the check at the
+sampler's start
 (``table_shift_start_sd``; ``bayesrod.api.calibration.table_columns``). Writes
 ``sbc_geometry.csv`` (resumable: rows already there are not recomputed) and ``sbc_geometry.md`` (coverage
 per parameter and per case, with the binomial range of 90% coverage and a chi-square test of the rank
@@ -68,7 +69,7 @@ PARAMS = ("EI0", "p", "sigma_force_N", "effect")
 FIELDS = (
     ["seed", "length_m", "n_heights", "shapes", "effect", "rhat_max", "max_ref_vs_fast_N", "n_fast_fallback"]
     + [f"{k}_{s}" for k in PARAMS for s in ("true", "median", "rank", "covered")]
-    + ["table_shift_sd", "table_shift_worst", "effect_axis_zoom", "table_shift_start_sd", "error"]
+    + ["table_shift_sd", "table_shift_worst", "effect_axis_zoom", "table_shift_start_sd", "error", "p_axis_zoom"]
 )
 N_RANK = 99
 
@@ -234,7 +235,10 @@ def replicate(
         return row | {"rhat_max": float("nan"), "max_ref_vs_fast_N": float("nan"), "error": f"{type(e).__name__}: {e}"}
     row |= {"rhat_max": res["rhat_max"], "max_ref_vs_fast_N": worst}
     row |= {"n_fast_fallback": n_fallback, "error": ""}
-    row |= {k: res[k] for k in ("table_shift_sd", "table_shift_worst", "effect_axis_zoom", "table_shift_start_sd")}
+    row |= {
+        k: res[k]
+        for k in ("table_shift_sd", "table_shift_worst", "effect_axis_zoom", "table_shift_start_sd", "p_axis_zoom")
+    }
     truth = {"EI0": case["EI0"], "p": case["p"], "sigma_force_N": case["sigma_force_N"]}
     names = {"EI0": "EI0", "p": "p", "sigma_force_N": "sigma_force_N", "effect": case["effect"]}
     if case["effect"]:
@@ -303,11 +307,12 @@ def summarise(rows: list[dict], out: Path) -> str:
         warned = [r for r in checked if _num(r["table_shift_sd"]) > TABLE_SHIFT_WARN_SD]
         missed = [r for r in warned if any(str(r.get(f"{k}_covered")) in ("False", "0") for k in PARAMS)]
         zoomed = sum(r.get("effect_axis_zoom") == "kept" for r in checked)
+        p_zoomed = sum(r.get("p_axis_zoom") == "kept" for r in checked)  # a column since session 72
         lines += [
             "",
             f"The fit's own table check (rows that record it, {len(checked)}): {len(warned)} warned (tables move the "
             f"median by more than {TABLE_SHIFT_WARN_SD:g} sd; {len(missed)} of them missed a parameter), the effect "
-            f"axis narrowed around the start in {zoomed}.",
+            f"axis narrowed around the start in {zoomed}, the p grid in {p_zoomed}.",
         ]
     worst = max((_num(r["max_ref_vs_fast_N"]) for r in ok), default=float("nan"))
     rh = max((_num(r["rhat_max"]) for r in ok), default=float("nan"))

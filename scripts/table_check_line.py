@@ -37,8 +37,8 @@ def fit_start(seed: int, effects: tuple) -> tuple:
         seen.update(post=post, theta0=theta0)
         raise _Stop
 
-    real = fitting._zoom_effect_axis
-    fitting._zoom_effect_axis = stop
+    real = fitting._zoom_tables
+    fitting._zoom_tables = stop
     try:
         fitting.fit(
             ds,
@@ -52,7 +52,7 @@ def fit_start(seed: int, effects: tuple) -> tuple:
     except _Stop:
         pass
     finally:
-        fitting._zoom_effect_axis = real
+        fitting._zoom_tables = real
     return case, seen["post"], seen["theta0"]
 
 

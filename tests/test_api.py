@@ -447,10 +447,17 @@ def test_a_table_check_past_a_tenth_of_an_sd_reaches_the_summary_and_the_warning
     # the threshold itself: tests/test_inference.py (table_warning); here that its message is what the user reads
     from bayesrod.api.fitting import table_warning
 
-    check = {"max_error_over_sigma": 0.5, "shift_in_sd": {"log EI0": 0.3, "p": -0.02}, "n_samples": 10}
+    check = {
+        "max_error_over_sigma": 0.5,
+        "shift_in_sd": {"log EI0": 0.3, "p": -0.02},
+        "n_samples": 10,
+        "laplace_sd": {"log EI0": 0.1, "p": 1.0},  # wide: no window narrower than 0.8 of the p grid
+    }
     monkeypatch.setattr("bayesrod.api.fitting.table_check", lambda lik, point: dict(check))
     post = bayesrod.fit(twig_noisy, use_shapes=False, progress=False, seed=1, max_steps=300, target_ess=50)
-    got = post.to_dict()["table_check"]
+    got = dict(post.to_dict()["table_check"])
+    start = got.pop("at_start")  # the same (stand-in) check at the start and between p nodes: nothing narrowed
+    assert start["shift_in_sd"] == start["between_p_nodes"]["shift_in_sd"] == check["shift_in_sd"]
     assert got == check | {"message": table_warning(check)} and "by 0.3 sd" in got["message"]
     assert any(got["message"] in m for m in bayesrod_warnings), bayesrod_warnings
 

@@ -127,11 +127,15 @@ def test_a_calibration_row_records_the_fits_worst_table_shift_and_its_zoom():
     doc = {"table_check": {"shift_in_sd": {"log EI0": 0.02, "p": -1.8, "mu": 0.4}}}
     row = table_columns(doc)
     assert np.isnan(row.pop("table_shift_start_sd"))  # no effect axis: no check at the start
-    assert row == {"table_shift_sd": 1.8, "table_shift_worst": "p", "effect_axis_zoom": "none"}
+    assert row == {"table_shift_sd": 1.8, "table_shift_worst": "p", "effect_axis_zoom": "none", "p_axis_zoom": "none"}
     doc["table_check"]["at_start"] = {"u": 0.5, "shift_in_sd": {"log EI0": 0.01, "p": 0.02, "mu": -0.04}}
     assert table_columns(doc)["table_shift_start_sd"] == 0.04
     doc["table_check"]["at_start"]["between_nodes"] = {"u": 0.52, "shift_in_sd": {"log EI0": 0.1, "p": 0.7, "mu": 0.6}}
     assert table_columns(doc)["table_shift_start_sd"] == 0.7  # the worse of the two, which decided
+    doc["table_check"]["at_start"]["between_p_nodes"] = {"p": 0.425, "shift_in_sd": {"log EI0": -0.9, "p": 0.2}}
+    assert table_columns(doc)["table_shift_start_sd"] == 0.9  # the worst of the three
+    doc["table_check"]["p_axis_zoom"] = {"kept": True}
+    assert table_columns(doc)["p_axis_zoom"] == "kept" and table_columns(doc)["effect_axis_zoom"] == "none"
     doc["table_check"]["effect_axis_zoom"] = {"kept": True}
     assert table_columns(doc)["effect_axis_zoom"] == "kept"
     doc["table_check"]["effect_axis_zoom"] = {"kept": False}

@@ -683,15 +683,16 @@ def test_a_start_at_a_node_of_a_coarse_effect_axis_is_checked_between_nodes_too(
     assert g[1] < lo < 0.0 < hi < g[3]
     # and so the fit narrows the axis there: the narrowed likelihood keeps the centerlines' weight the fit chose
     # (with centerlines, n_eff/n; the narrowed tables are built anew), the start stays, the window is recorded
-    from bayesrod.api.fitting import _zoom_effect_axis
+    from bayesrod.api.fitting import _zoom_tables
     from bayesrod.inference.likelihood import LogPosterior
 
     lik.shape_weight = 0.37
     post = LogPosterior(lik, load_prior("woody"))
     config = {"use_shapes": False}
-    at_start, (record, zlik, zpost, ztheta) = _zoom_effect_axis(
+    at_start, (records, zlik, zpost, ztheta) = _zoom_tables(
         as_dataset(ds), load_prior("woody"), ("base_tilt",), config, post, post.to_sample(point)[0]
     )
+    record = records["effect_axis_zoom"]
     assert record["kept"] and config["effect_window"] == pytest.approx([lo, hi], rel=1e-9)
     assert at_start["u"] == pytest.approx(0.0, abs=1e-12)
     assert zlik.shape_weight == 0.37 and zpost.likelihood is zlik
@@ -813,11 +814,65 @@ def test_zoom_window_narrows_only_a_coarse_axis_and_stays_inside_it():
 
     draws = {"base_tilt": np.array([0.0019, 0.0021, 0.05, 0.0979, 0.0981])}
     zoom = {"kept": True, "u_range_before": [-0.3, 0.3], "u_range": [0.0, 0.1]}
-    got = _zoom_edge(lik, draws, zoom)
+    key = "effect_axis_zoom"
+    got = _zoom_edge(lik, draws, key, zoom)
     assert got["draws_at_edge"] == 0.4 and "40.00% of the draws" in got["message"]
-    assert _zoom_edge(lik, draws, zoom | {"u_range_before": [0.0, 0.3]})["draws_at_edge"] == 0.2  # a prior's end
-    assert _zoom_edge(lik, draws, zoom | {"u_range_before": [0.0, 0.1]}) == {"draws_at_edge": 0.0}
-    assert _zoom_edge(lik, draws, zoom | {"kept": False}) == {}
+    assert _zoom_edge(lik, draws, key, zoom | {"u_range_before": [0.0, 0.3]})["draws_at_edge"] == 0.2  # a prior's end
+    assert _zoom_edge(lik, draws, key, zoom | {"u_range_before": [0.0, 0.1]}) == {"draws_at_edge": 0.0}
+    assert _zoom_edge(lik, draws, key, zoom | {"kept": False}) == {}
+
+
+def test_p_zoom_window_narrows_only_a_coarse_p_grid_and_stays_inside_it():
+    """The p grid's window: p0 +- 60 Laplace sds of p within the grid, only where the check's worst shift is over
+    0.05 sd (on any parameter) and the window spans at most 0.8 of the grid; draws near an inner end reported."""
+    from types import SimpleNamespace
+
+    from bayesrod.api.fitting import _zoom_edge
+    from bayesrod.inference.likelihood import p_zoom_window
+
+    lik = SimpleNamespace(p_grid=np.linspace(0.0, 1.5, 61))
+
+    def check(shift, sd=1e-3):
+        return {"shift_in_sd": {"log EI0": shift, "p": 0.0}, "laplace_sd": {} if sd is None else {"p": sd}}
+
+    point = {"EI0": 2.0, "p": 0.4}
+    assert p_zoom_window(lik, point, check(0.05)) is None and p_zoom_window(lik, point, check(-0.049)) is None
+    np.testing.assert_allclose(p_zoom_window(lik, point, check(-0.051)), (0.4 - 0.06, 0.4 + 0.06))
+    np.testing.assert_allclose(p_zoom_window(lik, point | {"p": 0.01}, check(0.2)), (0.0, 0.07))  # the grid's end
+    np.testing.assert_allclose(p_zoom_window(lik, point | {"p": 1.47}, check(0.2)), (1.41, 1.5))
+    for sd in (None, 0.0, np.nan):
+        assert p_zoom_window(lik, point | {"p": 0.8}, check(0.2, sd=sd)) is None, sd
+    assert p_zoom_window(lik, point, None) is None
+    assert p_zoom_window(lik, point | {"p": 0.75}, check(0.2, sd=0.0101)) is None  # 1.212 of 1.5: over 0.8 of it
+    assert p_zoom_window(lik, point | {"p": 0.75}, check(0.2, sd=0.0099)) is not None
+    draws = {"p": np.array([0.342, 0.343, 0.4, 0.457, 0.458])}  # the bands: 0.0024 wide
+    zoom = {"kept": True, "p_range_before": [0.0, 1.5], "p_range": [0.34, 0.46]}
+    got = _zoom_edge(lik, draws, "p_axis_zoom", zoom)
+    assert got["draws_at_edge"] == 0.4 and "narrowed p " in got["message"]
+    assert _zoom_edge(lik, draws, "p_axis_zoom", zoom | {"p_range_before": [0.34, 1.5]})["draws_at_edge"] == 0.2
+
+
+def test_a_p_window_is_checked_and_narrows_the_grid_and_the_support():
+    """build_likelihood(p_window=) tables p over the window with the same 61 nodes, refuses a window outside the
+    prior's table range, and the posterior gives zero density outside it (without a window, a p grid narrower
+    than the prior is refused)."""
+    from bayesrod.inference.likelihood import LogPosterior, RodLikelihood, build_likelihood
+
+    ds = bayesrod.simulate("twig", seed=2, config_overrides={"heights_m": (0.55,), "n_frames_engaged": 2})
+    prior = load_prior("woody")
+    lo, hi = prior.get("p").bounds()
+    for window in ((0.3, 0.3), (0.4, 0.3), (lo - 0.1, 0.5), (0.3, min(hi, 3.0) + 0.1), (float("nan"), 0.5)):
+        with pytest.raises(ValueError, match=r"p_window: expected \(lo, hi\)"):
+            build_likelihood(ds, prior, (), use_shapes=False, p_window=window)
+    lik = build_likelihood(ds, prior, (), use_shapes=False, p_window=(0.3, 0.5))
+    np.testing.assert_allclose(lik.p_grid, np.linspace(0.3, 0.5, 61))
+    assert lik.p_window == (0.3, 0.5)
+    post = LogPosterior(lik, prior)
+    p = np.array([0.29, 0.31, 0.49, 0.51])
+    theta = post.to_sample({"EI0": np.full(4, 2.0), "p": p, "sigma_force_N": np.full(4, 0.01)})
+    assert np.isfinite(post.log_prob(theta)).tolist() == [False, True, True, False]
+    with pytest.raises(ValueError, match="prior p: expected support within the table range"):
+        LogPosterior(RodLikelihood(ds, p_range=(0.3, 0.5), use_shapes=False), prior)
 
 
 def test_an_effect_window_is_checked():

@@ -89,23 +89,30 @@ def fit_for_calibration(
 def table_columns(doc: dict) -> dict:
     """A calibration row's record of the fit's table check (summary.json ``table_check``): ``table_shift_sd``,
     the largest |shift| [Laplace sd] at the posterior median (NaN where not checked); ``table_shift_worst``,
-    the parameter it moves most; ``table_shift_start_sd``, the same at the sampler's start, the worse of the
-    check there and in the middle of its node interval, which decided the zoom (NaN without an effect axis);
-    ``effect_axis_zoom``: ``"none"`` (axis kept as built), ``"kept"`` (narrowed around the start) or
-    ``"refused"`` (narrowed, but the check at the start did not improve)."""
+    the parameter it moves most; ``table_shift_start_sd``, the same at the sampler's start, the worst of the
+    check there and with the effect, or p, in the middle of its node interval, which decided the zoom (NaN where
+    not checked); ``effect_axis_zoom`` and ``p_axis_zoom``: ``"none"`` (axis kept as built), ``"kept"``
+    (narrowed around the start) or ``"refused"`` (narrowed, but the check at the start did not improve)."""
     check = doc.get("table_check") or {}
     shifts = {k: abs(float(v)) for k, v in (check.get("shift_in_sd") or {}).items()}
     worst = max(shifts, key=shifts.get) if shifts else ""
     start = check.get("at_start") or {}
     start_shifts = [
-        abs(float(v)) for c in (start, start.get("between_nodes") or {}) for v in (c.get("shift_in_sd") or {}).values()
+        abs(float(v))
+        for c in (start, start.get("between_nodes") or {}, start.get("between_p_nodes") or {})
+        for v in (c.get("shift_in_sd") or {}).values()
     ]
-    zoom = check.get("effect_axis_zoom")
+
+    def zoomed(key: str) -> str:
+        zoom = check.get(key)
+        return "none" if zoom is None else ("kept" if zoom.get("kept") else "refused")
+
     return {
         "table_shift_sd": shifts[worst] if worst else float("nan"),
         "table_shift_worst": worst,
         "table_shift_start_sd": max(start_shifts) if start_shifts else float("nan"),
-        "effect_axis_zoom": "none" if zoom is None else ("kept" if zoom.get("kept") else "refused"),
+        "effect_axis_zoom": zoomed("effect_axis_zoom"),
+        "p_axis_zoom": zoomed("p_axis_zoom"),
     }
 
 

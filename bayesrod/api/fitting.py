@@ -30,11 +30,13 @@ from ..dataset.model import Specimen
 from ..dataset.plausibility import starts_loaded
 from ..inference.likelihood import (
     LogPosterior,
+    between_nodes,
     build_likelihood,
     check_workers,
     effective_shape_weight,
     geometry_blocker,
     length_is_approximate,
+    p_zoom_window,
     table_check,
     table_workers,
     zoom_window,
@@ -107,6 +109,7 @@ def _likelihood_options(config: Mapping) -> dict:
         "diameter": config.get("diameter", "off"),
         "slip": config.get("slip", False),
         "effect_window": config.get("effect_window"),
+        "p_window": config.get("p_window"),
     }
 
 
@@ -710,11 +713,12 @@ def _check_between_nodes(lik, point: dict) -> tuple[dict | None, dict | None, di
     that holds it (:meth:`EffectAxis.between_nodes`): cubic interpolation in u is exact at a node, so a point
     near one checks well however coarse the axis (base tilt on 5 nodes: 0.038 sd at a node, 9.2 sd between two;
     the suspected reason friction SBC seed 7's start passed while its median read 1.8 sd). Returns the two
-    checks (None where one cannot be made; the second with its ``u``) and the worse of them, which decides;
-    raises ValueError where the first cannot be made (an exact solve the tables never needed)."""
+    checks (None where one cannot be made, the second also without a tabled effect; the second with its ``u``)
+    and the worse of them; raises ValueError where the first cannot be made (an exact solve the tables never
+    needed)."""
     at = table_check(lik, point)
-    if at is None:  # forces not read from the plain tables: nothing to check between nodes either
-        return None, None, None
+    if at is None or lik.axis is None:  # forces not read from the plain tables, or no effect axis
+        return at, None, at
     u0 = float(lik.effect_coordinate(point)[0])
     um = lik.axis.between_nodes(u0)
     moved = point | {lik.axis.name: float(lik.axis.value(um, point["EI0"], lik.L))}
@@ -726,23 +730,40 @@ def _check_between_nodes(lik, point: dict) -> tuple[dict | None, dict | None, di
     return at, between, _worse(at, between)
 
 
-def _zoom_effect_axis(spec, pr, effects, config: dict, post, theta0: NDArray) -> tuple[dict, tuple | None]:
-    """Narrow the effect axis around the start point where the tables are too coarse there (:func:`zoom_window`).
+def _check_between_p_nodes(lik, point: dict) -> dict | None:
+    """:func:`table_check` at ``point`` with p moved to the middle of the p-node interval that holds it (with its
+    ``p``): the 4-point interpolation in p is exact at a node, as the effect's is (:func:`_check_between_nodes`).
+    None where it cannot be made."""
+    pm = between_nodes(lik.p_grid, float(point["p"]))
+    try:
+        check = table_check(lik, point | {"p": pm})
+    except ValueError:
+        return None
+    return None if check is None else check | {"p": pm}
 
-    The tables are checked at the start and, with its effect moved to the middle of its node interval, where
-    their interpolation in u is least exact (:func:`_check_between_nodes`); the worse of the two decides.
-    The window is centred on the start, which stays the start. Returns (the start's record for summary.json's
-    ``table_check.at_start``: its table coordinate ``u``, where the check could be made its ``shift_in_sd``,
-    and ``between_nodes``, the check in the middle of its node interval, ``{u, shift_in_sd}``; then None where
-    the axis stays, else (the record for ``table_check.effect_axis_zoom``, the likelihood, posterior and start
-    point to sample with)). The narrowed axis is kept only when the worse of its two checks improves on the
-    worse of the axis's, and ``config["effect_window"]`` then records it (a saved run rebuilds the same tables).
+
+def _zoom_tables(spec, pr, effects, config: dict, post, theta0: NDArray) -> tuple[dict, tuple | None]:
+    """Narrow the p grid and the effect axis around the start point where the tables are too coarse there
+    (:func:`p_zoom_window`, :func:`zoom_window`).
+
+    The tables are checked at the start and, with its effect, then its p, moved to the middle of their node
+    intervals, where the interpolation is least exact (:func:`_check_between_nodes`,
+    :func:`_check_between_p_nodes`); the worst of the three decides. Each axis whose window rule allows it is
+    narrowed, both in one table build. The windows are centred on the start, which stays the start. Returns
+    (the start's record for summary.json's ``table_check.at_start``: with an effect axis its table coordinate
+    ``u``, where the check could be made its ``shift_in_sd``, ``between_nodes`` (the check in the middle of the
+    effect's node interval, ``{u, shift_in_sd}``) and ``between_p_nodes`` (``{p, shift_in_sd}``); then None
+    where the tables stay, else (the zoom's records for ``table_check``, ``effect_axis_zoom`` and
+    ``p_axis_zoom`` for the axes narrowed, the likelihood, posterior and start point to sample with)). The
+    narrowed tables are kept only when the worst of their checks improves on the worst of the first's, and
+    ``config["effect_window"]`` and ``config["p_window"]`` then record them (a saved run rebuilds the same
+    tables).
     """
     lik = post.likelihood
     point = {k: float(v[0]) for k, v in post.to_natural(theta0[None]).items()}
-    at_start = {"u": float(lik.effect_coordinate(point)[0])}
+    at_start = {} if lik.axis is None else {"u": float(lik.effect_coordinate(point)[0])}
     try:
-        at, between, before = _check_between_nodes(lik, point)
+        at, between, worse = _check_between_nodes(lik, point)
     except ValueError:  # an exact solve the tables never needed: the post-sampling check says so
         return at_start, None
     if at is None:
@@ -750,19 +771,22 @@ def _zoom_effect_axis(spec, pr, effects, config: dict, post, theta0: NDArray) ->
     at_start["shift_in_sd"] = at["shift_in_sd"]
     if between is not None:
         at_start["between_nodes"] = {"u": between["u"], "shift_in_sd": between["shift_in_sd"]}
-    window = zoom_window(lik, point, before)
-    if window is None:
+    between_p = _check_between_p_nodes(lik, point)
+    if between_p is not None:
+        at_start["between_p_nodes"] = {"p": between_p["p"], "shift_in_sd": between_p["shift_in_sd"]}
+    before = _worse(worse, between_p)
+    windows = {"effect_window": zoom_window(lik, point, before), "p_window": p_zoom_window(lik, point, before)}
+    if not any(windows.values()):
         return at_start, None
     log.info(
-        "%s: the tables would move the start by %.2g sd; %s axis narrowed to u in [%.4g, %.4g] (%d nodes)",
+        "%s: the tables would move the start by %.2g sd; narrowed to %s",
         spec.specimen,
         _worst_shift(before),
-        lik.axis.name,
-        window[0],
-        window[1],
-        lik.axis.grid.size,
+        ", ".join(f"{k} [{w[0]:.4g}, {w[1]:.4g}]" for k, w in windows.items() if w),
     )
-    options = _likelihood_options(config) | {"effect_window": window, "n_effect": lik.axis.grid.size}
+    options = _likelihood_options(config) | {k: w for k, w in windows.items() if w}
+    if windows["effect_window"]:
+        options["n_effect"] = lik.axis.grid.size
     zlik = build_likelihood(spec, pr, effects, **options)
     zlik.shape_weight = lik.shape_weight
     zpost = LogPosterior(zlik, pr)
@@ -770,40 +794,53 @@ def _zoom_effect_axis(spec, pr, effects, config: dict, post, theta0: NDArray) ->
     after = None
     if np.isfinite(zpost.log_prob(ztheta)):
         with contextlib.suppress(ValueError):  # an exact solve the narrowed tables never needed: no check
-            after = _check_between_nodes(zlik, point)[2]
-    record = {
-        "nodes": int(zlik.axis.grid.size),
-        "u_range_before": [float(lik.axis.grid[0]), float(lik.axis.grid[-1])],
-        "u_range": [float(window[0]), float(window[1])],
+            after = _worse(_check_between_nodes(zlik, point)[2], _check_between_p_nodes(zlik, point))
+    common = {
         "shift_in_sd_before": before["shift_in_sd"],
         "shift_in_sd_after": after["shift_in_sd"] if after else None,
         "kept": _worst_shift(after) < _worst_shift(before),
     }
-    if not record["kept"]:
-        return at_start, (record, lik, post, theta0)
-    config["effect_window"] = [float(window[0]), float(window[1])]
-    return at_start, (record, zlik, zpost, ztheta)
+    records = {}
+    if windows["effect_window"]:
+        records["effect_axis_zoom"] = {
+            "nodes": int(zlik.axis.grid.size),
+            "u_range_before": [float(lik.axis.grid[0]), float(lik.axis.grid[-1])],
+            "u_range": [float(v) for v in windows["effect_window"]],
+        } | common
+    if windows["p_window"]:
+        records["p_axis_zoom"] = {
+            "nodes": int(zlik.p_grid.size),
+            "p_range_before": [float(lik.p_grid[0]), float(lik.p_grid[-1])],
+            "p_range": [float(v) for v in windows["p_window"]],
+        } | common
+    if not common["kept"]:
+        return at_start, (records, lik, post, theta0)
+    config.update({k: [float(w[0]), float(w[1])] for k, w in windows.items() if w})
+    return at_start, (records, zlik, zpost, ztheta)
 
 
-def _zoom_edge(lik, samples: Mapping, zoom: dict) -> dict:
-    """Draws of a narrowed effect axis next to its inner ends (where the window, not the prior, cut the axis):
-    ``draws_at_edge`` (share of draws within :data:`ZOOM_EDGE_SHARE` of the window of such an end) and a
-    ``message`` when any are (the window may truncate the posterior)."""
+def _zoom_edge(lik, samples: Mapping, key: str, zoom: dict) -> dict:
+    """Draws of a narrowed axis (``key``: ``effect_axis_zoom`` or ``p_axis_zoom``) next to its inner ends (where
+    the window, not the prior, cut the axis): ``draws_at_edge`` (share of draws within :data:`ZOOM_EDGE_SHARE`
+    of the window of such an end) and a ``message`` when any are (the window may truncate the posterior)."""
     if not zoom["kept"]:
         return {}
-    (lo0, hi0), (lo, hi) = zoom["u_range_before"], zoom["u_range"]
-    u = lik.effect_coordinate(samples)
+    if key == "p_axis_zoom":
+        (lo0, hi0), (lo, hi), x, name = zoom["p_range_before"], zoom["p_range"], np.asarray(samples["p"]), "p"
+    else:
+        (lo0, hi0), (lo, hi) = zoom["u_range_before"], zoom["u_range"]
+        x, name = lik.effect_coordinate(samples), f"{lik.axis.name} axis (u)"
     band = ZOOM_EDGE_SHARE * (hi - lo)
-    near = np.zeros(u.shape, bool)
+    near = np.zeros(x.shape, bool)
     if lo > lo0:
-        near |= u < lo + band
+        near |= x < lo + band
     if hi < hi0:
-        near |= u > hi - band
+        near |= x > hi - band
     out = {"draws_at_edge": float(np.mean(near))}
     if out["draws_at_edge"] > 0.0:
         out["message"] = (
-            f"{out['draws_at_edge']:.2%} of the draws lie at an end of the narrowed {lik.axis.name} axis "
-            f"(u in [{lo:.4g}, {hi:.4g}]): the window may cut the posterior; report it"
+            f"{out['draws_at_edge']:.2%} of the draws lie at an end of the narrowed {name} "
+            f"(in [{lo:.4g}, {hi:.4g}]): the window may cut the posterior; report it"
         )
     return out
 
@@ -937,9 +974,10 @@ def fit(
 
     Notes
     -----
-    With a tabled effect, the tables are checked against exact solves at the sampler's start; where they
-    would move the estimate by more than 0.05 sd, the effect's axis is rebuilt over a window around the start
-    before sampling (one more table build; ``summary.json`` ``table_check.effect_axis_zoom``, docs/inference.md).
+    The tables are checked against exact solves at the sampler's start (and with p, and a tabled effect, moved
+    to the middle of their node intervals); where they would move the estimate by more than 0.05 sd, the p grid
+    and the effect's axis are rebuilt over windows around the start before sampling (one more table build;
+    ``summary.json`` ``table_check.p_axis_zoom`` and ``effect_axis_zoom``, docs/inference.md).
     """
     t0 = time.perf_counter()
     check_workers(n_workers)  # before any work
@@ -1052,12 +1090,11 @@ def fit(
                 theta0 = find_start(post, rng, init=two_stage)
         else:
             lik.shape_weight = float(shape_weight)
-    zoom, at_start = None, {}
-    if lik.axis is not None:
-        with table_workers(n_workers, progress=progress_enabled(progress)):
-            at_start, zoomed = _zoom_effect_axis(spec, pr, effects, config, post, theta0)
-        if zoomed is not None:
-            zoom, lik, post, theta0 = zoomed
+    zooms = {}
+    with table_workers(n_workers, progress=progress_enabled(progress)):
+        at_start, zoomed = _zoom_tables(spec, pr, effects, config, post, theta0)
+    if zoomed is not None:
+        zooms, lik, post, theta0 = zoomed
     theta0 = post.settle_base_coordinates(theta0)
     if "base_compliance" in post.names:
         log.info("%s: base spring sampled in %s", spec.specimen, "u" if post.base_pair() else "log k")
@@ -1130,9 +1167,9 @@ def fit(
             log.warning("warning: %s: %s", spec.specimen, message)
     if at_start:  # the check the zoom decision read, beside the check at the median
         extra.setdefault("table_check", {})["at_start"] = at_start
-    if zoom is not None:  # beside the check's result, or its "not checked" message
-        zoom.update(_zoom_edge(lik, samples, zoom))
-        extra.setdefault("table_check", {})["effect_axis_zoom"] = zoom
+    for key, zoom in zooms.items():  # beside the check's result, or its "not checked" message
+        zoom.update(_zoom_edge(lik, samples, key, zoom))
+        extra.setdefault("table_check", {})[key] = zoom
         if zoom.get("message"):
             log.warning("warning: %s: %s", spec.specimen, zoom["message"])
     doc = build_summary(spec, post, samples, res.diagnostics, lik.fit_error(median), effects, extra)

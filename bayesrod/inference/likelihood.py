@@ -108,8 +108,7 @@ class EffectAxis:
     def between_nodes(self, u: float) -> float:
         """The middle of the node interval that holds ``u`` (the end intervals for u outside the grid): where
         the tables' interpolation in u is least exact (it is exact at the nodes)."""
-        i = int(np.clip(np.searchsorted(self.grid, u) - 1, 0, self.grid.size - 2))
-        return float(0.5 * (self.grid[i] + self.grid[i + 1]))
+        return between_nodes(self.grid, u)
 
     @classmethod
     def from_prior(cls, name: str, prior, EI0_range: tuple[float, float], L: float, n: int = 13) -> EffectAxis:
@@ -224,6 +223,26 @@ def _slip_window(force, eng) -> dict:
 
 #: interior forces per round of the branch end's search (:class:`ForceCurves`): the bracket shrinks 8x per round
 BRANCH_SECTIONS = 7
+#: force levels a curve adds between its last clustered level and the branch end (:func:`force_levels`), evenly in
+#: log10(1 - f/f_end) down to 10^-PLATEAU_DECADES: on a plateau the force comes within 1e-5 of the end's 0.2 L
+#: before the end (SBC seed 108, p 0.96), one interval of the clustered levels, whose interpolation moved the
+#: forces by 2.3 noise sds there (docs/validation.md, session 72)
+PLATEAU_LEVELS = 24
+PLATEAU_DECADES = 13.0
+
+
+def force_levels(n_f: int) -> NDArray:
+    """The forces, as fractions of the branch end's, at which :class:`ForceCurves` solves a curve, ascending,
+    (n_f + PLATEAU_LEVELS,): n_f levels 1 - (1 - u)^2 (u uniform in [0, 1]; evenly spaced in displacement near
+    a fold, where f_end - f grows as (d_end - d)^2), and between the last of them below 1 and 1 itself
+    :data:`PLATEAU_LEVELS` more, evenly in log10(1 - f/f_end) down to 10^-:data:`PLATEAU_DECADES` (where the force
+    nears its end exponentially slowly, on a plateau, the clustered levels leave most of the displacement in one
+    interval). The last level is 1, the branch end."""
+    u = np.linspace(0.0, 1.0, n_f)
+    clustered = 1.0 - (1.0 - u) ** 2
+    top = -np.log10(1.0 - clustered[-2])
+    plateau = 1.0 - 10.0 ** -np.linspace(top, PLATEAU_DECADES, PLATEAU_LEVELS + 1)[1:]
+    return np.concatenate([clustered[:-1], plateau, [1.0]])
 
 #: how :meth:`ForceCurves.batch` runs its solves: ``(processes, progress bar)``, set by :func:`table_workers`
 _TABLE_BUILD: ContextVar[tuple[int, bool]] = ContextVar("bayesrod_table_build", default=(1, False))
@@ -384,8 +403,7 @@ class ForceCurves:
             above = np.take_along_axis(pts, np.minimum(first, BRANCH_SECTIONS - 1)[..., None], -1)[..., 0]
             lo = np.where(first > 0, below, lo)
             hi = np.where(first < BRANCH_SECTIONS, above, hi)
-        u = np.linspace(0.0, 1.0, n_f)
-        f = lo[..., None] * (1.0 - (1.0 - u) ** 2)  # (Q, P, n_f)
+        f = lo[..., None] * force_levels(n_f)  # (Q, P, n_f + PLATEAU_LEVELS)
         # one more column in the same solve: the force SLIP_FORCE_REL below the branch end's, where the earliest
         # slip the model allows lies (on a plateau the end's displacement is ill-conditioned; docs/inference.md)
         f_early = lo[..., None] * (1.0 - SLIP_FORCE_REL)
@@ -516,7 +534,8 @@ class RodLikelihood:
     use_forces, use_shapes : bool
         Which observations enter (a force-only fit of field data, a shape-only fit).
     n_p : int
-        Nodes of the p grid (61 over [0, 3]: interpolation error < 1e-6 relative).
+        Nodes of the p grid (61 over the prior's support; :func:`build_likelihood` narrows it around a start
+        where that is too coarse for the posterior, ``p_window``).
 
     Attributes
     ----------
@@ -531,6 +550,9 @@ class RodLikelihood:
     """
 
     offset_prior_sd: float | None = None
+    #: (lo, hi) when the p grid spans a window narrower than the prior's support (``build_likelihood(p_window=)``;
+    #: walkers outside it get zero density); None: the grid covers the prior
+    p_window: tuple[float, float] | None = None
 
     def __init__(
         self,
@@ -1542,7 +1564,7 @@ class LogPosterior(PosteriorBase):
         self.priors = [extra[n] if n in extra else prior.get(n) for n in self.names]
         lo, hi = likelihood.p_grid[0], likelihood.p_grid[-1]
         plo, phi = self.priors[1].bounds()
-        if plo < lo - 1e-12 or phi > hi + 1e-12:
+        if getattr(likelihood, "p_window", None) is None and (plo < lo - 1e-12 or phi > hi + 1e-12):
             raise ValueError(f"prior p: expected support within the table range [{lo}, {hi}], got [{plo}, {phi}]")
         self._p_bounds = (max(lo, plo), min(hi, phi))
         self._p_idx = [1]
@@ -1683,17 +1705,48 @@ def zoom_window(lik: RodLikelihood, point: dict, check: dict | None) -> tuple[fl
     the friction study, forces only: Laplace sd 0.0016 in mu against a node spacing of 0.0375 on 49 nodes;
     the tables moved mu by +0.50 sd, 97 nodes by 0.00; docs/validation.md, session 65).
     """
-    if lik.axis is None or check is None or max(abs(v) for v in check["shift_in_sd"].values()) <= TABLE_ZOOM_SD:
-        return None
-    sd = check["laplace_sd"].get(effect_axis_label(lik.axis))
-    if sd is None or not 0.0 < sd < np.inf:
+    if lik.axis is None:
         return None
     u0 = float(lik.effect_coordinate(point)[0])
-    g = lik.axis.grid
-    lo, hi = max(float(g[0]), u0 - ZOOM_HALF_WIDTH_SD * sd), min(float(g[-1]), u0 + ZOOM_HALF_WIDTH_SD * sd)
-    if not hi > lo or hi - lo > ZOOM_MAX_SHARE * (g[-1] - g[0]):
+    return _window(check, effect_axis_label(lik.axis), u0, lik.axis.grid)
+
+
+def p_zoom_window(lik: RodLikelihood, point: dict, check: dict | None) -> tuple[float, float] | None:
+    """A narrower range of the taper exponent p, around ``point``, where the tables there are too coarse.
+
+    The rule of :func:`zoom_window` on the p grid: where ``check`` (:func:`table_check` at ``point``) says the
+    tables would move the estimate by more than :data:`TABLE_ZOOM_SD`, the window is p0 +-
+    :data:`ZOOM_HALF_WIDTH_SD` of p's Laplace sd within the current grid (``build_likelihood(p_window=...)``
+    tables it with the same number of nodes); None when the check passes or cannot be made, or when the window
+    would span more than :data:`ZOOM_MAX_SHARE` of the grid.
+
+    Why: 61 nodes over the prior's p are coarse for a very precise posterior (SBC seed 68, one height with
+    centerlines, force sd 6e-6 of the peak force: Laplace sd of p 1e-5 against a node spacing of 0.05; near
+    the branch end the tables' force was 7e-5 off the exact solve and moved p by -1.37 sd; 61 nodes over
+    [0.2, 0.45] by +0.003 sd; docs/validation.md, session 72).
+    """
+    return _window(check, "p", float(np.atleast_1d(point["p"])[0]), lik.p_grid)
+
+
+def _window(check: dict | None, name: str, x0: float, grid: NDArray) -> tuple[float, float] | None:
+    """x0 +- ZOOM_HALF_WIDTH_SD Laplace sds of ``name`` (``check["laplace_sd"]``) within ``grid``, when the
+    check's worst shift exceeds TABLE_ZOOM_SD and the window spans at most ZOOM_MAX_SHARE of the grid."""
+    if check is None or max(abs(v) for v in check["shift_in_sd"].values()) <= TABLE_ZOOM_SD:
+        return None
+    sd = check["laplace_sd"].get(name)
+    if sd is None or not 0.0 < sd < np.inf:
+        return None
+    lo, hi = max(float(grid[0]), x0 - ZOOM_HALF_WIDTH_SD * sd), min(float(grid[-1]), x0 + ZOOM_HALF_WIDTH_SD * sd)
+    if not hi > lo or hi - lo > ZOOM_MAX_SHARE * (grid[-1] - grid[0]):
         return None
     return lo, hi
+
+
+def between_nodes(grid: NDArray, x: float) -> float:
+    """The middle of the interval of the uniform ``grid`` that holds ``x`` (the end intervals for x outside
+    it): where the tables' interpolation along that axis is least exact (it is exact at the nodes)."""
+    i = int(np.clip(np.searchsorted(grid, x) - 1, 0, grid.size - 2))
+    return float(0.5 * (grid[i] + grid[i + 1]))
 
 
 def force_scale_fit(lik: RodLikelihood, p: float, EI0: float | None = None) -> tuple[float, float]:
@@ -1759,6 +1812,7 @@ def build_likelihood(
     diameter: str = "off",
     slip: bool = False,
     effect_window: tuple[float, float] | None = None,
+    p_window: tuple[float, float] | None = None,
 ) -> RodLikelihood:
     """The likelihood for ``effects``; a tabled effect gets its axis from the prior and a plain EI0 estimate.
 
@@ -1780,6 +1834,8 @@ def build_likelihood(
     each push's slip lies (:meth:`RodLikelihood.slip_loglik`; docs/inference.md, "The slip").
     ``effect_window`` (lo, hi): the effect axis spans this range of its table coordinate u instead (with
     ``n_effect`` nodes; :func:`zoom_window` picks it); walkers outside it get zero density.
+    ``p_window`` (lo, hi): the p grid spans this range (61 nodes; :func:`p_zoom_window` picks it) instead of the
+    prior's support; walkers outside it get zero density.
     """
     tabled = [e for e in effects if e in TABLE_EFFECTS]
     if effect_window is not None:
@@ -1795,6 +1851,14 @@ def build_likelihood(
             n_effect = max(n_effect, SHAPE_EFFECT_NODES.get(tabled[0], 25))
     lo, hi = prior.get("p").bounds()
     p_range = (lo, min(hi, 3.0))
+    if p_window is not None:
+        lo_p, hi_p = (float(v) for v in p_window)
+        if not (np.isfinite(lo_p) and np.isfinite(hi_p) and p_range[0] <= lo_p < hi_p <= p_range[1]):
+            raise ValueError(
+                f"p_window: expected (lo, hi), finite, within the p prior's table range [{p_range[0]:g}, "
+                f"{p_range[1]:g}], lo < hi, got {p_window!r}"
+            )
+        p_range = (lo_p, hi_p)
     axis = None
     if tabled and effect_window is not None:
         axis = EffectAxis(tabled[0], np.linspace(lo_w, hi_w, n_effect))
@@ -1807,7 +1871,7 @@ def build_likelihood(
     length_prior = None
     if length == "unknown" or (length == "auto" and length_is_approximate(spec)):
         length_prior = prior.params.get("length_m") or default_length_prior(spec)
-    return RodLikelihood(
+    lik = RodLikelihood(
         spec,
         p_range=p_range,
         effects=effects,
@@ -1823,6 +1887,9 @@ def build_likelihood(
         diameter_priors=diameter_priors(prior) if diameter != "off" else None,
         slip=slip,
     )
+    if p_window is not None:
+        lik.p_window = p_range
+    return lik
 
 
 def diameter_priors(prior) -> dict:
