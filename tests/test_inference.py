@@ -528,10 +528,14 @@ def test_shape_offsets_past_a_nodes_slip_go_on_along_the_secant_of_its_last_step
     (d,) = lik.data
     eta = d.height_m / L
     curves = ForceCurves(eta, lik.p_grid, effects_nd=None if mu is None else {"mu": mu})
-    i = 10  # p 1.25: its slip (d_end 0.50; with friction 0.15) comes before the data's last frames (0.70)
+    # with friction p 1.25, whose slip (d_end 0.15) comes before the data's last frames (0.70); without, p 0.25
+    # (d_end 0.73): from p 0.5 on the plain rod's force comes to a plateau (within 2e-7 of its end over the last
+    # 0.01 L; 1e-13 from p 0.75), where the loaded stem no longer changes shape as the contact slides (the
+    # points move by 1e-7 m over that step), and a flat secant would test nothing (session 72)
+    i = 10 if mu else 2
     de = curves.d_end[i]
-    assert de < d.frame_D_m.max() / L
-    assert (curves.end_slope[i] > 1.0) if mu else (curves.end_slope[i] < 0.1)
+    assert (de < d.frame_D_m.max() / L) if mu else (de < 0.74)
+    assert (curves.end_slope[i] > 1.0) if mu else (curves.end_slope[i] < 0.2)
     step = min(SHAPE_END_STEP, 0.5 * de)
     last = d.frame_index == d.frame_index.max()
     x, z, k = d.x_m[last], d.z_m[last], int(last.sum())
@@ -544,7 +548,7 @@ def test_shape_offsets_past_a_nodes_slip_go_on_along_the_secant_of_its_last_step
     for j, a in enumerate(past, start=2):
         np.testing.assert_allclose(n[i, j], n[i, 1] + a * L * slope, rtol=0, atol=1e-12)
     if mu is None:  # a node that has not slipped reads each frame's own shape: no two frames alike
-        assert curves.d_end[0] > D.max() / L and np.abs(n[0, 3] - n[0, 2]).max() > 1e-4
+        assert curves.d_end[0] > D[2] / L and np.abs(n[0, 2] - n[0, 1]).max() > 1e-4
 
 
 @pytest.mark.parametrize(
@@ -649,6 +653,46 @@ def test_a_fit_narrows_a_coarse_effect_axis_around_its_start(monkeypatch, tmp_pa
         assert q.loc[name, "q05"] < value < q.loc[name, "q95"], (name, q.loc[name].to_dict())
     loaded = bayesrod.Posterior.load(post.save(tmp_path / "run", figures=False))
     np.testing.assert_allclose(loaded._lik().axis.grid, np.linspace(lo, hi, 5))
+
+
+def test_a_fit_narrows_a_coarse_p_grid_around_its_start(tmp_path):
+    """Where 61 nodes over the prior's p are coarse for a very precise posterior (one height, forces to 1e-4 N:
+    Laplace sd of p 9e-6 against a node spacing of 0.05, p in the middle of a node interval), the fit narrows
+    the p grid to +-60 Laplace sds around its start (p_zoom_window, 61 nodes), samples on it, says so in
+    table_check.p_axis_zoom, and a saved run rebuilds the same grid. Measured (session 72): 0.54 sd before,
+    0.009 after and at the median; the posterior sd of p 8.75e-6 against a Laplace sd of 8.78e-6."""
+    from bayesrod.dataset.simulate import NoiseModel
+
+    truth = {"EI0": 2.6, "p": 0.425}
+    ds = bayesrod.simulate(
+        {**truth, "length_m": 0.9, "heights_m": (0.5,), "specimen": "pzoom"},
+        seed=3,
+        noise_model=NoiseModel(force_sd_N=1e-4, shape_sd_m=0.0),
+        config_overrides={"robot_step_m": 0.009},
+    )
+    data = ds.save(tmp_path / "data")
+    post = bayesrod.fit(data, "woody", use_shapes=False, progress=False, seed=2)
+    check = post.doc["table_check"]
+    zoom = check["p_axis_zoom"]
+    assert "effect_axis_zoom" not in check  # no effect axis to narrow
+    before = max(abs(v) for v in zoom["shift_in_sd_before"].values())
+    after = max(abs(v) for v in zoom["shift_in_sd_after"].values())
+    assert zoom["kept"] and zoom["nodes"] == 61 and before > 0.3 and after < 0.03, zoom
+    lo, hi = zoom["p_range"]
+    sd = check["laplace_sd"]["p"]
+    assert zoom["p_range_before"] == [0.0, 3.0] and 0.8 < (hi - lo) / (120 * sd) < 1.25, (zoom, sd)  # 0.98
+    assert zoom["draws_at_edge"] == 0.0 and "message" not in zoom
+    start = check["at_start"]  # the check the decision read: at the start and with p between nodes
+    assert start["between_p_nodes"]["p"] == pytest.approx(0.425, abs=1e-12) and "u" not in start
+    assert max(abs(v) for v in check["shift_in_sd"].values()) < 0.03 and "message" not in check
+    np.testing.assert_allclose(post._lik().p_grid, np.linspace(lo, hi, 61))
+    # the posterior's width is the Laplace sd's: the window neither cuts nor widens it
+    assert 0.8 < np.std(post.samples["p"]) / sd < 1.25
+    q = post.summary()
+    for name, value in (("EI0", 2.6), ("p", 0.425), ("sigma_force_N", 1e-4)):
+        assert q.loc[name, "q05"] < value < q.loc[name, "q95"], (name, q.loc[name].to_dict())
+    loaded = bayesrod.Posterior.load(post.save(tmp_path / "run", figures=False))
+    np.testing.assert_allclose(loaded._lik().p_grid, np.linspace(lo, hi, 61))
 
 
 def test_a_start_at_a_node_of_a_coarse_effect_axis_is_checked_between_nodes_too(monkeypatch):

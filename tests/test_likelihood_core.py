@@ -441,6 +441,40 @@ def test_friction_force_curves_end_where_the_contact_leaves_the_tip_at_every_tap
     assert np.max(np.abs(np.diff(c.d_end))) < 0.02, c.d_end
 
 
+def test_force_levels_cluster_at_the_end_and_go_down_a_plateau():
+    """n_f levels 1 - (1 - u)^2, then PLATEAU_LEVELS more evenly in log10(1 - f/f_end) down to 1e-13, then the end."""
+    n = 160
+    levels = likelihood.force_levels(n)
+    u = np.linspace(0.0, 1.0, n)
+    assert levels.size == n + likelihood.PLATEAU_LEVELS == n + 24 and levels[0] == 0.0 and levels[-1] == 1.0
+    np.testing.assert_allclose(levels[: n - 1], 1.0 - (1.0 - u[:-1]) ** 2, rtol=0, atol=1e-15)
+    tail = -np.log10(1.0 - levels[n - 2 : -1])  # the last clustered level, then the plateau's
+    np.testing.assert_allclose(np.diff(tail), (13.0 - tail[0]) / 24, rtol=1e-3)  # 1 - f rounds near 1e-13
+    assert tail[-1] == pytest.approx(13.0, abs=1e-3) and np.all(np.diff(levels) > 0)
+
+
+@pytest.mark.parametrize(
+    ("eta", "p", "rel"),
+    [(0.41221, 0.95, 1.5e-6), (0.5, 1.2, 1.5e-6), (0.5, 0.43, 5e-7)],
+)
+def test_a_force_curve_reads_exact_solves_to_its_end_also_on_a_plateau(monkeypatch, eta, p, rel):
+    """A tabled curve against exact solves at 198 displacements up to its branch end. At p 0.95 (SBC seed 108)
+    the force nears its end exponentially slowly: it is within 1e-5 of the end's 0.14 L before it. Measured
+    (largest error over the peak force; session 72): with the clustered levels alone 1.9e-5 (the last
+    interval held 0.16 L; the tables moved seed 108's p by 1.1 sd), with the plateau's levels and PCHIP 3.8e-6,
+    with the cubic spline 4.4e-7; at p 0.43 2.8e-6 with PCHIP, 7.9e-8 with the spline."""
+    from bayesrod.physics import force_from_displacement_nd
+
+    monkeypatch.setattr(likelihood, "_CURVE_CACHE", {})
+    (c,) = ForceCurves.batch(np.array([eta]), np.array([p - 0.05, p, p + 0.05, p + 0.1]))
+    d = np.linspace(0.0, c.d_end[1], 200)[1:-1]
+    exact = force_from_displacement_nd(d, np.full(d.size, eta), p, None)["f"]
+    ok = np.isfinite(exact)
+    assert ok.sum() > 180
+    err = np.max(np.abs(c.force(d)[1] - exact)[ok]) / np.max(exact[ok])
+    assert err < rel, err
+
+
 def test_force_curves_count_displacement_from_the_unloaded_stem():
     """With a rest curvature the unloaded stem already leans: the curve's displacement is the contact's travel from
     where the unloaded stem meets the probe's height, f(xi(f) - xi(0)) = f, and the same curves serve the shapes."""

@@ -40,7 +40,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 from scipy import special
-from scipy.interpolate import PchipInterpolator
+from scipy.interpolate import CubicSpline, PchipInterpolator
 
 from ..dataset.engagement import detect_engagement
 from ..dataset.model import Specimen
@@ -323,12 +323,32 @@ def _solve_spread(cls, etas: NDArray, p_grid: NDArray, n_f: int, rows: list, tod
     return [done[q] for q in todo]
 
 
+#: the smallest displacement (nondimensional, d/L) between two force levels a curve keeps (:func:`_spaced`): a
+#: friction solve's displacement scatters by about 1e-6 near its end, where the levels crowd within 1e-5 of
+#: each other, and a spline through them read end slopes of 0 to 3e4 (61 +- 10 between them)
+MIN_LEVEL_GAP = 1e-4
+
+
+def _spaced(d: NDArray, idx: NDArray) -> NDArray:
+    """The indices ``idx`` (ascending ``d``) less those within :data:`MIN_LEVEL_GAP` of the last one kept; the last
+    index is always kept (the branch end), its predecessor dropped instead where the two lie that close."""
+    out = [int(idx[0])]
+    for i in idx[1:-1]:
+        if d[i] - d[out[-1]] >= MIN_LEVEL_GAP:
+            out.append(int(i))
+    last = int(idx[-1])
+    if len(out) > 1 and d[last] - d[out[-1]] < MIN_LEVEL_GAP:
+        out.pop()
+    out.append(last)
+    return np.asarray(out)
+
+
 class ForceCurves:
     """Force-displacement curves f(d) at one height for every p of a grid, from forward solves.
 
     For each p: the branch end f_end (sections of a bracket on the existence of contact),
-    forward solves at n_f forces clustered toward f_end, and a monotone cubic
-    (PCHIP) of f against d. ``force`` continues each node's curve past its slip displacement
+    forward solves at the forces of :func:`force_levels` (n_f clustered toward f_end, more down a plateau), and a
+    cubic spline (not-a-knot) of f against d. ``force`` continues each node's curve past its slip displacement
     ``d_end`` along its end tangent so that tables stay smooth in p; slip is decided separately.
     :meth:`batch` builds the curves of several heights in one set of solves.
     """
@@ -435,7 +455,11 @@ class ForceCurves:
                     # base moment's root meets the bend there); the curve ends at its last equilibrium
                     c.d_end[k] = dk[keep][-1]
                     c.d_early[k] = np.fmin(c.d_early[k], c.d_end[k])
-                spline = PchipInterpolator(dk[keep], fk[keep], extrapolate=True)
+                # a cubic spline, not PCHIP: PCHIP's slopes are first order, and on a plateau curve (eta 0.41,
+                # p 0.95) its force lay up to 3.8e-6 of the peak off exact solves, the spline's 4.4e-7 (the
+                # regular p 0.43: 2.8e-6 and 7.9e-8; docs/validation.md, session 72)
+                at = _spaced(dk, np.flatnonzero(keep))
+                spline = CubicSpline(dk[at], fk[at], extrapolate=True)
                 c.end_slope[k] = max(float(spline.derivative()(c.d_end[k])), 0.0)
                 c._interp.append(spline)
             out.append(c)
