@@ -244,6 +244,7 @@ def force_levels(n_f: int) -> NDArray:
     plateau = 1.0 - 10.0 ** -np.linspace(top, PLATEAU_DECADES, PLATEAU_LEVELS + 1)[1:]
     return np.concatenate([clustered[:-1], plateau, [1.0]])
 
+
 #: how :meth:`ForceCurves.batch` runs its solves: ``(processes, progress bar)``, set by :func:`table_workers`
 _TABLE_BUILD: ContextVar[tuple[int, bool]] = ContextVar("bayesrod_table_build", default=(1, False))
 #: effects whose solves search the base moment (:mod:`bayesrod.physics.elastica`): each curve takes seconds to a
