@@ -788,6 +788,35 @@ def test_the_between_nodes_check_moves_only_the_effect_to_the_middle_of_its_node
     assert len(seen) == 1 and between is None and worse is at
 
 
+def test_the_between_p_nodes_check_moves_only_p_to_the_middle_of_its_node_interval(monkeypatch):
+    """_check_between_p_nodes: the table check at the same point but p in the middle of the p-node interval that
+    holds it (the 4-point interpolation in p is exact at a node), recorded with that p; None where it cannot be
+    made."""
+    import importlib
+    from types import SimpleNamespace
+
+    fitting = importlib.import_module("bayesrod.api.fitting")
+    lik = SimpleNamespace(p_grid=np.linspace(0.0, 3.0, 61))
+    seen, result = [], [{"shift_in_sd": {"p": 0.3}}]
+
+    def check(lik_, point):
+        seen.append(point)
+        if isinstance(result[0], Exception):
+            raise result[0]
+        return result[0]
+
+    monkeypatch.setattr(fitting, "table_check", check)
+    point = {"EI0": 2.0, "p": 0.45, "sigma_force_N": 0.01}  # on a node
+    got = fitting._check_between_p_nodes(lik, point)
+    assert abs(got["p"] - 0.45) == pytest.approx(0.025, abs=1e-12)  # an interval next to the node, its middle
+    assert seen == [point | {"p": got["p"]}]
+    assert got["shift_in_sd"] == {"p": 0.3}
+    assert fitting._check_between_p_nodes(lik, point | {"p": 0.43})["p"] == pytest.approx(0.425, abs=1e-12)
+    for r in (None, ValueError("no exact solve")):
+        result[0] = r
+        assert fitting._check_between_p_nodes(lik, point) is None
+
+
 def test_an_effect_axis_maps_its_coordinate_back_to_the_effect():
     """EffectAxis.value inverts EffectAxis.coordinate for each tabled effect (a base spring's u = 0: a clamp, an
     infinitely stiff spring); between_nodes is the middle of the node interval that holds u."""

@@ -475,6 +475,19 @@ def test_a_force_curve_reads_exact_solves_to_its_end_also_on_a_plateau(monkeypat
     assert err < rel, err
 
 
+def test_friction_end_slopes_are_smooth_in_p(monkeypatch):
+    """With friction the branch ends with the force still rising, and past its end the table goes on along that
+    slope: it must be smooth in p (interpolated over p nodes). Near the end a friction solve's displacement
+    scatters by about 1e-6; measured (eta 0.45, mu 0.3, p 0.5-0.8; session 72): the spline's own slope at the
+    end read 58, 0, 30, 0 through every level and 96, 71, 104, 63 through levels 1e-4 L apart; the quadratic
+    over the last 0.01 L 98.6, 84.2, 71.3, 61.4 (PCHIP before session 72: 78, 64, 64, 39)."""
+    monkeypatch.setattr(likelihood, "_CURVE_CACHE", {})
+    (c,) = ForceCurves.batch(np.array([0.45]), np.array([0.5, 0.6, 0.7, 0.8]), effects_nd={"mu": 0.3})
+    slope = c.end_slope
+    assert np.all((slope > 40) & (slope < 130)) and np.all(np.diff(slope) < 0), slope
+    assert np.max(np.abs(np.diff(slope, 2))) < 5.0, slope
+
+
 def test_force_curves_count_displacement_from_the_unloaded_stem():
     """With a rest curvature the unloaded stem already leans: the curve's displacement is the contact's travel from
     where the unloaded stem meets the probe's height, f(xi(f) - xi(0)) = f, and the same curves serve the shapes."""

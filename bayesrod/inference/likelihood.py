@@ -344,6 +344,21 @@ def _spaced(d: NDArray, idx: NDArray) -> NDArray:
     return np.asarray(out)
 
 
+#: the displacement (nondimensional) before a branch's end over which its end slope is fitted (:func:`_end_slope`)
+END_FIT_WIDTH = 0.01
+
+
+def _end_slope(d: NDArray, f: NDArray, d_end: float, spline) -> float:
+    """df/dd at the branch end: the slope at ``d_end`` of a least-squares quadratic through the levels within
+    :data:`END_FIT_WIDTH` of it (five or more; else ``spline``'s derivative there). A spline's own slope at the end
+    reads the last interval alone: with friction, whose displacements scatter by 1e-6 near the end, slopes of 62 to
+    104 at neighbouring p where the fit reads (session 72); a quadratic is exact at a fold's end (slope 0)."""
+    near = d >= d_end - END_FIT_WIDTH
+    if near.sum() < 5:
+        return float(spline.derivative()(d_end))
+    return float(np.polyfit(d[near] - d_end, f[near], 2)[1])
+
+
 class ForceCurves:
     """Force-displacement curves f(d) at one height for every p of a grid, from forward solves.
 
@@ -461,7 +476,7 @@ class ForceCurves:
                 # regular p 0.43: 2.8e-6 and 7.9e-8; docs/validation.md, session 72)
                 at = _spaced(dk, np.flatnonzero(keep))
                 spline = CubicSpline(dk[at], fk[at], extrapolate=True)
-                c.end_slope[k] = max(float(spline.derivative()(c.d_end[k])), 0.0)
+                c.end_slope[k] = max(_end_slope(dk[at], fk[at], c.d_end[k], spline), 0.0)
                 c._interp.append(spline)
             out.append(c)
         return out
