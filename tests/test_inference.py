@@ -817,6 +817,35 @@ def test_the_between_p_nodes_check_moves_only_p_to_the_middle_of_its_node_interv
         assert fitting._check_between_p_nodes(lik, point) is None
 
 
+def test_a_start_on_a_p_node_is_checked_between_p_nodes_and_the_worse_decides(monkeypatch):
+    """The 4-point interpolation in p is exact at a node, so a start on one passes however coarse the p grid: the
+    zoom reads the worst of the check at the start and with p between nodes (here a stand-in check: 0.01 sd on a
+    node, 0.5 between), and narrows the p grid to +-60 Laplace sds (1e-4) around the start."""
+    import importlib
+
+    from bayesrod.inference.likelihood import LogPosterior, build_likelihood
+
+    fitting = importlib.import_module("bayesrod.api.fitting")
+    ds = bayesrod.simulate("twig", seed=2, config_overrides={"heights_m": (0.55,), "n_frames_engaged": 2})
+    prior = load_prior("woody")
+    lik = build_likelihood(ds, prior, (), use_shapes=False)
+    node = float(lik.p_grid[9])
+
+    def check(lik_, point):
+        on_node = np.min(np.abs(lik_.p_grid - point["p"])) < 1e-12
+        return {"shift_in_sd": {"log EI0": 0.0, "p": 0.01 if on_node else 0.5}, "laplace_sd": {"p": 1e-4}}
+
+    monkeypatch.setattr(fitting, "table_check", check)
+    post = LogPosterior(lik, prior)
+    point = {"EI0": 2.6, "p": node, "sigma_force_N": 0.01}
+    config = {"use_shapes": False}
+    at_start, (records, *_rest) = fitting._zoom_tables(ds, prior, (), config, post, post.to_sample(point)[0])
+    assert at_start["shift_in_sd"]["p"] == 0.01 and at_start["between_p_nodes"]["shift_in_sd"]["p"] == 0.5
+    zoom = records["p_axis_zoom"]
+    assert zoom["shift_in_sd_before"]["p"] == 0.5 and list(records) == ["p_axis_zoom"]
+    np.testing.assert_allclose(zoom["p_range"], [node - 0.006, node + 0.006], rtol=0, atol=1e-12)
+
+
 def test_an_effect_axis_maps_its_coordinate_back_to_the_effect():
     """EffectAxis.value inverts EffectAxis.coordinate for each tabled effect (a base spring's u = 0: a clamp, an
     infinitely stiff spring); between_nodes is the middle of the node interval that holds u."""
