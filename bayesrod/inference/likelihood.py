@@ -326,7 +326,8 @@ def _solve_spread(cls, etas: NDArray, p_grid: NDArray, n_f: int, rows: list, tod
 
 #: the smallest displacement (nondimensional, d/L) between two force levels a curve keeps (:func:`_spaced`): a
 #: friction solve's displacement scatters by about 1e-6 near its end, where the levels crowd within 1e-5 of
-#: each other, and a spline through them read end slopes of 0 to 3e4 (61 +- 10 between them)
+#: each other; a spline through every level lay up to 4.6e-5 of the peak force off exact solves near the end
+#: (mu 0.5, h/L 0.5, p 0.43), through levels 1e-4 apart 1.6e-6 (session 72)
 MIN_LEVEL_GAP = 1e-4
 
 
