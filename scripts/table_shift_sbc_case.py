@@ -21,8 +21,9 @@ import sbc_geometry as S
 
 from bayesrod.api._common import as_dataset
 from bayesrod.api.calibration import mle_shift
+from bayesrod.api.fitting import _check_between_p_nodes, _worse
 from bayesrod.dataset.simulate import NoiseModel
-from bayesrod.inference.likelihood import build_likelihood, table_check, zoom_window
+from bayesrod.inference.likelihood import build_likelihood, p_zoom_window, table_check, zoom_window
 from bayesrod.inference.priors import load_prior
 
 
@@ -48,21 +49,27 @@ def main(argv=None) -> None:
     lik = build_likelihood(as_dataset(ds), prior, fitted, use_shapes=not a.forces_only, n_effect=a.n_effect)
     print(f"seed {a.seed}: {effect or 'no effect'}, {len(case['heights_m'])} heights, p {case['p']:.4f}")
     show(mle_shift(lik, truth, noise=held))
-    if a.zoom and lik.axis is not None:
+    if a.zoom:
         point = truth | {"sigma_force_N": held[0], "sigma_shape_m": held[1], "shape_sd_scale": 1.0}
-        check = table_check(lik, point)
-        window = zoom_window(lik, point, check)
+        check = _worse(table_check(lik, point), _check_between_p_nodes(lik, point))  # the fit's rule, at the truth
+        windows = {"effect_window": zoom_window(lik, point, check), "p_window": p_zoom_window(lik, point, check)}
         worst = max(abs(v) for v in check["shift_in_sd"].values()) if check else float("nan")
-        if window is None:
-            print(f"  zoom: none (the check at the truth: {worst:.2f} sd; a window would span over 0.8 of the axis)")
+        if not any(windows.values()):
+            print(f"  zoom: none (the check at the truth: {worst:.2f} sd; a window would span over 0.8 of an axis)")
         else:
-            n = int(lik.axis.grid.size)
-            was = f"{lik.axis.grid[0]:.4g}, {lik.axis.grid[-1]:.4g}"
-            print(f"  zoom (the check at the truth: {worst:.2f} sd): u in [{window[0]:.5g}, {window[1]:.5g}]")
-            print(f"  ({n} nodes; was [{was}])")
-            zoomed = build_likelihood(
-                as_dataset(ds), prior, fitted, use_shapes=not a.forces_only, n_effect=n, effect_window=window
-            )
+            print(f"  zoom (the worse check at the truth and with p between nodes: {worst:.2f} sd):")
+            if windows["effect_window"]:
+                lo, hi = windows["effect_window"]
+                print(f"  u in [{lo:.5g}, {hi:.5g}] ({lik.axis.grid.size} nodes; was [{lik.axis.grid[0]:.4g}, ", end="")
+                print(f"{lik.axis.grid[-1]:.4g}])")
+            if windows["p_window"]:
+                lo, hi = windows["p_window"]
+                was = f"{lik.p_grid[0]:.4g}, {lik.p_grid[-1]:.4g}"
+                print(f"  p in [{lo:.6g}, {hi:.6g}] ({lik.p_grid.size} nodes; was [{was}])")
+            options = {k: w for k, w in windows.items() if w}
+            if windows["effect_window"]:
+                options["n_effect"] = int(lik.axis.grid.size)
+            zoomed = build_likelihood(as_dataset(ds), prior, fitted, use_shapes=not a.forces_only, **options)
             show(mle_shift(zoomed, truth, noise=held))
 
 
