@@ -224,9 +224,9 @@ def _slip_window(force, eng) -> dict:
 #: interior forces per round of the branch end's search (:class:`ForceCurves`): the bracket shrinks 8x per round
 BRANCH_SECTIONS = 7
 #: force levels a curve adds between its last clustered level and the branch end (:func:`force_levels`), evenly in
-#: log10(1 - f/f_end) down to 10^-PLATEAU_DECADES: on a plateau the force comes within 1e-5 of the end's 0.2 L
-#: before the end (SBC seed 108, p 0.96), one interval of the clustered levels, whose interpolation moved the
-#: forces by 2.3 noise sds there (docs/validation.md, session 72)
+#: log10(1 - f/f_end) down to 10^-PLATEAU_DECADES: on a plateau the force comes within 1e-5 of the end's 0.14 L
+#: before the end (h/L 0.41, p 0.95: SBC seed 108's push), and the last interval of the clustered levels held
+#: 0.16 L, whose interpolation moved the forces by 2.3 noise sds there (docs/validation.md, session 72)
 PLATEAU_LEVELS = 24
 PLATEAU_DECADES = 13.0
 
@@ -352,8 +352,9 @@ END_FIT_WIDTH = 0.01
 def _end_slope(d: NDArray, f: NDArray, d_end: float, spline) -> float:
     """df/dd at the branch end: the slope at ``d_end`` of a least-squares quadratic through the levels within
     :data:`END_FIT_WIDTH` of it (five or more; else ``spline``'s derivative there). A spline's own slope at the end
-    reads the last interval alone: with friction, whose displacements scatter by 1e-6 near the end, slopes of 62 to
-    104 at neighbouring p where the fit reads (session 72); a quadratic is exact at a fold's end (slope 0)."""
+    reads the last interval alone: with friction, whose displacements scatter by 1e-6 near the end, 96, 71, 104, 63
+    at p 0.5-0.8 (mu 0.3, h/L 0.45), where the quadratic reads 98.6, 84.2, 71.3, 61.4 (session 72); a quadratic is
+    exact at a fold's end (slope 0)."""
     near = d >= d_end - END_FIT_WIDTH
     if near.sum() < 5:
         return float(spline.derivative()(d_end))
