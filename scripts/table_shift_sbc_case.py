@@ -8,9 +8,9 @@ forces and centerlines solved again by the reference solver (``--fast``: the sim
 exact model's MLE is the truth. The table likelihood is maximised over (log EI0, p, the effect) with
 the noise at the case's force sd and 1.5 mm, and its shift from the truth is printed in Laplace sds,
 with the log likelihood at the truth and at the maximum. ``--n-effect``: nodes on the effect's table
-axis (default: the fit's). ``--zoom``: then also on the axis a fit narrows around its start where the
-tables there are too coarse (``bayesrod.inference.likelihood.zoom_window`` at the truth, the fit's rule; a
-second table build).
+axis (default: the fit's). ``--zoom``: then also on the axes (the effect's, p's) a fit narrows around its
+start where the tables there are too coarse (``bayesrod.api.fitting.zoom_decision`` at the truth, the fit's rule:
+the worst of the checks there and with the effect and p between nodes; a second table build).
 """
 
 from __future__ import annotations
@@ -21,9 +21,9 @@ import sbc_geometry as S
 
 from bayesrod.api._common import as_dataset
 from bayesrod.api.calibration import mle_shift
-from bayesrod.api.fitting import _check_between_p_nodes, _worse
+from bayesrod.api.fitting import zoom_decision
 from bayesrod.dataset.simulate import NoiseModel
-from bayesrod.inference.likelihood import build_likelihood, p_zoom_window, table_check, zoom_window
+from bayesrod.inference.likelihood import build_likelihood
 from bayesrod.inference.priors import load_prior
 
 
@@ -51,13 +51,12 @@ def main(argv=None) -> None:
     show(mle_shift(lik, truth, noise=held))
     if a.zoom:
         point = truth | {"sigma_force_N": held[0], "sigma_shape_m": held[1], "shape_sd_scale": 1.0}
-        check = _worse(table_check(lik, point), _check_between_p_nodes(lik, point))  # the fit's rule, at the truth
-        windows = {"effect_window": zoom_window(lik, point, check), "p_window": p_zoom_window(lik, point, check)}
+        _, check, windows = zoom_decision(lik, point)  # the fit's rule, at the truth
         worst = max(abs(v) for v in check["shift_in_sd"].values()) if check else float("nan")
         if not any(windows.values()):
             print(f"  zoom: none (the check at the truth: {worst:.2f} sd; a window would span over 0.8 of an axis)")
         else:
-            print(f"  zoom (the worse check at the truth and with p between nodes: {worst:.2f} sd):")
+            print(f"  zoom (the worst check at the truth and with the effect and p between nodes: {worst:.2f} sd):")
             if windows["effect_window"]:
                 lo, hi = windows["effect_window"]
                 print(f"  u in [{lo:.5g}, {hi:.5g}] ({lik.axis.grid.size} nodes; was [{lik.axis.grid[0]:.4g}, ", end="")

@@ -11,7 +11,6 @@ and ``report.html``.
 
 from __future__ import annotations
 
-import contextlib
 import copy
 import json
 import logging
@@ -742,6 +741,32 @@ def _check_between_p_nodes(lik, point: dict) -> dict | None:
     return None if check is None else check | {"p": pm}
 
 
+def zoom_decision(lik, point: dict) -> tuple[dict, dict | None, dict]:
+    """The fit's rule for narrowing its tables at ``point`` (natural units, scalars): :func:`table_check` there,
+    with the effect moved between its nodes (:func:`_check_between_nodes`) and with p moved between its nodes
+    (:func:`_check_between_p_nodes`); the worst of them decides (:func:`zoom_window`, :func:`p_zoom_window`).
+    Returns (the record for summary.json's ``table_check.at_start``, the deciding check or None where none could
+    be made, ``{"effect_window": (lo, hi) or None, "p_window": (lo, hi) or None}``). Also read by
+    ``scripts/table_shift_sbc_case.py --zoom``."""
+    at_start = {} if lik.axis is None else {"u": float(lik.effect_coordinate(point)[0])}
+    none = {"effect_window": None, "p_window": None}
+    try:
+        at, between, worse = _check_between_nodes(lik, point)
+    except ValueError:  # an exact solve the tables never needed: the post-sampling check says so
+        return at_start, None, none
+    if at is None:
+        return at_start, None, none
+    at_start["shift_in_sd"] = at["shift_in_sd"]
+    if between is not None:
+        at_start["between_nodes"] = {"u": between["u"], "shift_in_sd": between["shift_in_sd"]}
+    between_p = _check_between_p_nodes(lik, point)
+    if between_p is not None:
+        at_start["between_p_nodes"] = {"p": between_p["p"], "shift_in_sd": between_p["shift_in_sd"]}
+    before = _worse(worse, between_p)
+    windows = {"effect_window": zoom_window(lik, point, before), "p_window": p_zoom_window(lik, point, before)}
+    return at_start, before, windows
+
+
 def _zoom_tables(spec, pr, effects, config: dict, post, theta0: NDArray) -> tuple[dict, tuple | None]:
     """Narrow the p grid and the effect axis around the start point where the tables are too coarse there
     (:func:`p_zoom_window`, :func:`zoom_window`).
@@ -761,21 +786,7 @@ def _zoom_tables(spec, pr, effects, config: dict, post, theta0: NDArray) -> tupl
     """
     lik = post.likelihood
     point = {k: float(v[0]) for k, v in post.to_natural(theta0[None]).items()}
-    at_start = {} if lik.axis is None else {"u": float(lik.effect_coordinate(point)[0])}
-    try:
-        at, between, worse = _check_between_nodes(lik, point)
-    except ValueError:  # an exact solve the tables never needed: the post-sampling check says so
-        return at_start, None
-    if at is None:
-        return at_start, None
-    at_start["shift_in_sd"] = at["shift_in_sd"]
-    if between is not None:
-        at_start["between_nodes"] = {"u": between["u"], "shift_in_sd": between["shift_in_sd"]}
-    between_p = _check_between_p_nodes(lik, point)
-    if between_p is not None:
-        at_start["between_p_nodes"] = {"p": between_p["p"], "shift_in_sd": between_p["shift_in_sd"]}
-    before = _worse(worse, between_p)
-    windows = {"effect_window": zoom_window(lik, point, before), "p_window": p_zoom_window(lik, point, before)}
+    at_start, before, windows = zoom_decision(lik, point)
     if not any(windows.values()):
         return at_start, None
     log.info(
@@ -791,10 +802,7 @@ def _zoom_tables(spec, pr, effects, config: dict, post, theta0: NDArray) -> tupl
     zlik.shape_weight = lik.shape_weight
     zpost = LogPosterior(zlik, pr)
     ztheta = zpost.to_sample(point)[0]
-    after = None
-    if np.isfinite(zpost.log_prob(ztheta)):
-        with contextlib.suppress(ValueError):  # an exact solve the narrowed tables never needed: no check
-            after = _worse(_check_between_nodes(zlik, point)[2], _check_between_p_nodes(zlik, point))
+    after = zoom_decision(zlik, point)[1] if np.isfinite(zpost.log_prob(ztheta)) else None
     common = {
         "shift_in_sd_before": before["shift_in_sd"],
         "shift_in_sd_after": after["shift_in_sd"] if after else None,
