@@ -6,33 +6,25 @@ Run:  python benchmarks/bench_force_levels.py [--repeat 5]
 Builds the plain likelihood of the simulated twig (three heights) forces only and with centerlines, and the
 curves of one height with contact friction (mu 0.3, 13 p nodes), each with the curve cache cleared, and prints
 the median time of each over ``--repeat`` builds with the old curves (the reference: ``PLATEAU_LEVELS = 0``,
-``MIN_LEVEL_GAP = 0``, PCHIP and the spline's own end slope patched in) and with today's, and their ratio.
+``MIN_LEVEL_GAP = 0``, PCHIP and the spline's own end slope patched in by
+``scripts/force_curve_accuracy.py``) and with today's, and their ratio.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 import numpy as np
 from bench_forward import _median_time as median_time  # noqa: E402  (benchmarks/ is the script's path)
-from scipy.interpolate import PchipInterpolator
 
 import bayesrod
 from bayesrod.inference import likelihood as LK
 from bayesrod.inference.priors import load_prior
 
-
-def _old_curves():
-    """Patch session 71's curves in; returns the undo."""
-    saved = (LK.PLATEAU_LEVELS, LK.MIN_LEVEL_GAP, LK.CubicSpline, LK._end_slope)
-    LK.PLATEAU_LEVELS, LK.MIN_LEVEL_GAP = 0, 0.0
-    LK.CubicSpline = lambda x, y, extrapolate=True: PchipInterpolator(x, y, extrapolate=extrapolate)
-    LK._end_slope = lambda d, f, d_end, spline: float(spline.derivative()(d_end))
-
-    def undo():
-        LK.PLATEAU_LEVELS, LK.MIN_LEVEL_GAP, LK.CubicSpline, LK._end_slope = saved
-
-    return undo
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+from force_curve_accuracy import old_curves  # noqa: E402  (session 71's curves, patched in)
 
 
 def main() -> None:
@@ -56,7 +48,7 @@ def main() -> None:
     cases = {"plain, forces only": build(False), "plain, with centerlines": build(True), "friction curves": friction}
     print(f"{'case':<26} {'session 71 [s]':>15} {'today [s]':>10} {'ratio':>7}")
     for name, fn in cases.items():
-        undo = _old_curves()
+        undo = old_curves()
         try:
             old = median_time(fn, args.repeat)
         finally:
