@@ -101,6 +101,8 @@ def draw_case(seed: int, effects: tuple = EFFECTS) -> dict:
 
 #: the case's own force noise, centerlines at 1.5 mm (simulate_case's default)
 CASE_NOISE = "case"
+#: the centerline points' noise sd of every case [m]
+CASE_SHAPE_SD_M = 0.0015
 
 
 def simulate_case(
@@ -120,7 +122,9 @@ def simulate_case(
     60 samples spread knowing the slip); ``cap_l``: every push stops at this fraction of L (None: at its
     slip). The specimen is named ``{prefix}-{seed}``."""
     if noise is CASE_NOISE:
-        noise = NoiseModel(force_sd_N=case["sigma_force_N"], shape_sd_m=0.0015, shape_sd_reported_m=0.0015)
+        noise = NoiseModel(
+            force_sd_N=case["sigma_force_N"], shape_sd_m=CASE_SHAPE_SD_M, shape_sd_reported_m=CASE_SHAPE_SD_M
+        )
     stem = {k: case[k] for k in ("EI0", "p", "length_m", "heights_m")} | {"specimen": f"{prefix}-{seed}"}
     switched = {case["effect"]: case["effect_value"]} if case["effect"] else {}
     extra = {} if frames is None else {"n_frames_engaged": frames}
