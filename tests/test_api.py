@@ -368,6 +368,48 @@ def test_posterior_width_matches_the_laplace_width_and_the_noise_is_recovered(po
     assert q["q95"] / q["q05"] < 1.6  # and the interval says something
 
 
+def test_the_posterior_puts_the_truth_where_the_data_s_own_noise_put_it(post, twig_noisy):
+    """Per replicate, not per coverage count: with iid Gaussian noise e and a model close to linear over the
+    posterior's width, the least-squares shift the noise alone makes, z = (J'J)^-1 J'e / sd (J: the noise-free
+    forces' derivatives in log EI0 and p at the truth, by the solver straight, not through the likelihood's tables),
+    places the truth at the posterior quantile Phi(-z) (the default prior is flat over the width). The truth's
+    normal score in the posterior within 0.2 of -z: a posterior off-centre by a third of its sd fails, whatever
+    coverage would say (measured: -0.19 for -0.25 and +0.04 for -0.02; scripts/sbc_noise_draws.py --projection
+    reads SBC replicates the same way, docs/validation.md, session 73)."""
+    from scipy import stats
+
+    from bayesrod.dataset.engagement import detect_engagement
+    from bayesrod.physics.effects import Effects
+    from bayesrod.physics.elastica import force_from_displacement
+
+    ds = bayesrod.load(twig_noisy)
+    truth = ds.extra["truth"]
+    assert truth["effects"] == {}  # the plain rod
+    engaged = [detect_engagement(push.force.force_N).mask for push in ds.pushes]
+
+    def forces(x) -> np.ndarray:
+        return np.concatenate(
+            [
+                force_from_displacement(
+                    push.force.contact_x_m[m], push.height_m, float(np.exp(x[0])), float(x[1]), ds.length_m, Effects()
+                ).force_N
+                for push, m in zip(ds.pushes, engaged, strict=True)
+            ]
+        )
+
+    x0 = np.array([np.log(truth["EI0"]), truth["p"]])
+    noise = np.concatenate([push.force.force_N[m] for push, m in zip(ds.pushes, engaged, strict=True)]) - forces(x0)
+    sd = truth["noise"]["force_sd_N"]
+    assert 0.9 < np.sqrt(np.mean(noise**2)) / sd < 1.1  # the residual at the truth is the simulator's noise
+    J = np.stack([(forces(x0 + 1e-6 * u) - forces(x0 - 1e-6 * u)) / 2e-6 for u in np.eye(2)], axis=1)
+    A = J.T @ J
+    z = np.linalg.solve(A, J.T @ noise) / (sd * np.sqrt(np.diag(np.linalg.inv(A))))
+    for k, zk in zip(("EI0", "p"), z, strict=True):
+        q = float(np.mean(np.asarray(post.samples[k]) < truth[k]))
+        assert 0.001 < q < 0.999, (k, q)
+        assert stats.norm.ppf(q) == pytest.approx(-zk, abs=0.2), (k, stats.norm.ppf(q), -zk)
+
+
 def test_the_noise_posterior_is_the_exact_marginal_of_the_least_squares_fit(post):
     """The force noise's posterior against its exact answer: for Gaussian noise and a model that is close to
     linear in (log EI0, p) over the posterior's width (three heights, forces only), integrating them out leaves
