@@ -20,10 +20,12 @@ z = the least-squares shift of the noise alone over its sd, N(0, 1) per seed for
 and chi2 = the joint shift's Mahalanobis distance, chi-square with 2 degrees of freedom. A forces-only
 posterior that is right misses its truth where |z| came out large, on the side of z (z < 0: the truth above
 the posterior, a high rank): ``--rows`` joins an SBC rows CSV (its ranks and coverage) so that each miss can be
-read against its data. Centerlines are not projected (a seed with them can be pulled either way by its frames);
-``--projection-fit`` projects them too: the fit's own likelihood (tables, centerlines at their reported sd, weight 1)
-is maximised from the truth with the noise sds held at the truth (``bayesrod.api.calibration.mle_shift``), and z
-is that maximum's shift in its Laplace sds (the effect profiled out); slower (a table build per seed).
+read against its data (``--case-seed N``: every seed draws its noise on seed N's case, a control of the
+generator: its z should then be N(0, 1) over seeds). Centerlines are not projected (a seed with them can be
+pulled either way by its frames); ``--projection-fit`` projects them too: the fit's own likelihood (tables,
+centerlines at their reported sd, weight 1) is maximised from the truth with the noise sds held at the truth
+(``bayesrod.api.calibration.mle_shift``), and z is that maximum's shift in its Laplace sds (the effect profiled
+out); slower (a table build per seed).
 """
 
 from __future__ import annotations
@@ -69,10 +71,11 @@ def _effect_field(cfg) -> str | None:
     return on[0] if on else None
 
 
-def noise_projection(seed: int, effects: tuple) -> dict | None:
+def noise_projection(seed: int, effects: tuple, case_seed: int | None = None) -> dict | None:
     """A seed's force noise projected on its forces' parameter directions (``--projection``); None where the
-    case cannot be simulated. Samples whose perturbed force is past the branch's end (nan) are left out."""
-    case = draw_case(seed, effects)
+    case cannot be simulated. Samples whose perturbed force is past the branch's end (nan) are left out.
+    ``case_seed``: simulate that seed's case with ``seed``'s noise draws (None: the seed's own case)."""
+    case = draw_case(seed if case_seed is None else case_seed, effects)
     try:
         ds = simulate_case(seed, case, frames=None if case["shapes"] else 2)
     except ValueError:
@@ -114,14 +117,14 @@ def noise_projection(seed: int, effects: tuple) -> dict | None:
     }
 
 
-def fit_projection(seed: int, effects: tuple) -> dict | None:
+def fit_projection(seed: int, effects: tuple, case_seed: int | None = None) -> dict | None:
     """:func:`noise_projection` by the fit's own likelihood, centerlines included (``--projection-fit``)."""
     from bayesrod.api._common import as_dataset
     from bayesrod.api.calibration import mle_shift
     from bayesrod.inference.likelihood import build_likelihood
     from bayesrod.inference.priors import load_prior
 
-    case = draw_case(seed, effects)
+    case = draw_case(seed if case_seed is None else case_seed, effects)
     try:
         ds = simulate_case(seed, case, frames=None if case["shapes"] else 2)
         data = as_dataset(ds)
@@ -155,6 +158,8 @@ def projection_table(rows: list[dict], sbc_rows: dict, with_centerlines: bool = 
     for r in rows:
         line = f"{r['seed']:4d} {r['effect']:15s} {r['n_heights']} {'yes' if r['shapes'] else 'no ':3s} {r['n']:4d}"
         line += f" {r['z_EI0']:+.2f} {r['z_p']:+.2f} {r['chi2']:6.2f}"
+        if r.get("n_left_out"):
+            line += f" ({r['n_left_out']} samples left out: past the branch's end when perturbed)"
         s = sbc_rows.get(r["seed"])
         if s and s.get("EI0_rank"):
             line += f"  {s['EI0_rank']:>3s} {s['p_rank']:>3s} ({s['EI0_covered']}, {s['p_covered']})"
@@ -212,6 +217,13 @@ def main(argv=None) -> None:
     ap.add_argument(
         "--projection-fit", action="store_true", help="project by the fit's likelihood, centerlines included"
     )
+    ap.add_argument(
+        "--case-seed",
+        type=int,
+        default=None,
+        help="with --projection[-fit]: every seed simulates this seed's case (its stem, heights, effect) with its own "
+        "noise draws: a control of the generator on one case",
+    )
     ap.add_argument("--rows", default=None, help="with --projection: an SBC rows CSV to read the ranks from")
     args = ap.parse_args(argv)
     effects = (None, *[e for e in args.effects.split(",") if e])
@@ -229,7 +241,7 @@ def main(argv=None) -> None:
         project = fit_projection if args.projection_fit else noise_projection
         found = []
         for s in seeds:
-            r = project(s, effects)
+            r = project(s, effects, args.case_seed)
             if r is not None:
                 found.append(r)
             if sys.stderr.isatty():
