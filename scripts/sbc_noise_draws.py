@@ -147,23 +147,28 @@ def fit_projection(seed: int, effects: tuple, case_seed: int | None = None) -> d
     }
 
 
-def projection_table(rows: list[dict], sbc_rows: dict, with_centerlines: bool = False) -> None:
-    """Print each seed's z and chi2 (with its SBC ranks where ``sbc_rows`` has the seed) and the summary.
+PROJECTION_HEADER = "seed effect heights shapes n z_EI0 z_p chi2"
+
+
+def projection_row(r: dict, sbc_rows: dict) -> str:
+    """One seed's line of the projection table (with its SBC ranks where ``sbc_rows`` has the seed)."""
+    line = f"{r['seed']:4d} {r['effect']:15s} {r['n_heights']} {'yes' if r['shapes'] else 'no ':3s} {r['n']:4d}"
+    line += f" {r['z_EI0']:+.2f} {r['z_p']:+.2f} {r['chi2']:6.2f}"
+    if r.get("n_left_out"):
+        line += f" ({r['n_left_out']} samples left out: past the branch's end when perturbed)"
+    s = sbc_rows.get(r["seed"])
+    if s and s.get("EI0_rank"):
+        line += f"  {s['EI0_rank']:>3s} {s['p_rank']:>3s} ({s['EI0_covered']}, {s['p_covered']})"
+    return line
+
+
+def projection_summary(rows: list[dict], sbc_rows: dict, with_centerlines: bool = False) -> None:
+    """Print the summary of the seeds' projections ``rows`` (and, with ``sbc_rows``, their ranks against -z).
 
     ``with_centerlines``: the z of ``rows`` project the centerlines too (``--projection-fit``), so the seeds with
     them are read against their ranks as well."""
     from scipy import stats
 
-    print("seed effect heights shapes n z_EI0 z_p chi2" + ("  EI0_rank p_rank (covered)" if sbc_rows else ""))
-    for r in rows:
-        line = f"{r['seed']:4d} {r['effect']:15s} {r['n_heights']} {'yes' if r['shapes'] else 'no ':3s} {r['n']:4d}"
-        line += f" {r['z_EI0']:+.2f} {r['z_p']:+.2f} {r['chi2']:6.2f}"
-        if r.get("n_left_out"):
-            line += f" ({r['n_left_out']} samples left out: past the branch's end when perturbed)"
-        s = sbc_rows.get(r["seed"])
-        if s and s.get("EI0_rank"):
-            line += f"  {s['EI0_rank']:>3s} {s['p_rank']:>3s} ({s['EI0_covered']}, {s['p_covered']})"
-        print(line)
     c = np.array([r["chi2"] for r in rows])
     if np.isfinite(c).all():
         q90, q99 = stats.chi2.ppf([0.9, 0.99], 2)
@@ -240,17 +245,15 @@ def main(argv=None) -> None:
                 sbc_rows = {int(r["seed"]): r for r in csv.DictReader(fh)}
         project = fit_projection if args.projection_fit else noise_projection
         found = []
+        print(PROJECTION_HEADER + ("  EI0_rank p_rank (covered)" if sbc_rows else ""), flush=True)
         for s in seeds:
             r = project(s, effects, args.case_seed)
             if r is not None:
                 found.append(r)
-            if sys.stderr.isatty():
-                print(f"\rseed {s} ({len(found)} projected)", end="", file=sys.stderr, flush=True)
-        if sys.stderr.isatty():
-            print(file=sys.stderr)
+                print(projection_row(r, sbc_rows), flush=True)
         if not found:
             raise SystemExit("no seed could be simulated")
-        projection_table(found, sbc_rows, with_centerlines=args.projection_fit)
+        projection_summary(found, sbc_rows, with_centerlines=args.projection_fit)
         return
     rows = [r for r in (noise_draw(s, effects) for s in seeds) if r is not None]
     if not rows:
