@@ -42,20 +42,34 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from sbc_geometry import ALL_EFFECTS, CASE_SHAPE_SD_M, EFFECTS, N_RANK, PRIOR, draw_case, engaged_forces, simulate_case  # noqa: E402
 
 
-def noise_draw(seed: int, effects: tuple) -> tuple[int, int, float] | None:
-    """(number of heights, engaged samples n, standardised chi-square u) of one seed's force noise; None
-    where the case cannot be simulated (a height its rest shape never crosses, as the SBC records)."""
-    case = draw_case(seed, effects)
+def simulated(seed: int, effects: tuple, case_seed: int | None = None) -> tuple[dict, object] | None:
+    """(case, dataset) of a seed as its SBC replicate simulates it (before the reference re-solve, which keeps the
+    noise); None where the case cannot be simulated (a height its rest shape never crosses, as the SBC records).
+    ``case_seed``: that seed's case with ``seed``'s noise draws (None: the seed's own case)."""
+    case = draw_case(seed if case_seed is None else case_seed, effects)
     try:
-        ds = simulate_case(seed, case, frames=2)
+        return case, simulate_case(seed, case, frames=None if case["shapes"] else 2)
     except ValueError:
         return None
+
+
+def engaged_observed(ds) -> np.ndarray:
+    """The recorded forces [N] of a simulated dataset's engaged samples, pushes concatenated."""
+    _, sim = ds.simulation
+    pairs = zip(ds.pushes, sim, strict=True)
+    return np.concatenate([np.asarray(push.force.force_N, float)[sp.engaged] for push, sp in pairs])
+
+
+def noise_draw(seed: int, effects: tuple) -> tuple[int, int, float] | None:
+    """(number of heights, engaged samples n, standardised chi-square u) of one seed's force noise; None
+    where the case cannot be simulated."""
+    found = simulated(seed, effects)
+    if found is None:
+        return None
+    case, ds = found
     cfg, sim = ds.simulation
-    noise = [
-        np.asarray(push.force.force_N, float)[sp.engaged] - engaged_forces(sp, cfg)
-        for push, sp in zip(ds.pushes, sim, strict=True)
-    ]
-    e = np.concatenate(noise) / case["sigma_force_N"]
+    noise = engaged_observed(ds) - np.concatenate([engaged_forces(sp, cfg) for sp in sim])
+    e = noise / case["sigma_force_N"]
     n = e.size
     return len(case["heights_m"]), n, float((np.sum(e**2) - n) / np.sqrt(2.0 * n))
 
@@ -74,12 +88,11 @@ def _effect_field(cfg) -> str | None:
 def noise_projection(seed: int, effects: tuple, case_seed: int | None = None) -> dict | None:
     """A seed's force noise projected on its forces' parameter directions (``--projection``); None where the
     case cannot be simulated. Samples whose perturbed force is past the branch's end (nan) are left out.
-    ``case_seed``: simulate that seed's case with ``seed``'s noise draws (None: the seed's own case)."""
-    case = draw_case(seed if case_seed is None else case_seed, effects)
-    try:
-        ds = simulate_case(seed, case, frames=None if case["shapes"] else 2)
-    except ValueError:
+    ``case_seed``: as :func:`simulated`."""
+    found = simulated(seed, effects, case_seed)
+    if found is None:
         return None
+    case, ds = found
     cfg, sim = ds.simulation
     field = _effect_field(cfg)
     x0 = [np.log(cfg.EI0), cfg.p] + ([getattr(cfg.effects, field)] if field else [])
@@ -90,9 +103,7 @@ def noise_projection(seed: int, effects: tuple, case_seed: int | None = None) ->
         return np.concatenate([engaged_forces(sp, c) for sp in sim])
 
     x0 = np.array(x0, float)
-    pairs = zip(ds.pushes, sim, strict=True)
-    observed = np.concatenate([np.asarray(push.force.force_N, float)[sp.engaged] for push, sp in pairs])
-    e = observed - forces(x0)
+    e = engaged_observed(ds) - forces(x0)
     steps = PROJECTION_STEP * np.maximum(np.abs(x0), 1.0)
     steps[:2] = PROJECTION_STEP
     cols = [(forces(x0 + h * u) - forces(x0 - h * u)) / (2 * h) for h, u in zip(steps, np.eye(x0.size), strict=True)]
@@ -124,9 +135,11 @@ def fit_projection(seed: int, effects: tuple, case_seed: int | None = None) -> d
     from bayesrod.inference.likelihood import build_likelihood
     from bayesrod.inference.priors import load_prior
 
-    case = draw_case(seed if case_seed is None else case_seed, effects)
+    found = simulated(seed, effects, case_seed)
+    if found is None:
+        return None
+    case, ds = found
     try:
-        ds = simulate_case(seed, case, frames=None if case["shapes"] else 2)
         data = as_dataset(ds)
     except ValueError:  # DatasetError is one: a push that never loaded the stem, as the SBC records
         return None
@@ -177,11 +190,18 @@ def projection_summary(rows: list[dict], sbc_rows: dict, with_centerlines: bool 
             f"point {np.mean(c > q90):.3f}, its 99% point {np.mean(c > q99):.3f}"
         )
     groups = {"forces only": [not r["shapes"] for r in rows], "with centerlines": [r["shapes"] for r in rows]}
-    for label, sel in groups.items():
+    splits = dict(groups)
+    splits["one height, forces only"] = [r["n_heights"] == 1 and not r["shapes"] for r in rows]
+    splits |= {f"effect {e}": [r["effect"] == e for r in rows] for e in dict.fromkeys(r["effect"] for r in rows)}
+    for label, sel in splits.items():
         z = np.array([(r["z_EI0"], r["z_p"]) for r, k in zip(rows, sel, strict=True) if k])
         if z.size:
             se = 1 / np.sqrt(len(z))
-            print(f"{label}: {len(z)} seeds, mean z EI0 {z[:, 0].mean():+.2f}, p {z[:, 1].mean():+.2f} (+- {se:.2f})")
+            big = np.sum(np.abs(z) > stats.norm.ppf(0.95), axis=0)  # outside a right posterior's 90% interval
+            print(
+                f"{label}: {len(z)} seeds, mean z EI0 {z[:, 0].mean():+.2f}, p {z[:, 1].mean():+.2f} (+- {se:.2f}); "
+                f"|z| > 1.645: EI0 {big[0]}, p {big[1]} ({0.1 * len(z):.1f} expected)"
+            )
     if not sbc_rows:
         return
     read = {"forces only": groups["forces only"]}
