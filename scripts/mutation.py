@@ -528,6 +528,54 @@ TARGETS["width_variant"] = (
 )
 TARGETS["moves"] = ("bayesrod/inference/moves.py", ["tests/test_moves.py"], None)
 
+# added in session 74: session 72's force levels down a plateau, their spacing and end slope, and the p window with
+# its check between p nodes (hand mutants only until then: docs/results/hand_mutants_session72/)
+TARGETS["plateau_levels"] = (
+    "bayesrod/inference/likelihood.py",
+    [
+        *(
+            f"tests/test_likelihood_core.py::{t}"
+            for t in (
+                "test_force_levels_cluster_at_the_end_and_go_down_a_plateau",
+                "test_a_force_curve_reads_exact_solves_to_its_end_also_on_a_plateau",
+                "test_force_levels_closer_than_the_gap_are_dropped_but_the_end_is_kept",
+                "test_friction_end_slopes_are_smooth_in_p",
+            )
+        ),
+        *(
+            f"tests/test_inference.py::{t}"
+            for t in (
+                "test_p_zoom_window_narrows_only_a_coarse_p_grid_and_stays_inside_it",
+                "test_zoom_window_narrows_only_a_coarse_axis_and_stays_inside_it",
+                "test_a_p_window_is_checked_and_narrows_the_grid_and_the_support",
+                "test_the_between_p_nodes_check_moves_only_p_to_the_middle_of_its_node_interval",
+                "test_a_start_on_a_p_node_is_checked_between_p_nodes_and_the_worse_decides",
+            )
+        ),
+    ],
+    [
+        *(
+            f"*.x_{f}__mutmut_*"
+            for f in ("force_levels", "_spaced", "_end_slope", "_window", "p_zoom_window", "between_nodes")
+        ),
+    ],
+)
+TARGETS["p_zoom"] = (
+    "bayesrod/api/fitting.py",
+    [
+        *(
+            f"tests/test_inference.py::{t}"
+            for t in (
+                "test_the_between_p_nodes_check_moves_only_p_to_the_middle_of_its_node_interval",
+                "test_a_start_on_a_p_node_is_checked_between_p_nodes_and_the_worse_decides",
+                "test_a_fit_narrows_a_coarse_p_grid_around_its_start",
+                "test_a_fit_narrows_a_coarse_effect_axis_around_its_start",
+            )
+        ),
+    ],
+    [*(f"*.x_{f}__mutmut_*" for f in ("_check_between_p_nodes", "zoom_decision", "_zoom_tables", "_zoom_edge"))],
+)
+
 STATUSES = ("killed", "timeout", "survived", "no tests", "suspicious", "skipped", "segfault")
 
 
