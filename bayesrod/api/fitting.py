@@ -790,10 +790,11 @@ def _zoom_tables(spec, pr, effects, config: dict, post, theta0: NDArray) -> tupl
     if not any(windows.values()):
         return at_start, None
     log.info(
-        "%s: the tables would move the start by %.2g sd; narrowed to %s",
+        "%s: the tables would move the start by %.2g sd; building them again over %s%s",
         spec.specimen,
         _worst_shift(before),
         ", ".join(f"{k} [{w[0]:.4g}, {w[1]:.4g}]" for k, w in windows.items() if w),
+        " (as long as the first build: contact friction)" if "contact_friction" in effects else "",
     )
     options = _likelihood_options(config) | {k: w for k, w in windows.items() if w}
     if windows["effect_window"]:
