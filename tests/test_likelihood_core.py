@@ -484,6 +484,28 @@ def test_force_levels_closer_than_the_gap_are_dropped_but_the_end_is_kept():
     np.testing.assert_array_equal(likelihood._spaced(d, np.arange(7)), [0, 1, 2, 6])
     np.testing.assert_array_equal(likelihood._spaced(d, np.array([0, 3, 4, 7])), [0, 3, 4, 7])
     np.testing.assert_array_equal(likelihood._spaced(d, np.array([4, 5])), [4, 5])  # two levels: both kept
+    # three levels, the last crowding the second: the second goes, the first and the end stay
+    np.testing.assert_array_equal(likelihood._spaced(d, np.array([1, 2, 3])), [1, 3])
+
+
+def test_the_end_slope_is_the_quadratic_through_the_levels_near_the_end_or_the_spline_with_fewer_than_five():
+    """_end_slope fits a quadratic to the levels within END_FIT_WIDTH (0.01 L) of the branch end where there are
+    five or more (a friction curve's levels crowd there), else takes the spline's slope. On a cubic the two differ
+    (the spline through points of a cubic is exact), so each rule shows."""
+    from scipy.interpolate import CubicSpline
+
+    far = np.array([0.9, 0.95, 0.97])
+    for n_near, quadratic in ((5, True), (6, True), (4, False)):
+        d = np.concatenate([far, np.linspace(0.9925, 1.0, n_near)])
+        f = d**3
+        slope = likelihood._end_slope(d, f, 1.0, CubicSpline(d, f))
+        if quadratic:
+            near = d[-n_near:] - 1.0
+            expected = np.polyfit(near, f[-n_near:], 2)[1]
+            assert abs(expected - 3.0) > 1e-6  # the two rules differ here
+            assert slope == pytest.approx(expected, rel=1e-12), (n_near, slope)
+        else:
+            assert slope == pytest.approx(3.0, rel=1e-9), (n_near, slope)
 
 
 def test_friction_end_slopes_are_smooth_in_p(monkeypatch):
