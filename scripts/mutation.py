@@ -539,6 +539,7 @@ TARGETS["plateau_levels"] = (
                 "test_force_levels_cluster_at_the_end_and_go_down_a_plateau",
                 "test_a_force_curve_reads_exact_solves_to_its_end_also_on_a_plateau",
                 "test_force_levels_closer_than_the_gap_are_dropped_but_the_end_is_kept",
+                "test_the_end_slope_is_the_quadratic_through_the_levels_near_the_end_or_the_spline_with_fewer_than_five",
                 "test_friction_end_slopes_are_smooth_in_p",
             )
         ),
@@ -547,6 +548,7 @@ TARGETS["plateau_levels"] = (
             for t in (
                 "test_p_zoom_window_narrows_only_a_coarse_p_grid_and_stays_inside_it",
                 "test_zoom_window_narrows_only_a_coarse_axis_and_stays_inside_it",
+                "test_an_effect_axis_maps_its_coordinate_back_to_the_effect",  # between_nodes at the grid's ends
                 "test_a_p_window_is_checked_and_narrows_the_grid_and_the_support",
                 "test_the_between_p_nodes_check_moves_only_p_to_the_middle_of_its_node_interval",
                 "test_a_start_on_a_p_node_is_checked_between_p_nodes_and_the_worse_decides",
