@@ -565,6 +565,7 @@ TARGETS["plateau_levels"] = (
 TARGETS["p_zoom"] = (
     "bayesrod/api/fitting.py",
     [
+        "tests/test_zoom_units.py",
         *(
             f"tests/test_inference.py::{t}"
             for t in (
