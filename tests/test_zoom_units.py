@@ -27,7 +27,7 @@ def test_zoom_edge_counts_the_draws_next_to_each_inner_end_of_a_window_and_says_
     low = fitting._zoom_edge(None, {"p": p[:-1]}, "p_axis_zoom", _zoom(1.0, 2.0))
     high = fitting._zoom_edge(None, {"p": p[1:]}, "p_axis_zoom", _zoom(1.0, 2.0))
     assert low["draws_at_edge"] == pytest.approx(1 / 7) and high["draws_at_edge"] == pytest.approx(1 / 7)
-    # draws just inside the band's far side are not at the edge
+    # draws just beyond the band (farther than 2% of the window from an end) are not at the edge
     clear = fitting._zoom_edge(None, {"p": np.array([1.021, 1.5, 1.979])}, "p_axis_zoom", _zoom(1.0, 2.0))
     assert clear == {"draws_at_edge": 0.0}
     # an end the window shares with the prior's range is the prior's, not the window's: not counted
@@ -76,7 +76,7 @@ def _run_zoom(monkeypatch, after, finite=True):
     before = {"shift_in_sd": {"p": 2.0}}
     decisions = iter(
         [
-            ({"shift_in_sd": before["shift_in_sd"]}, before, {"effect_window": None, "p_window": (0.4, 0.6)}),
+            (dict(before), before, {"effect_window": None, "p_window": (0.4, 0.6)}),
             ({}, None if after is None else {"shift_in_sd": {"p": after}}, {"effect_window": None, "p_window": None}),
         ]
     )
@@ -88,20 +88,20 @@ def _run_zoom(monkeypatch, after, finite=True):
     theta0 = np.array([np.log(2.0), 0.5])
     at_start, zoomed = fitting._zoom_tables(SimpleNamespace(specimen="s"), None, (), config, post, theta0)
     records, lik_out, post_out, theta_out = zoomed
-    return records["p_axis_zoom"], config, lik_out is zlik, lik_out, post_out is post, theta_out
+    return records["p_axis_zoom"], config, lik_out, post_out is post, theta_out
 
 
 def test_narrowed_tables_are_kept_only_where_their_check_improves_and_keep_the_shape_weight(monkeypatch):
     """The zoom is kept (config records its window, the narrowed likelihood samples, with the first's centerline
     weight) only where the narrowed tables' worst shift is smaller than the first's; a worse check, one that cannot
     be made, or a start outside the narrowed support keeps the first tables."""
-    zoom, config, narrowed, lik, same_post, _ = _run_zoom(monkeypatch, after=0.01)
-    assert zoom["kept"] and narrowed and config == {"p_window": [0.4, 0.6]}
+    zoom, config, lik, same_post, _ = _run_zoom(monkeypatch, after=0.01)
+    assert zoom["kept"] and not same_post and config == {"p_window": [0.4, 0.6]}
     assert zoom["shift_in_sd_before"] == {"p": 2.0} and zoom["shift_in_sd_after"] == {"p": 0.01}
     assert zoom["p_range"] == [0.4, 0.6] and zoom["p_range_before"] == [0.0, 3.0] and zoom["nodes"] == 61
-    assert lik.shape_weight == 0.37  # the weight the first likelihood's centerlines were given
+    assert lik.p_grid[0] == 0.4 and lik.shape_weight == 0.37  # the narrowed tables, the first's centerline weight
     for after, finite in ((3.0, True), (2.0, True), (None, True), (0.01, False)):  # 2.0: no better than before
-        zoom, config, narrowed, _, same_post, theta = _run_zoom(monkeypatch, after=after, finite=finite)
-        assert not zoom["kept"] and not narrowed and same_post and config == {}, (after, finite)
+        zoom, config, lik, same_post, theta = _run_zoom(monkeypatch, after=after, finite=finite)
+        assert not zoom["kept"] and lik.p_grid[0] == 0.0 and same_post and config == {}, (after, finite)
         assert zoom["shift_in_sd_after"] == (None if after is None or not finite else {"p": after})
         np.testing.assert_array_equal(theta, [np.log(2.0), 0.5])
